@@ -1,0 +1,348 @@
+//! The named datamap: an ordered list of `key → value` pairs, the structured payload format.
+//!
+//! Keys keep the order they were inserted in (a dataset's fields read in the order a driver wrote them).
+//! Values are booleans, 64-bit integers, 64-bit floats, UTF-8 strings, byte strings, and lists of values.
+
+use std::fmt;
+
+/// One value in a [`DataMap`].
+#[derive(Debug, Clone)]
+pub enum Value {
+    /// A boolean.
+    Bool(bool),
+    /// A signed 64-bit integer.
+    Int(i64),
+    /// A 64-bit IEEE float.
+    Float(f64),
+    /// A UTF-8 string.
+    Str(String),
+    /// A byte string.
+    Bytes(Vec<u8>),
+    /// A list of values.
+    List(Vec<Value>),
+}
+
+impl Value {
+    /// The value's type name as used in the XML form and in error messages.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            Value::Bool(_) => "bool",
+            Value::Int(_) => "int",
+            Value::Float(_) => "float",
+            Value::Str(_) => "string",
+            Value::Bytes(_) => "bytes",
+            Value::List(_) => "list",
+        }
+    }
+
+    /// The value as a float, when it is numeric (an integer converts).
+    pub fn as_f64(&self) -> Option<f64> {
+        match self {
+            Value::Float(f) => Some(*f),
+            Value::Int(i) => Some(*i as f64),
+            _ => None,
+        }
+    }
+
+    /// The value as an integer, when it is an integer.
+    pub fn as_i64(&self) -> Option<i64> {
+        match self {
+            Value::Int(i) => Some(*i),
+            _ => None,
+        }
+    }
+
+    /// The value as a boolean, when it is one.
+    pub fn as_bool(&self) -> Option<bool> {
+        match self {
+            Value::Bool(b) => Some(*b),
+            _ => None,
+        }
+    }
+
+    /// The value as a string slice, when it is a string.
+    pub fn as_str(&self) -> Option<&str> {
+        match self {
+            Value::Str(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// Parses a value typed on a command line or in a file: `true`/`false`, an integer, a float, or
+    /// else a string. A value in double quotes is always a string.
+    pub fn parse_loose(text: &str) -> Value {
+        if let Some(inner) = text.strip_prefix('"').and_then(|t| t.strip_suffix('"')) {
+            return Value::Str(inner.to_string());
+        }
+        match text {
+            "true" => return Value::Bool(true),
+            "false" => return Value::Bool(false),
+            _ => {}
+        }
+        if let Ok(i) = text.parse::<i64>() {
+            return Value::Int(i);
+        }
+        if looks_numeric(text)
+            && let Ok(f) = text.parse::<f64>()
+        {
+            return Value::Float(f);
+        }
+        Value::Str(text.to_string())
+    }
+}
+
+/// True for text that reads as a decimal number (so `inf` or `nan` typed as words stay strings).
+fn looks_numeric(text: &str) -> bool {
+    let t = text.strip_prefix(['-', '+']).unwrap_or(text);
+    t.starts_with(|c: char| c.is_ascii_digit() || c == '.')
+}
+
+/// Values compare equal when they have the same type and content; floats compare by bit pattern so
+/// that NaN equals itself and `-0.0` differs from `0.0` (conversions must preserve both).
+impl PartialEq for Value {
+    fn eq(&self, other: &Self) -> bool {
+        match (self, other) {
+            (Value::Bool(a), Value::Bool(b)) => a == b,
+            (Value::Int(a), Value::Int(b)) => a == b,
+            (Value::Float(a), Value::Float(b)) => a.to_bits() == b.to_bits(),
+            (Value::Str(a), Value::Str(b)) => a == b,
+            (Value::Bytes(a), Value::Bytes(b)) => a == b,
+            (Value::List(a), Value::List(b)) => a == b,
+            _ => false,
+        }
+    }
+}
+
+impl fmt::Display for Value {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Value::Bool(b) => write!(f, "{b}"),
+            Value::Int(i) => write!(f, "{i}"),
+            Value::Float(x) => write!(f, "{x}"),
+            Value::Str(s) => write!(f, "{s:?}"),
+            Value::Bytes(b) => {
+                write!(f, "0x")?;
+                for byte in b.iter().take(32) {
+                    write!(f, "{byte:02x}")?;
+                }
+                if b.len() > 32 {
+                    write!(f, "…({} bytes)", b.len())?;
+                }
+                Ok(())
+            }
+            Value::List(items) => {
+                write!(f, "[")?;
+                for (i, item) in items.iter().enumerate() {
+                    if i > 0 {
+                        write!(f, ", ")?;
+                    }
+                    write!(f, "{item}")?;
+                }
+                write!(f, "]")
+            }
+        }
+    }
+}
+
+macro_rules! value_from {
+    ($($t:ty => $variant:ident $(as $cast:ty)?),* $(,)?) => {
+        $(impl From<$t> for Value {
+            fn from(v: $t) -> Self {
+                Value::$variant(v $(as $cast)?)
+            }
+        })*
+    };
+}
+
+value_from! {
+    bool => Bool,
+    i64 => Int,
+    i32 => Int as i64,
+    u32 => Int as i64,
+    u8 => Int as i64,
+    f64 => Float,
+    f32 => Float as f64,
+    String => Str,
+    Vec<u8> => Bytes,
+    Vec<Value> => List,
+}
+
+impl From<&str> for Value {
+    fn from(v: &str) -> Self {
+        Value::Str(v.to_string())
+    }
+}
+
+/// An ordered map of named values: the "named datamap" payload format.
+///
+/// Lookups are linear: datamaps hold a dataset's handful of fields, where a scan beats hashing.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DataMap {
+    entries: Vec<(String, Value)>,
+}
+
+impl DataMap {
+    /// An empty datamap.
+    pub fn new() -> Self {
+        DataMap { entries: Vec::new() }
+    }
+
+    /// An empty datamap with room for `n` entries.
+    pub fn with_capacity(n: usize) -> Self {
+        DataMap {
+            entries: Vec::with_capacity(n),
+        }
+    }
+
+    /// Sets `key` to `value`: replaces the value in place when the key exists, appends otherwise.
+    pub fn insert(&mut self, key: impl Into<String>, value: impl Into<Value>) {
+        let key = key.into();
+        let value = value.into();
+        match self.entries.iter_mut().find(|(k, _)| *k == key) {
+            Some(slot) => slot.1 = value,
+            None => self.entries.push((key, value)),
+        }
+    }
+
+    /// Builder form of [`DataMap::insert`].
+    pub fn with(mut self, key: impl Into<String>, value: impl Into<Value>) -> Self {
+        self.insert(key, value);
+        self
+    }
+
+    /// The value under `key`.
+    pub fn get(&self, key: &str) -> Option<&Value> {
+        self.entries.iter().find(|(k, _)| k == key).map(|(_, v)| v)
+    }
+
+    /// The numeric value under `key` as a float.
+    pub fn get_f64(&self, key: &str) -> Option<f64> {
+        self.get(key).and_then(Value::as_f64)
+    }
+
+    /// The integer under `key`.
+    pub fn get_i64(&self, key: &str) -> Option<i64> {
+        self.get(key).and_then(Value::as_i64)
+    }
+
+    /// The string under `key`.
+    pub fn get_str(&self, key: &str) -> Option<&str> {
+        self.get(key).and_then(Value::as_str)
+    }
+
+    /// The boolean under `key`.
+    pub fn get_bool(&self, key: &str) -> Option<bool> {
+        self.get(key).and_then(Value::as_bool)
+    }
+
+    /// Removes `key`, returning its value.
+    pub fn remove(&mut self, key: &str) -> Option<Value> {
+        let idx = self.entries.iter().position(|(k, _)| k == key)?;
+        Some(self.entries.remove(idx).1)
+    }
+
+    /// Renames `from` to `to` in place, keeping the entry's position. Returns false when `from` is absent.
+    pub fn rename(&mut self, from: &str, to: &str) -> bool {
+        if from == to {
+            return self.get(from).is_some();
+        }
+        let Some(idx) = self.entries.iter().position(|(k, _)| k == from) else {
+            return false;
+        };
+        self.entries.retain(|(k, _)| k != to);
+        let idx = if idx < self.entries.len() && self.entries[idx].0 == from {
+            idx
+        } else {
+            // an entry named `to` sat before `from` and was removed
+            idx - 1
+        };
+        self.entries[idx].0 = to.to_string();
+        true
+    }
+
+    /// The entries in order.
+    pub fn iter(&self) -> impl Iterator<Item = (&str, &Value)> {
+        self.entries.iter().map(|(k, v)| (k.as_str(), v))
+    }
+
+    /// The number of entries.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    /// True when the map has no entries.
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Appends an entry without looking for an existing key; decoders use it so that the order and
+    /// content of a received map is kept exactly, duplicates included.
+    pub(crate) fn push_raw(&mut self, key: String, value: Value) {
+        self.entries.push((key, value));
+    }
+}
+
+impl fmt::Display for DataMap {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        for (i, (k, v)) in self.entries.iter().enumerate() {
+            if i > 0 {
+                write!(f, " ")?;
+            }
+            write!(f, "{k}={v}")?;
+        }
+        Ok(())
+    }
+}
+
+impl<K: Into<String>, V: Into<Value>> FromIterator<(K, V)> for DataMap {
+    fn from_iter<I: IntoIterator<Item = (K, V)>>(iter: I) -> Self {
+        let mut map = DataMap::new();
+        for (k, v) in iter {
+            map.insert(k, v);
+        }
+        map
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn insert_keeps_order_and_replaces_in_place() {
+        let mut m = DataMap::new().with("b", 1i64).with("a", 2i64);
+        m.insert("b", 3i64);
+        let keys: Vec<_> = m.iter().map(|(k, _)| k).collect();
+        assert_eq!(keys, ["b", "a"]);
+        assert_eq!(m.get_i64("b"), Some(3));
+    }
+
+    #[test]
+    fn rename_keeps_position_and_replaces_target() {
+        let mut m = DataMap::new()
+            .with("x", 1i64)
+            .with("y", 2i64)
+            .with("z", 3i64);
+        assert!(m.rename("z", "x"));
+        let keys: Vec<_> = m.iter().map(|(k, _)| k.to_string()).collect();
+        assert_eq!(keys, ["y", "x"]);
+        assert_eq!(m.get_i64("x"), Some(3));
+        assert!(!m.rename("nope", "q"));
+    }
+
+    #[test]
+    fn loose_parsing_picks_the_narrowest_type() {
+        assert_eq!(Value::parse_loose("true"), Value::Bool(true));
+        assert_eq!(Value::parse_loose("-12"), Value::Int(-12));
+        assert_eq!(Value::parse_loose("1.5"), Value::Float(1.5));
+        assert_eq!(Value::parse_loose("nan"), Value::Str("nan".into()));
+        assert_eq!(Value::parse_loose("\"12\""), Value::Str("12".into()));
+        assert_eq!(Value::parse_loose("N"), Value::Str("N".into()));
+    }
+
+    #[test]
+    fn float_equality_is_bitwise() {
+        assert_eq!(Value::Float(f64::NAN), Value::Float(f64::NAN));
+        assert_ne!(Value::Float(0.0), Value::Float(-0.0));
+    }
+}

@@ -1,0 +1,210 @@
+//! Duplicate detection by provenance: one sliding window of sequence numbers per origin.
+//!
+//! Every interface and every bridge keeps a [`Dedup`]. A message whose (origin, sequence number)
+//! was already seen inside the window is a duplicate; one older than the whole window is late.
+//! Both are dropped and counted. A node that restarts draws a new boot number, hence a new origin, so
+//! its fresh sequence numbers are never mistaken for old ones.
+
+use crate::message::Message;
+use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Sequence numbers remembered per origin.
+pub const WINDOW: u64 = 1024;
+/// Origins remembered at once; the least recently seen is forgotten first.
+pub const MAX_ORIGINS: usize = 4096;
+
+const WORDS: usize = (WINDOW / 64) as usize;
+
+/// The verdict on one message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Seen {
+    /// First time seen.
+    New,
+    /// Seen before, inside the window.
+    Duplicate,
+    /// Older than the window: cannot be told apart from a duplicate, so it is dropped.
+    Late,
+}
+
+#[derive(Clone)]
+struct Window {
+    highest: u64,
+    /// bit i of the window: `highest - i` was seen
+    bits: [u64; WORDS],
+    last_use: u64,
+}
+
+impl Window {
+    fn new(seq: u64, now: u64) -> Window {
+        let mut bits = [0u64; WORDS];
+        bits[0] = 1;
+        Window {
+            highest: seq,
+            bits,
+            last_use: now,
+        }
+    }
+
+    fn check(&mut self, seq: u64) -> Seen {
+        if seq > self.highest {
+            self.shift(seq - self.highest);
+            self.highest = seq;
+            self.bits[0] |= 1;
+            return Seen::New;
+        }
+        let back = self.highest - seq;
+        if back >= WINDOW {
+            return Seen::Late;
+        }
+        let (word, bit) = ((back / 64) as usize, back % 64);
+        if self.bits[word] & (1 << bit) != 0 {
+            Seen::Duplicate
+        } else {
+            self.bits[word] |= 1 << bit;
+            Seen::New
+        }
+    }
+
+    /// Moves the window forward by `n`: bit i becomes bit i + n.
+    fn shift(&mut self, n: u64) {
+        if n >= WINDOW {
+            self.bits = [0; WORDS];
+            return;
+        }
+        let (words, bits) = ((n / 64) as usize, (n % 64) as u32);
+        for i in (0..WORDS).rev() {
+            let src = i.checked_sub(words);
+            let hi = src.map_or(0, |s| self.bits[s] << bits);
+            let lo = match src.and_then(|s| s.checked_sub(1)) {
+                Some(s) if bits > 0 => self.bits[s] >> (64 - bits),
+                _ => 0,
+            };
+            self.bits[i] = hi | lo;
+        }
+    }
+}
+
+/// A hasher for keys that are already hashes (origin ids).
+#[derive(Default)]
+struct IdHasher(u64);
+
+impl Hasher for IdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for b in bytes {
+            self.0 = self.0.rotate_left(8) ^ u64::from(*b);
+        }
+    }
+    fn write_u64(&mut self, n: u64) {
+        self.0 = n;
+    }
+}
+
+/// Per-origin duplicate detection.
+#[derive(Default)]
+pub struct Dedup {
+    windows: HashMap<u64, Window, BuildHasherDefault<IdHasher>>,
+    clock: u64,
+}
+
+impl Dedup {
+    /// An empty table.
+    pub fn new() -> Dedup {
+        Dedup::default()
+    }
+
+    /// Records `msg` and says whether it is new.
+    pub fn check(&mut self, msg: &Message) -> Seen {
+        self.check_raw(msg.provenance.origin.id, msg.provenance.seq)
+    }
+
+    /// Records (origin id, sequence number) and says whether it is new.
+    pub fn check_raw(&mut self, origin: u64, seq: u64) -> Seen {
+        self.clock += 1;
+        let now = self.clock;
+        if let Some(w) = self.windows.get_mut(&origin) {
+            w.last_use = now;
+            return w.check(seq);
+        }
+        if self.windows.len() >= MAX_ORIGINS
+            && let Some(oldest) = self
+                .windows
+                .iter()
+                .min_by_key(|(_, w)| w.last_use)
+                .map(|(k, _)| *k)
+        {
+            self.windows.remove(&oldest);
+        }
+        self.windows.insert(origin, Window::new(seq, now));
+        Seen::New
+    }
+
+    /// Origins currently remembered.
+    pub fn origins(&self) -> usize {
+        self.windows.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn duplicates_inside_the_window_are_caught_in_any_order() {
+        let mut d = Dedup::new();
+        let order = [5u64, 3, 4, 1, 2, 7, 6, 900, 10, 8, 9];
+        for s in order {
+            assert_eq!(d.check_raw(1, s), Seen::New, "{s}");
+        }
+        for s in order {
+            assert_eq!(d.check_raw(1, s), Seen::Duplicate, "{s}");
+        }
+        assert_eq!(d.check_raw(2, 5), Seen::New, "another origin is independent");
+    }
+
+    #[test]
+    fn the_window_slides() {
+        let mut d = Dedup::new();
+        assert_eq!(d.check_raw(1, 1), Seen::New);
+        assert_eq!(d.check_raw(1, 1 + WINDOW), Seen::New);
+        assert_eq!(d.check_raw(1, 1), Seen::Late);
+        assert_eq!(d.check_raw(1, 2), Seen::New);
+        assert_eq!(d.check_raw(1, 2), Seen::Duplicate);
+        // a big jump clears everything
+        assert_eq!(d.check_raw(1, 10 * WINDOW), Seen::New);
+        assert_eq!(d.check_raw(1, 10 * WINDOW - 1), Seen::New);
+    }
+
+    #[test]
+    fn shifting_across_word_boundaries_keeps_bits() {
+        let mut d = Dedup::new();
+        for s in 1..=200u64 {
+            assert_eq!(d.check_raw(9, s), Seen::New);
+        }
+        for jump in [63u64, 64, 65, 130] {
+            let top = 200 + jump;
+            assert_eq!(d.check_raw(9, top), Seen::New);
+            for s in (top.saturating_sub(WINDOW - 1)).max(1)..=200 {
+                assert_eq!(d.check_raw(9, s), Seen::Duplicate, "jump {jump} seq {s}");
+            }
+            d = Dedup::new();
+            for s in 1..=200u64 {
+                d.check_raw(9, s);
+            }
+        }
+    }
+
+    #[test]
+    fn origins_are_bounded() {
+        let mut d = Dedup::new();
+        for o in 0..(MAX_ORIGINS as u64 + 10) {
+            d.check_raw(o, 1);
+        }
+        assert_eq!(d.origins(), MAX_ORIGINS);
+        // the most recent ones are remembered
+        assert_eq!(d.check_raw(MAX_ORIGINS as u64 + 9, 1), Seen::Duplicate);
+    }
+}

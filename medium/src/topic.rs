@@ -1,0 +1,403 @@
+//! Topics (dotted names such as `nav.attitude`) and topic patterns.
+//!
+//! A pattern is a dotted name whose segments may be wildcards: `*` matches exactly one segment and
+//! `**` matches any number of segments, none included. `nav.*` matches `nav.depth` but not
+//! `nav.gps.raw`; `nav.**` matches both and `nav` itself. Patterns also rename: the segments a
+//! pattern's wildcards captured fill the wildcards of a template in order
+//! (`nav.*` → `auv1.nav.*` turns `nav.depth` into `auv1.nav.depth`).
+
+use std::fmt;
+use std::sync::Arc;
+use thiserror::Error;
+
+/// Longest topic, in bytes.
+pub const MAX_TOPIC_LEN: usize = 255;
+
+/// Why a topic or pattern is not valid.
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+pub enum TopicError {
+    /// The empty string.
+    #[error("empty topic")]
+    Empty,
+    /// Longer than [`MAX_TOPIC_LEN`].
+    #[error("topic is {0} bytes long, the limit is {MAX_TOPIC_LEN}")]
+    TooLong(usize),
+    /// Two dots in a row, or a dot at either end.
+    #[error("empty segment in {0:?} (two dots in a row, or a dot at an end)")]
+    EmptySegment(String),
+    /// Whitespace, a control character, or a wildcard where none is allowed.
+    #[error("character {1:?} not allowed in {0:?}")]
+    BadChar(String, char),
+    /// A wildcard that is not a whole segment (`na*v`).
+    #[error("wildcard must be a whole segment (`*` or `**`) in {0:?}")]
+    PartialWildcard(String),
+}
+
+fn check(text: &str, wildcards: bool) -> Result<(), TopicError> {
+    if text.is_empty() {
+        return Err(TopicError::Empty);
+    }
+    if text.len() > MAX_TOPIC_LEN {
+        return Err(TopicError::TooLong(text.len()));
+    }
+    for seg in text.split('.') {
+        if seg.is_empty() {
+            return Err(TopicError::EmptySegment(text.to_string()));
+        }
+        if let Some(c) = seg.chars().find(|c| c.is_whitespace() || c.is_control()) {
+            return Err(TopicError::BadChar(text.to_string(), c));
+        }
+        if seg.contains('*') {
+            if !wildcards {
+                return Err(TopicError::BadChar(text.to_string(), '*'));
+            }
+            if seg != "*" && seg != "**" {
+                return Err(TopicError::PartialWildcard(text.to_string()));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A topic name. Cheap to clone (shared).
+#[derive(Clone, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct Topic(Arc<str>);
+
+impl Topic {
+    /// Checks and wraps a topic name.
+    pub fn new(name: &str) -> Result<Topic, TopicError> {
+        check(name, false)?;
+        Ok(Topic(Arc::from(name)))
+    }
+
+    /// The name as text.
+    pub fn as_str(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for Topic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{:?}", &*self.0)
+    }
+}
+
+impl fmt::Display for Topic {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::ops::Deref for Topic {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl TryFrom<&str> for Topic {
+    type Error = TopicError;
+    fn try_from(s: &str) -> Result<Self, Self::Error> {
+        Topic::new(s)
+    }
+}
+
+impl TryFrom<String> for Topic {
+    type Error = TopicError;
+    fn try_from(s: String) -> Result<Self, Self::Error> {
+        Topic::new(&s)
+    }
+}
+
+impl TryFrom<&String> for Topic {
+    type Error = TopicError;
+    fn try_from(s: &String) -> Result<Self, Self::Error> {
+        Topic::new(s)
+    }
+}
+
+impl TryFrom<&Topic> for Topic {
+    type Error = TopicError;
+    fn try_from(t: &Topic) -> Result<Self, Self::Error> {
+        Ok(t.clone())
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Seg {
+    Lit(Box<str>),
+    One,
+    Any,
+}
+
+/// A topic pattern with `*` (one segment) and `**` (any number of segments) wildcards.
+#[derive(Clone, PartialEq, Eq)]
+pub struct Pattern {
+    text: Arc<str>,
+    segs: Arc<[Seg]>,
+    exact: bool,
+}
+
+impl Pattern {
+    /// Parses a pattern.
+    pub fn new(text: &str) -> Result<Pattern, TopicError> {
+        check(text, true)?;
+        let segs: Vec<Seg> = text
+            .split('.')
+            .map(|s| match s {
+                "*" => Seg::One,
+                "**" => Seg::Any,
+                lit => Seg::Lit(lit.into()),
+            })
+            .collect();
+        let exact = segs.iter().all(|s| matches!(s, Seg::Lit(_)));
+        Ok(Pattern {
+            text: Arc::from(text),
+            segs: segs.into(),
+            exact,
+        })
+    }
+
+    /// The pattern that matches every topic (`**`).
+    pub fn all() -> Pattern {
+        Pattern::new("**").expect("`**` is a valid pattern")
+    }
+
+    /// The pattern as written.
+    pub fn as_str(&self) -> &str {
+        &self.text
+    }
+
+    /// Number of wildcard segments.
+    pub fn wildcards(&self) -> usize {
+        self.segs.iter().filter(|s| !matches!(s, Seg::Lit(_))).count()
+    }
+
+    /// True when `topic` matches.
+    pub fn matches(&self, topic: &str) -> bool {
+        if self.exact {
+            return *self.text == *topic;
+        }
+        if let [Seg::Any] = &*self.segs {
+            return true;
+        }
+        let parts: smallvec_lite::Parts<'_> = smallvec_lite::Parts::new(topic);
+        match_segs(&self.segs, parts.as_slice(), &mut None)
+    }
+
+    /// The segments each wildcard captured when `topic` matches (a `**` may capture none).
+    pub fn captures<'t>(&self, topic: &'t str) -> Option<Vec<Vec<&'t str>>> {
+        let parts: Vec<&str> = topic.split('.').collect();
+        let mut caps = Some(Vec::new());
+        if match_segs(&self.segs, &parts, &mut caps) {
+            caps
+        } else {
+            None
+        }
+    }
+
+    /// Fills this pattern's wildcards, in order, with captured segments.
+    /// Returns `None` when the captures do not fit (different wildcard count).
+    pub fn fill(&self, caps: &[Vec<&str>]) -> Option<String> {
+        if caps.len() != self.wildcards() {
+            return None;
+        }
+        let mut caps = caps.iter();
+        let mut out: Vec<&str> = Vec::with_capacity(self.segs.len());
+        for seg in self.segs.iter() {
+            match seg {
+                Seg::Lit(l) => out.push(l),
+                Seg::One | Seg::Any => out.extend(caps.next()?.iter().copied()),
+            }
+        }
+        if out.is_empty() {
+            return None;
+        }
+        Some(out.join("."))
+    }
+
+    /// True when some topic matches both patterns.
+    pub fn overlaps(&self, other: &Pattern) -> bool {
+        let (a, b) = (&*self.segs, &*other.segs);
+        // memo[i][j]: can a[i..] and b[j..] match a common suffix
+        let mut memo = vec![vec![None; b.len() + 1]; a.len() + 1];
+        overlap(a, b, 0, 0, &mut memo)
+    }
+}
+
+fn match_segs<'t>(
+    segs: &[Seg],
+    parts: &[&'t str],
+    caps: &mut Option<Vec<Vec<&'t str>>>,
+) -> bool {
+    match segs.split_first() {
+        None => parts.is_empty(),
+        Some((Seg::Lit(l), rest)) => {
+            matches!(parts.first(), Some(p) if **p == **l) && match_segs(rest, &parts[1..], caps)
+        }
+        Some((Seg::One, rest)) => {
+            let Some(first) = parts.first() else {
+                return false;
+            };
+            let mark = caps.as_ref().map(Vec::len);
+            if let Some(c) = caps.as_mut() {
+                c.push(vec![*first]);
+            }
+            if match_segs(rest, &parts[1..], caps) {
+                return true;
+            }
+            if let (Some(c), Some(m)) = (caps.as_mut(), mark) {
+                c.truncate(m);
+            }
+            false
+        }
+        Some((Seg::Any, rest)) => {
+            // a trailing `**` needs no search
+            if rest.is_empty() {
+                if let Some(c) = caps.as_mut() {
+                    c.push(parts.to_vec());
+                }
+                return true;
+            }
+            for take in 0..=parts.len() {
+                let mark = caps.as_ref().map(Vec::len);
+                if let Some(c) = caps.as_mut() {
+                    c.push(parts[..take].to_vec());
+                }
+                if match_segs(rest, &parts[take..], caps) {
+                    return true;
+                }
+                if let (Some(c), Some(m)) = (caps.as_mut(), mark) {
+                    c.truncate(m);
+                }
+            }
+            false
+        }
+    }
+}
+
+fn overlap(a: &[Seg], b: &[Seg], i: usize, j: usize, memo: &mut Vec<Vec<Option<bool>>>) -> bool {
+    if let Some(v) = memo[i][j] {
+        return v;
+    }
+    let v = match (a.get(i), b.get(j)) {
+        (None, None) => true,
+        (Some(Seg::Any), _) => {
+            overlap(a, b, i + 1, j, memo) || (j < b.len() && overlap(a, b, i, j + 1, memo))
+        }
+        (_, Some(Seg::Any)) => overlap(a, b, i, j + 1, memo) || (i < a.len() && overlap(a, b, i + 1, j, memo)),
+        (None, Some(_)) | (Some(_), None) => false,
+        (Some(x), Some(y)) => {
+            let compatible = match (x, y) {
+                (Seg::Lit(p), Seg::Lit(q)) => p == q,
+                _ => true,
+            };
+            compatible && overlap(a, b, i + 1, j + 1, memo)
+        }
+    };
+    memo[i][j] = Some(v);
+    v
+}
+
+impl fmt::Debug for Pattern {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "Pattern({:?})", &*self.text)
+    }
+}
+
+impl fmt::Display for Pattern {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
+/// Splitting a topic without allocating for the usual handful of segments.
+mod smallvec_lite {
+    const INLINE: usize = 8;
+
+    pub enum Parts<'t> {
+        Inline([&'t str; INLINE], usize),
+        Heap(Vec<&'t str>),
+    }
+
+    impl<'t> Parts<'t> {
+        pub fn new(topic: &'t str) -> Self {
+            let mut arr = [""; INLINE];
+            let mut n = 0;
+            for part in topic.split('.') {
+                if n == INLINE {
+                    return Parts::Heap(topic.split('.').collect());
+                }
+                arr[n] = part;
+                n += 1;
+            }
+            Parts::Inline(arr, n)
+        }
+
+        pub fn as_slice(&self) -> &[&'t str] {
+            match self {
+                Parts::Inline(arr, n) => &arr[..*n],
+                Parts::Heap(v) => v,
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(s: &str) -> Pattern {
+        Pattern::new(s).unwrap()
+    }
+
+    #[test]
+    fn topics_are_checked() {
+        assert!(Topic::new("nav.attitude").is_ok());
+        assert_eq!(Topic::new(""), Err(TopicError::Empty));
+        assert!(matches!(Topic::new("nav..x"), Err(TopicError::EmptySegment(_))));
+        assert!(matches!(Topic::new("nav.x "), Err(TopicError::BadChar(_, ' '))));
+        assert!(matches!(Topic::new("nav.*"), Err(TopicError::BadChar(_, '*'))));
+        assert!(matches!(Pattern::new("nav.a*"), Err(TopicError::PartialWildcard(_))));
+        assert!(matches!(Topic::new(&"x".repeat(256)), Err(TopicError::TooLong(256))));
+    }
+
+    #[test]
+    fn wildcards_match_segments() {
+        assert!(p("nav.*").matches("nav.depth"));
+        assert!(!p("nav.*").matches("nav.gps.raw"));
+        assert!(!p("nav.*").matches("nav"));
+        assert!(p("nav.**").matches("nav"));
+        assert!(p("nav.**").matches("nav.gps.raw"));
+        assert!(p("**").matches("anything.at.all"));
+        assert!(p("**.raw").matches("nav.gps.raw"));
+        assert!(p("a.**.z").matches("a.z"));
+        assert!(p("a.**.z").matches("a.b.c.z"));
+        assert!(!p("a.**.z").matches("a.b.c"));
+        assert!(p("nav.depth").matches("nav.depth"));
+        assert!(!p("nav.depth").matches("nav.depths"));
+        assert!(p("*.*.*.*.*.*.*.*.*.j").matches("a.b.c.d.e.f.g.h.i.j"));
+    }
+
+    #[test]
+    fn renames_fill_captures_in_order() {
+        let from = p("nav.*.**");
+        let caps = from.captures("nav.gps.raw.x").unwrap();
+        assert_eq!(caps, vec![vec!["gps"], vec!["raw", "x"]]);
+        assert_eq!(p("auv1.*.data.**").fill(&caps).unwrap(), "auv1.gps.data.raw.x");
+        let caps = p("nav.**").captures("nav").unwrap();
+        assert_eq!(p("auv1.nav.**").fill(&caps).unwrap(), "auv1.nav");
+        assert!(p("x.*").fill(&[]).is_none());
+    }
+
+    #[test]
+    fn overlap_is_decided_on_segments() {
+        assert!(p("nav.*").overlaps(&p("*.depth")));
+        assert!(!p("nav.*").overlaps(&p("cmd.*")));
+        assert!(p("**").overlaps(&p("a.b.c")));
+        assert!(p("a.**.c").overlaps(&p("**.b.c")));
+        assert!(!p("a.*").overlaps(&p("a.*.*")));
+        assert!(p("a.**").overlaps(&p("a")));
+        assert!(!p("a.*").overlaps(&p("a")));
+    }
+}

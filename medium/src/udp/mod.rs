@@ -1,0 +1,362 @@
+//! The UDP medium: seabus's own datagram format over unicast, broadcast or multicast.
+//!
+//! ```text
+//! udp://239.255.42.1:47800?ttl=0            multicast group (joined on loopback when ttl is 0)
+//! udp://239.255.42.1:47800?ttl=1&iface=eth0 multicast on a chosen interface
+//! udp://255.255.255.255:47800               broadcast (or any address with ?broadcast)
+//! udp://0.0.0.0:47801?peer=10.0.0.2:47801   unicast to listed peers, listening on the bound port
+//! ```
+//! Options: `ttl` (multicast hop limit, default 0), `iface` (interface name or IPv4 address),
+//! `peer` (repeatable, or comma-separated), `bind` (address to bind instead of the default),
+//! `broadcast`, `loop` (multicast loopback, default on), `recv_buf` (socket receive buffer in bytes,
+//! default 4 MiB), `max` (largest datagram, default 65507). A message that encodes larger than `max`
+//! is refused at send. A datagram that does not decode is counted by reason and dropped. A node
+//! never receives its own datagrams back (multicast loopback): each carries its sender's id.
+
+pub mod wire;
+
+use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::Message;
+use crate::url::MediumUrl;
+use bytes::{Bytes, BytesMut};
+use socket2::{Domain, Protocol, Socket, Type};
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
+use std::sync::Arc;
+use tokio::net::UdpSocket;
+
+/// The largest UDP payload over IPv4.
+pub const MAX_DATAGRAM: usize = 65_507;
+/// Default socket receive buffer.
+pub const DEFAULT_RECV_BUF: usize = 4 << 20;
+
+const OPTIONS: [&str; 8] = ["ttl", "iface", "peer", "bind", "broadcast", "loop", "recv_buf", "max"];
+
+/// How a UDP medium reaches its peers.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Mode {
+    /// A multicast group.
+    Multicast {
+        /// The group address.
+        group: Ipv4Addr,
+        /// The interface address the group is joined on.
+        iface: Ipv4Addr,
+        /// Hop limit.
+        ttl: u32,
+    },
+    /// Broadcast to an address.
+    Broadcast(Ipv4Addr),
+    /// Unicast to listed peers.
+    Unicast(Vec<SocketAddr>),
+}
+
+/// A UDP medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UdpConfig {
+    /// How peers are reached.
+    pub mode: Mode,
+    /// Local address to bind.
+    pub bind: SocketAddrV4,
+    /// Port datagrams are sent to (multicast and broadcast).
+    pub port: u16,
+    /// Multicast loopback.
+    pub multicast_loop: bool,
+    /// Requested receive buffer size.
+    pub recv_buf: usize,
+    /// Largest datagram sent.
+    pub max: usize,
+}
+
+impl UdpConfig {
+    /// Reads the settings from a `udp://` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<UdpConfig, crate::url::UrlError> {
+        let port = url
+            .port
+            .ok_or_else(|| url.error("needs a port (udp://HOST:PORT)"))?;
+        let host: Ipv4Addr = if url.host.is_empty() {
+            Ipv4Addr::UNSPECIFIED
+        } else {
+            url.host
+                .parse()
+                .map_err(|_| url.error(format!("`{}` is not an IPv4 address", url.host)))?
+        };
+        let ttl: Option<u32> = url.take_parsed("ttl", "a hop count 0–255")?;
+        if ttl.is_some_and(|t| t > 255) {
+            return Err(url.error("option `ttl`: expected a hop count 0–255"));
+        }
+        let iface = match url.take("iface") {
+            None => None,
+            Some(name) => Some(
+                name.parse::<Ipv4Addr>()
+                    .ok()
+                    .or_else(|| interface_address(&name))
+                    .ok_or_else(|| url.error(format!("option `iface={name}`: no such interface or IPv4 address")))?,
+            ),
+        };
+        let mut peers = Vec::new();
+        for p in url.take_all("peer") {
+            let addr = std::net::ToSocketAddrs::to_socket_addrs(&p)
+                .ok()
+                .and_then(|mut a| a.find(SocketAddr::is_ipv4))
+                .ok_or_else(|| url.error(format!("option `peer={p}`: expected HOST:PORT")))?;
+            peers.push(addr);
+        }
+        let bind_override: Option<Ipv4Addr> = url.take_parsed("bind", "an IPv4 address")?;
+        let broadcast = url.take_flag("broadcast")?.unwrap_or(false);
+        let multicast_loop = url.take_flag("loop")?.unwrap_or(true);
+        let recv_buf = url.take_parsed("recv_buf", "a size in bytes")?.unwrap_or(DEFAULT_RECV_BUF);
+        let max = url.take_parsed("max", "a size in bytes")?.unwrap_or(MAX_DATAGRAM);
+        if max > MAX_DATAGRAM || max < wire::FIXED + 3 {
+            return Err(url.error(format!("option `max={max}`: expected {}–{MAX_DATAGRAM}", wire::FIXED + 3)));
+        }
+        url.finish(&OPTIONS)?;
+
+        let (mode, bind_ip) = if host.is_multicast() {
+            let ttl = ttl.unwrap_or(0);
+            // with ttl 0 nothing can leave this host: the loopback interface is the honest choice,
+            // and it works on a machine with no network at all
+            let iface = iface.unwrap_or(if ttl == 0 {
+                Ipv4Addr::LOCALHOST
+            } else {
+                Ipv4Addr::UNSPECIFIED
+            });
+            (Mode::Multicast { group: host, iface, ttl }, host)
+        } else if broadcast || host == Ipv4Addr::BROADCAST {
+            (Mode::Broadcast(host), Ipv4Addr::UNSPECIFIED)
+        } else {
+            (Mode::Unicast(peers.clone()), host)
+        };
+        if !matches!(mode, Mode::Unicast(_)) && !peers.is_empty() {
+            return Err(url.error("option `peer` is for unicast URLs; multicast and broadcast reach every listener"));
+        }
+        Ok(UdpConfig {
+            mode,
+            bind: SocketAddrV4::new(bind_override.unwrap_or(bind_ip), port),
+            port,
+            multicast_loop,
+            recv_buf,
+            max,
+        })
+    }
+
+    fn destinations(&self) -> Vec<SocketAddr> {
+        match &self.mode {
+            Mode::Multicast { group, .. } => vec![SocketAddr::V4(SocketAddrV4::new(*group, self.port))],
+            Mode::Broadcast(addr) => vec![SocketAddr::V4(SocketAddrV4::new(*addr, self.port))],
+            Mode::Unicast(peers) => peers.clone(),
+        }
+    }
+}
+
+/// The first IPv4 address of a network interface.
+pub fn interface_address(name: &str) -> Option<Ipv4Addr> {
+    let mut addrs: *mut libc::ifaddrs = std::ptr::null_mut();
+    // SAFETY: getifaddrs fills `addrs` with a list we free below with freeifaddrs
+    if unsafe { libc::getifaddrs(&mut addrs) } != 0 {
+        return None;
+    }
+    let mut found = None;
+    let mut cur = addrs;
+    while !cur.is_null() {
+        // SAFETY: `cur` is a node of the list getifaddrs returned, alive until freeifaddrs
+        let ifa = unsafe { &*cur };
+        if !ifa.ifa_addr.is_null() && !ifa.ifa_name.is_null() {
+            // SAFETY: ifa_name is a NUL-terminated string owned by the list
+            let ifname = unsafe { std::ffi::CStr::from_ptr(ifa.ifa_name) };
+            // SAFETY: ifa_addr is non-null and points to a sockaddr of the family it states
+            let family = unsafe { (*ifa.ifa_addr).sa_family };
+            if ifname.to_bytes() == name.as_bytes() && i32::from(family) == libc::AF_INET {
+                // SAFETY: the family is AF_INET, so the address is a sockaddr_in
+                let sin = unsafe { &*(ifa.ifa_addr as *const libc::sockaddr_in) };
+                found = Some(Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)));
+                break;
+            }
+        }
+        cur = ifa.ifa_next;
+    }
+    // SAFETY: `addrs` came from getifaddrs and is freed once
+    unsafe { libc::freeifaddrs(addrs) };
+    found
+}
+
+fn socket(cfg: &UdpConfig) -> std::io::Result<(std::net::UdpSocket, usize)> {
+    let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))?;
+    let shared = !matches!(cfg.mode, Mode::Unicast(_));
+    if shared {
+        // several listeners on one host share a multicast or broadcast port
+        s.set_reuse_address(true)?;
+    }
+    let _ = s.set_recv_buffer_size(cfg.recv_buf);
+    let got = s.recv_buffer_size().unwrap_or(0);
+    match &cfg.mode {
+        Mode::Multicast { iface, ttl, .. } => {
+            s.set_multicast_ttl_v4(*ttl)?;
+            s.set_multicast_loop_v4(cfg.multicast_loop)?;
+            if !iface.is_unspecified() {
+                s.set_multicast_if_v4(iface)?;
+            }
+        }
+        Mode::Broadcast(_) => s.set_broadcast(true)?,
+        Mode::Unicast(_) => {}
+    }
+    s.bind(&SocketAddr::V4(cfg.bind).into())?;
+    if let Mode::Multicast { group, iface, .. } = &cfg.mode
+        && let Err(e) = s.join_multicast_v4(group, iface)
+    {
+        if !iface.is_unspecified() {
+            return Err(e);
+        }
+        // no route for multicast (a machine with no network): fall back to loopback
+        tracing::info!("joining {group} on the default interface failed ({e}); using loopback");
+        s.join_multicast_v4(group, &Ipv4Addr::LOCALHOST)?;
+        s.set_multicast_if_v4(&Ipv4Addr::LOCALHOST)?;
+    }
+    s.set_nonblocking(true)?;
+    Ok((s.into(), got))
+}
+
+/// The UDP transport.
+pub struct UdpTransport {
+    name: Arc<str>,
+    socket: Arc<UdpSocket>,
+    sender: u64,
+    dests: Vec<SocketAddr>,
+    max: usize,
+}
+
+/// Opens a UDP medium.
+pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
+    let cfg = UdpConfig::from_url(&mut o.url)?;
+    let io_err = |context: String| {
+        let url = o.url.to_string();
+        move |source| OpenError::Io { url, context, source }
+    };
+    let (std_socket, recv_buf) = socket(&cfg).map_err(io_err(format!("binding {}", cfg.bind)))?;
+    let socket = Arc::new(UdpSocket::from_std(std_socket).map_err(io_err("registering the socket".into()))?);
+    if recv_buf < cfg.recv_buf {
+        tracing::debug!(medium = %o.name, "receive buffer is {recv_buf} bytes (asked for {})", cfg.recv_buf);
+    }
+    let sender = fastrand::u64(1..);
+    let transport = Arc::new(UdpTransport {
+        name: o.name.clone(),
+        socket: socket.clone(),
+        sender,
+        dests: cfg.destinations(),
+        max: cfg.max,
+    });
+    let task = tokio::spawn(receive(socket, sender, o.ingress.clone()));
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    tracing::debug!(medium = %o.name, mode = ?cfg.mode, bind = %cfg.bind, "udp medium open");
+    Ok(transport)
+}
+
+impl UdpTransport {
+    /// The address the socket is bound to.
+    pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
+        self.socket.local_addr()
+    }
+}
+
+impl Transport for UdpTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let frame = wire::encode(msg, self.sender).map_err(|reason| SendError::Io {
+            medium: self.name.to_string(),
+            reason: reason.to_string(),
+        })?;
+        if frame.len() > self.max {
+            return Err(SendError::TooLarge {
+                medium: self.name.to_string(),
+                size: frame.len(),
+                max: self.max,
+            });
+        }
+        Ok(frame)
+    }
+
+    fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            for dest in &self.dests {
+                self.socket
+                    .send_to(&frame, dest)
+                    .await
+                    .map_err(|e| SendError::Io {
+                        medium: self.name.to_string(),
+                        reason: format!("sending to {dest}: {e}"),
+                    })?;
+            }
+            Ok(())
+        })
+    }
+}
+
+const RECV_CHUNK: usize = 1 << 20;
+
+async fn receive(socket: Arc<UdpSocket>, me: u64, ingress: Ingress) {
+    let mut buf = BytesMut::with_capacity(RECV_CHUNK);
+    let mut origins = wire::Origins::default();
+    loop {
+        if buf.capacity() - buf.len() < MAX_DATAGRAM + 1 {
+            buf = BytesMut::with_capacity(RECV_CHUNK);
+        }
+        let from = match socket.recv_buf_from(&mut buf).await {
+            Ok((_, from)) => from,
+            Err(e) => {
+                tracing::debug!("udp receive: {e}");
+                tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                continue;
+            }
+        };
+        let datagram = buf.split().freeze();
+        match wire::decode(&datagram, &mut origins) {
+            Ok((sender, _)) if sender == me => {}
+            Ok((_, msg)) => {
+                if !ingress.deliver(msg).await {
+                    return;
+                }
+            }
+            Err(e) => ingress.reject(e.kind.reason(), format_args!("datagram from {from}: {e}")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(url: &str) -> Result<UdpConfig, crate::url::UrlError> {
+        UdpConfig::from_url(&mut MediumUrl::parse(url).unwrap())
+    }
+
+    #[test]
+    fn modes_follow_the_address() {
+        let c = cfg("udp://239.255.42.1:47800").unwrap();
+        assert_eq!(
+            c.mode,
+            Mode::Multicast {
+                group: Ipv4Addr::new(239, 255, 42, 1),
+                iface: Ipv4Addr::LOCALHOST,
+                ttl: 0
+            }
+        );
+        let c = cfg("udp://239.255.42.1:47800?ttl=1").unwrap();
+        assert!(matches!(c.mode, Mode::Multicast { iface, ttl: 1, .. } if iface.is_unspecified()));
+        let c = cfg("udp://255.255.255.255:5000").unwrap();
+        assert_eq!(c.mode, Mode::Broadcast(Ipv4Addr::BROADCAST));
+        assert_eq!(c.bind, SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, 5000));
+        let c = cfg("udp://127.0.0.1:5000?peer=127.0.0.1:5001,127.0.0.1:5002").unwrap();
+        assert_eq!(c.destinations().len(), 2);
+        let c = cfg("udp://239.255.42.1:47800?iface=lo").unwrap();
+        assert!(matches!(c.mode, Mode::Multicast { iface, .. } if iface == Ipv4Addr::LOCALHOST));
+    }
+
+    #[test]
+    fn bad_urls_say_why() {
+        assert!(cfg("udp://239.255.42.1").unwrap_err().reason.contains("needs a port"));
+        assert!(cfg("udp://example:1").unwrap_err().reason.contains("not an IPv4 address"));
+        assert!(cfg("udp://239.1.1.1:1?ttl=300").unwrap_err().reason.contains("hop count"));
+        assert!(cfg("udp://239.1.1.1:1?iface=nosuch0").unwrap_err().reason.contains("no such interface"));
+        assert!(cfg("udp://239.1.1.1:1?peer=1.2.3.4:5").unwrap_err().reason.contains("for unicast"));
+        assert!(cfg("udp://1.2.3.4:1?peer=nonsense").unwrap_err().reason.contains("HOST:PORT"));
+        assert!(cfg("udp://1.2.3.4:1?max=10").is_err());
+    }
+}

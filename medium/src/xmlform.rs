@@ -1,0 +1,554 @@
+//! The XML form of a datamap (documented in `docs/wire-formats.md`).
+//!
+//! ```xml
+//! <datamap>
+//!   <float name="yaw">90.5</float>
+//!   <int name="n">-2</int>
+//!   <bool name="ok">true</bool>
+//!   <string name="id">a</string>
+//!   <bytes name="raw">AQI=</bytes>
+//!   <list name="xs"><int>1</int><string>two</string></list>
+//! </datamap>
+//! ```
+//! The form is lossless: floats are written in the shortest form that reads back to the same bits
+//! (a NaN with a payload as `NaN:0x…`), carriage returns and attribute whitespace as character
+//! references, and a string or name holding a character XML 1.0 cannot carry (C0 controls other than
+//! tab, newline and carriage return; U+FFFE; U+FFFF) is written in base64 with `encoding="base64"` /
+//! `name-base64="…"`. Readers accept any whitespace between elements and around numbers.
+
+use crate::datamap::{DataMap, Value};
+use base64::Engine as _;
+use base64::engine::general_purpose::STANDARD as B64;
+use quick_xml::events::{BytesStart, Event};
+use quick_xml::reader::Reader;
+use std::fmt::Write as _;
+use thiserror::Error;
+
+/// Deepest list nesting the reader accepts.
+pub const MAX_DEPTH: usize = 32;
+
+/// Why XML text could not be read as a datamap; `offset` is the byte offset into the text.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{kind} at byte {offset}")]
+pub struct XmlFormError {
+    /// Byte offset into the XML text.
+    pub offset: usize,
+    /// What was wrong.
+    pub kind: XmlFormErrorKind,
+}
+
+/// The kinds of [`XmlFormError`].
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum XmlFormErrorKind {
+    /// The text is not well-formed XML.
+    #[error("XML syntax: {0}")]
+    Syntax(String),
+    /// The text ended inside the document.
+    #[error("document ends early (incomplete)")]
+    Incomplete,
+    /// The root element is not `<datamap>`.
+    #[error("root element is <{0}>, expected <datamap>")]
+    NotADataMap(String),
+    /// An element that is not a value element.
+    #[error("unexpected element <{0}>, expected one of bool, int, float, string, bytes, list")]
+    UnknownElement(String),
+    /// A datamap entry without a `name` attribute.
+    #[error("<{0}> has no name attribute")]
+    MissingName(String),
+    /// Text that does not read as the element's type.
+    #[error("{text:?} is not a valid {ty}")]
+    BadValue {
+        /// The element's type name.
+        ty: &'static str,
+        /// The offending text.
+        text: String,
+    },
+    /// Text directly inside `<datamap>` or `<list>`.
+    #[error("unexpected text {0:?} between elements")]
+    StrayText(String),
+    /// Content after the root element.
+    #[error("content after </datamap>")]
+    Trailing,
+    /// Lists nested deeper than [`MAX_DEPTH`].
+    #[error("lists nested deeper than {MAX_DEPTH}")]
+    TooDeep,
+}
+
+impl XmlFormError {
+    /// True when the text was cut short rather than malformed.
+    pub fn is_incomplete(&self) -> bool {
+        self.kind == XmlFormErrorKind::Incomplete
+    }
+}
+
+/// Writes `map` in the XML form.
+pub fn to_xml(map: &DataMap) -> String {
+    let mut out = String::with_capacity(32 + map.len() * 40);
+    out.push_str("<datamap>");
+    for (k, v) in map.iter() {
+        write_value(&mut out, Some(k), v);
+    }
+    out.push_str("</datamap>");
+    out
+}
+
+fn write_value(out: &mut String, name: Option<&str>, v: &Value) {
+    let tag = v.type_name();
+    out.push('<');
+    out.push_str(tag);
+    if let Some(name) = name {
+        if xml_safe(name) {
+            out.push_str(" name=\"");
+            escape_attr(out, name);
+        } else {
+            out.push_str(" name-base64=\"");
+            out.push_str(&B64.encode(name));
+        }
+        out.push('"');
+    }
+    match v {
+        Value::Bool(b) => {
+            let _ = write!(out, ">{b}");
+        }
+        Value::Int(i) => {
+            let _ = write!(out, ">{i}");
+        }
+        Value::Float(f) => {
+            out.push('>');
+            write_float(out, *f);
+        }
+        Value::Str(s) => {
+            if xml_safe(s) {
+                out.push('>');
+                escape_text(out, s);
+            } else {
+                out.push_str(" encoding=\"base64\">");
+                out.push_str(&B64.encode(s));
+            }
+        }
+        Value::Bytes(b) => {
+            out.push('>');
+            out.push_str(&B64.encode(b));
+        }
+        Value::List(items) => {
+            out.push('>');
+            for item in items {
+                write_value(out, None, item);
+            }
+        }
+    }
+    out.push_str("</");
+    out.push_str(tag);
+    out.push('>');
+}
+
+fn write_float(out: &mut String, f: f64) {
+    if f.is_nan() && f.to_bits() != f64::NAN.to_bits() {
+        let _ = write!(out, "NaN:0x{:016x}", f.to_bits());
+    } else {
+        // Debug prints the shortest text that parses back to the same value ("1.0", "1e300", "NaN")
+        let _ = write!(out, "{f:?}");
+    }
+}
+
+/// True when every character of `s` can appear in XML 1.0 text.
+fn xml_safe(s: &str) -> bool {
+    !s.chars().any(|c| {
+        (c < ' ' && !matches!(c, '\t' | '\n' | '\r')) || c == '\u{FFFE}' || c == '\u{FFFF}'
+    })
+}
+
+fn escape_text(out: &mut String, s: &str) {
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '\r' => out.push_str("&#13;"),
+            c => out.push(c),
+        }
+    }
+}
+
+fn escape_attr(out: &mut String, s: &str) {
+    for c in s.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\t' => out.push_str("&#9;"),
+            '\n' => out.push_str("&#10;"),
+            '\r' => out.push_str("&#13;"),
+            c => out.push(c),
+        }
+    }
+}
+
+/// Reads a datamap from its XML form.
+pub fn from_xml(text: &str) -> Result<DataMap, XmlFormError> {
+    let mut p = Parser::new(text);
+    // prolog: declaration, comments, processing instructions, whitespace
+    let (root, empty) = loop {
+        let at = p.pos();
+        match p.next()? {
+            Event::Start(e) => break (e.into_owned(), false),
+            Event::Empty(e) => break (e.into_owned(), true),
+            Event::Decl(_) | Event::Comment(_) | Event::PI(_) | Event::DocType(_) => {}
+            Event::Text(t) if t.chars().all(char::is_whitespace) => {}
+            Event::Eof => return Err(p.err(at, XmlFormErrorKind::Incomplete)),
+            _ => return Err(p.err(at, XmlFormErrorKind::NotADataMap("text".into()))),
+        }
+    };
+    let root_name = tag_name(&root);
+    if root_name != "datamap" {
+        return Err(p.err(0, XmlFormErrorKind::NotADataMap(root_name)));
+    }
+    let mut map = DataMap::new();
+    if !empty {
+        while let Some((name, value)) = p.child(true, 0)? {
+            map.push_raw(name.unwrap_or_default(), value);
+        }
+    }
+    loop {
+        let at = p.pos();
+        match p.next()? {
+            Event::Eof => return Ok(map),
+            Event::Comment(_) | Event::PI(_) => {}
+            Event::Text(t) if t.chars().all(char::is_whitespace) => {}
+            _ => return Err(p.err(at, XmlFormErrorKind::Trailing)),
+        }
+    }
+}
+
+fn tag_name(e: &BytesStart<'_>) -> String {
+    e.name().as_ref().to_string()
+}
+
+struct Parser<'a> {
+    reader: Reader<&'a [u8]>,
+}
+
+impl<'a> Parser<'a> {
+    fn new(text: &'a str) -> Self {
+        let mut reader = Reader::from_str(text);
+        let cfg = reader.config_mut();
+        cfg.check_end_names = true;
+        cfg.expand_empty_elements = false;
+        Parser { reader }
+    }
+
+    fn pos(&self) -> usize {
+        self.reader.buffer_position() as usize
+    }
+
+    fn err(&self, offset: usize, kind: XmlFormErrorKind) -> XmlFormError {
+        XmlFormError { offset, kind }
+    }
+
+    fn next(&mut self) -> Result<Event<'a>, XmlFormError> {
+        self.reader.read_event().map_err(|e| {
+            let offset = self.reader.error_position() as usize;
+            let kind = match &e {
+                quick_xml::Error::Syntax(s)
+                    if matches!(
+                        s,
+                        quick_xml::errors::SyntaxError::UnclosedTag
+                            | quick_xml::errors::SyntaxError::UnclosedComment
+                            | quick_xml::errors::SyntaxError::UnclosedCData
+                            | quick_xml::errors::SyntaxError::UnclosedDoctype
+                            | quick_xml::errors::SyntaxError::UnclosedPI
+                            | quick_xml::errors::SyntaxError::UnclosedXmlDecl
+                    ) =>
+                {
+                    XmlFormErrorKind::Incomplete
+                }
+                _ => XmlFormErrorKind::Syntax(e.to_string()),
+            };
+            XmlFormError { offset, kind }
+        })
+    }
+
+    /// Reads the next child value of a `<datamap>` (`named`) or `<list>`; `None` at the parent's end tag.
+    fn child(
+        &mut self,
+        named: bool,
+        depth: usize,
+    ) -> Result<Option<(Option<String>, Value)>, XmlFormError> {
+        loop {
+            let at = self.pos();
+            let (start, empty) = match self.next()? {
+                Event::Start(e) => (e, false),
+                Event::Empty(e) => (e, true),
+                Event::End(_) => return Ok(None),
+                Event::Comment(_) | Event::PI(_) => continue,
+                Event::Text(t) if t.chars().all(char::is_whitespace) => continue,
+                Event::Text(t) => {
+                    let text = t.trim().to_string();
+                    return Err(self.err(at, XmlFormErrorKind::StrayText(text)));
+                }
+                Event::GeneralRef(r) => {
+                    let text = format!("&{};", &*r);
+                    return Err(self.err(at, XmlFormErrorKind::StrayText(text)));
+                }
+                Event::CData(_) => {
+                    return Err(self.err(at, XmlFormErrorKind::StrayText("CDATA".into())));
+                }
+                Event::Eof => return Err(self.err(at, XmlFormErrorKind::Incomplete)),
+                Event::Decl(_) | Event::DocType(_) => {
+                    return Err(self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into())));
+                }
+            };
+            let tag = tag_name(&start);
+            let mut name = None;
+            let mut base64 = false;
+            for attr in start.attributes() {
+                let attr = attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
+                let value = attr
+                    .normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                    .map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
+                match attr.key.as_ref() {
+                    "name" => name = Some(value.into_owned()),
+                    "name-base64" => {
+                        let raw = B64.decode(value.as_bytes()).ok().and_then(|b| String::from_utf8(b).ok());
+                        match raw {
+                            Some(n) => name = Some(n),
+                            None => {
+                                return Err(self.err(
+                                    at,
+                                    XmlFormErrorKind::BadValue {
+                                        ty: "base64 name",
+                                        text: value.into_owned(),
+                                    },
+                                ));
+                            }
+                        }
+                    }
+                    "encoding" => base64 = value == "base64",
+                    _ => {}
+                }
+            }
+            if named && name.is_none() {
+                return Err(self.err(at, XmlFormErrorKind::MissingName(tag)));
+            }
+            let value = match tag.as_str() {
+                "list" => {
+                    if depth >= MAX_DEPTH {
+                        return Err(self.err(at, XmlFormErrorKind::TooDeep));
+                    }
+                    let mut items = Vec::new();
+                    if !empty {
+                        while let Some((_, v)) = self.child(false, depth + 1)? {
+                            items.push(v);
+                        }
+                    }
+                    Value::List(items)
+                }
+                "bool" | "int" | "float" | "string" | "bytes" => {
+                    let text = if empty { String::new() } else { self.text()? };
+                    self.scalar(&tag, text, base64, at)?
+                }
+                _ => return Err(self.err(at, XmlFormErrorKind::UnknownElement(tag))),
+            };
+            return Ok(Some((name, value)));
+        }
+    }
+
+    /// Collects the text of an element up to its end tag, resolving references.
+    fn text(&mut self) -> Result<String, XmlFormError> {
+        let mut out = String::new();
+        loop {
+            let at = self.pos();
+            match self.next()? {
+                Event::Text(t) => out.push_str(&t.xml10_content()),
+                Event::CData(c) => out.push_str(&c),
+                Event::GeneralRef(r) => match resolve_ref(&r) {
+                    Some(c) => out.push(c),
+                    None => {
+                        return Err(self.err(
+                            at,
+                            XmlFormErrorKind::Syntax(format!(
+                                "unknown entity &{};",
+                                &*r
+                            )),
+                        ));
+                    }
+                },
+                Event::End(_) => return Ok(out),
+                Event::Comment(_) | Event::PI(_) => {}
+                Event::Eof => return Err(self.err(at, XmlFormErrorKind::Incomplete)),
+                Event::Start(e) | Event::Empty(e) => {
+                    return Err(self.err(at, XmlFormErrorKind::UnknownElement(tag_name(&e))));
+                }
+                Event::Decl(_) | Event::DocType(_) => {
+                    return Err(self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into())));
+                }
+            }
+        }
+    }
+
+    fn scalar(&self, tag: &str, text: String, base64: bool, at: usize) -> Result<Value, XmlFormError> {
+        let bad = |ty: &'static str, text: &str| {
+            self.err(
+                at,
+                XmlFormErrorKind::BadValue {
+                    ty,
+                    text: text.to_string(),
+                },
+            )
+        };
+        Ok(match tag {
+            "bool" => match text.trim() {
+                "true" | "1" => Value::Bool(true),
+                "false" | "0" => Value::Bool(false),
+                t => return Err(bad("bool", t)),
+            },
+            "int" => Value::Int(text.trim().parse().map_err(|_| bad("int", &text))?),
+            "float" => Value::Float(parse_float(text.trim()).ok_or_else(|| bad("float", &text))?),
+            "string" if base64 => {
+                let raw = B64
+                    .decode(strip_ws(&text))
+                    .ok()
+                    .and_then(|b| String::from_utf8(b).ok());
+                Value::Str(raw.ok_or_else(|| bad("base64 string", &text))?)
+            }
+            "string" => Value::Str(text),
+            _ => Value::Bytes(
+                B64.decode(strip_ws(&text))
+                    .map_err(|_| bad("base64 bytes", &text))?,
+            ),
+        })
+    }
+}
+
+fn strip_ws(s: &str) -> Vec<u8> {
+    s.bytes().filter(|b| !b.is_ascii_whitespace()).collect()
+}
+
+/// Resolves a predefined entity or character reference (without `&` and `;`).
+pub(crate) fn resolve_ref(r: &str) -> Option<char> {
+    match r {
+        "lt" => Some('<'),
+        "gt" => Some('>'),
+        "amp" => Some('&'),
+        "apos" => Some('\''),
+        "quot" => Some('"'),
+        _ => {
+            let s = r.strip_prefix('#')?;
+            let n = match s.strip_prefix('x') {
+                Some(hex) => u32::from_str_radix(hex, 16).ok()?,
+                None => s.parse().ok()?,
+            };
+            char::from_u32(n).filter(|c| *c != '\0')
+        }
+    }
+}
+
+fn parse_float(t: &str) -> Option<f64> {
+    if let Some(hex) = t.strip_prefix("NaN:0x") {
+        let bits = u64::from_str_radix(hex, 16).ok()?;
+        let f = f64::from_bits(bits);
+        return f.is_nan().then_some(f);
+    }
+    t.parse().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> DataMap {
+        DataMap::new()
+            .with("yaw", 90.5f64)
+            .with("n", -2i64)
+            .with("ok", true)
+            .with("id", "a<b & \"c\"\r\n\t")
+            .with("raw", vec![1u8, 2])
+            .with("xs", Value::List(vec![1i64.into(), "two".into()]))
+    }
+
+    #[test]
+    fn documented_example() {
+        let map = DataMap::new()
+            .with("yaw", 90.5f64)
+            .with("n", -2i64)
+            .with("ok", true)
+            .with("id", "a")
+            .with("raw", vec![1u8, 2])
+            .with("xs", Value::List(vec![1i64.into(), "two".into()]));
+        assert_eq!(
+            to_xml(&map),
+            "<datamap><float name=\"yaw\">90.5</float><int name=\"n\">-2</int>\
+             <bool name=\"ok\">true</bool><string name=\"id\">a</string>\
+             <bytes name=\"raw\">AQI=</bytes><list name=\"xs\"><int>1</int><string>two</string></list></datamap>"
+        );
+    }
+
+    #[test]
+    fn round_trip_with_awkward_text() {
+        let m = sample();
+        assert_eq!(from_xml(&to_xml(&m)).unwrap(), m);
+        let odd = DataMap::new()
+            .with("k\u{1}ey", "nul\0here")
+            .with("tab\tkey", "\u{FFFF}")
+            .with("neg0", -0.0f64)
+            .with("nan", f64::from_bits(0x7ff8_0000_dead_beef))
+            .with("inf", f64::NEG_INFINITY)
+            .with("empty", "")
+            .with("space", "  ");
+        let xml = to_xml(&odd);
+        assert!(xml.contains("name-base64"), "{xml}");
+        assert_eq!(from_xml(&xml).unwrap(), odd);
+    }
+
+    #[test]
+    fn hand_written_documents_are_accepted() {
+        let text = "<?xml version=\"1.0\"?>\n<!-- a sensor -->\n<datamap>\n  <float name=\"yaw\"> 12 </float>\n  \
+                    <bool name=\"ok\">1</bool>\n  <string name=\"e\"/>\n  <list name=\"l\">\n    <int> 3 </int>\n  </list>\n</datamap>\n";
+        let m = from_xml(text).unwrap();
+        assert_eq!(m.get_f64("yaw"), Some(12.0));
+        assert_eq!(m.get_bool("ok"), Some(true));
+        assert_eq!(m.get_str("e"), Some(""));
+        assert_eq!(m.get("l"), Some(&Value::List(vec![Value::Int(3)])));
+    }
+
+    #[test]
+    fn errors_are_typed_and_placed() {
+        let e = from_xml("<other/>").unwrap_err();
+        assert_eq!(e.kind, XmlFormErrorKind::NotADataMap("other".into()));
+        let e = from_xml("<datamap><int>1</int></datamap>").unwrap_err();
+        assert_eq!((e.offset, e.kind), (9, XmlFormErrorKind::MissingName("int".into())));
+        let e = from_xml("<datamap><int name=\"a\">x</int></datamap>").unwrap_err();
+        assert!(matches!(e.kind, XmlFormErrorKind::BadValue { ty: "int", .. }));
+        let e = from_xml("<datamap><date name=\"a\"/></datamap>").unwrap_err();
+        assert_eq!(e.kind, XmlFormErrorKind::UnknownElement("date".into()));
+        let e = from_xml("<datamap></datamap><x/>").unwrap_err();
+        assert_eq!(e.kind, XmlFormErrorKind::Trailing);
+        let e = from_xml("<datamap>hello</datamap>").unwrap_err();
+        assert_eq!(e.kind, XmlFormErrorKind::StrayText("hello".into()));
+        let e = from_xml("<datamap><int name=\"a\">1</float></datamap>").unwrap_err();
+        assert!(matches!(e.kind, XmlFormErrorKind::Syntax(_)));
+    }
+
+    #[test]
+    fn truncated_documents_are_incomplete() {
+        let xml = to_xml(&sample());
+        for cut in [0, 5, 12, 30, xml.len() - 3] {
+            let e = from_xml(&xml[..cut]).unwrap_err();
+            assert!(e.is_incomplete(), "cut {cut}: {e}");
+        }
+    }
+
+    #[test]
+    fn deep_lists_are_refused() {
+        let mut xml = String::from("<datamap><list name=\"l\">");
+        for _ in 0..MAX_DEPTH + 1 {
+            xml.push_str("<list>");
+        }
+        for _ in 0..MAX_DEPTH + 1 {
+            xml.push_str("</list>");
+        }
+        xml.push_str("</list></datamap>");
+        assert_eq!(from_xml(&xml).unwrap_err().kind, XmlFormErrorKind::TooDeep);
+    }
+}
