@@ -99,7 +99,10 @@ pub fn encode_into(map: &DataMap, out: &mut Vec<u8>) {
 }
 
 fn encoded_len_hint(map: &DataMap) -> usize {
-    4 + map.iter().map(|(k, v)| 2 + k.len() + value_len_hint(v)).sum::<usize>()
+    4 + map
+        .iter()
+        .map(|(k, v)| 2 + k.len() + value_len_hint(v))
+        .sum::<usize>()
 }
 
 fn value_len_hint(v: &Value) -> usize {
@@ -335,7 +338,10 @@ mod tests {
     #[test]
     fn every_prefix_is_incomplete_not_malformed() {
         let map = DataMap::new()
-            .with("list", Value::List(vec![1i64.into(), "x".into(), vec![1u8, 2].into()]))
+            .with(
+                "list",
+                Value::List(vec![1i64.into(), "x".into(), vec![1u8, 2].into()]),
+            )
             .with("f", 1.0f64);
         let bytes = encode(&map);
         for cut in 0..bytes.len() {

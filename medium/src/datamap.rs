@@ -184,7 +184,9 @@ pub struct DataMap {
 impl DataMap {
     /// An empty datamap.
     pub fn new() -> Self {
-        DataMap { entries: Vec::new() }
+        DataMap {
+            entries: Vec::new(),
+        }
     }
 
     /// An empty datamap with room for `n` entries.

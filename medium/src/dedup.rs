@@ -162,7 +162,11 @@ mod tests {
         for s in order {
             assert_eq!(d.check_raw(1, s), Seen::Duplicate, "{s}");
         }
-        assert_eq!(d.check_raw(2, 5), Seen::New, "another origin is independent");
+        assert_eq!(
+            d.check_raw(2, 5),
+            Seen::New,
+            "another origin is independent"
+        );
     }
 
     #[test]

@@ -210,7 +210,8 @@ impl Faults {
             return Ok(());
         }
         if delays.len() > 1 {
-            self.duplicated.fetch_add(delays.len() as u64 - 1, Ordering::Relaxed);
+            self.duplicated
+                .fetch_add(delays.len() as u64 - 1, Ordering::Relaxed);
         }
         let now = Instant::now();
         let mut result = Ok(());
@@ -283,7 +284,10 @@ mod tests {
 
     #[test]
     fn options_come_from_the_url() {
-        let mut u = MediumUrl::parse("udp://h:1?fault.loss=0.3&fault.dup=0.1&fault.hold=5ms&ttl=0&fault.seed=9").unwrap();
+        let mut u = MediumUrl::parse(
+            "udp://h:1?fault.loss=0.3&fault.dup=0.1&fault.hold=5ms&ttl=0&fault.seed=9",
+        )
+        .unwrap();
         let cfg = FaultConfig::from_url(&mut u).unwrap().unwrap();
         assert_eq!(cfg.loss, 0.3);
         assert_eq!(cfg.duplicate, 0.1);
@@ -292,9 +296,17 @@ mod tests {
         assert_eq!(u.take("ttl").as_deref(), Some("0"));
         let mut u = MediumUrl::parse("udp://h:1?fault.loss=2").unwrap();
         let e = FaultConfig::from_url(&mut u).unwrap_err();
-        assert_eq!(e.reason, "option `fault.loss=2`: expected a probability between 0 and 1");
+        assert_eq!(
+            e.reason,
+            "option `fault.loss=2`: expected a probability between 0 and 1"
+        );
         let mut u = MediumUrl::parse("udp://h:1?fault.los=0.1").unwrap();
-        assert!(FaultConfig::from_url(&mut u).unwrap_err().reason.contains("unknown option `fault.los`"));
+        assert!(
+            FaultConfig::from_url(&mut u)
+                .unwrap_err()
+                .reason
+                .contains("unknown option `fault.los`")
+        );
     }
 
     #[test]

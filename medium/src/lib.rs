@@ -36,8 +36,8 @@ pub use active::{ActiveInterface, Handler, Outgoing, TxWaker};
 pub use datamap::{DataMap, Value};
 pub use fault::FaultConfig;
 pub use medium::{
-    Ingress, Interface, InterfaceStats, IntoTopic, LinkState, Medium, MediumStats, Node, OpenError, SendError,
-    Transport, TryRecvError,
+    Ingress, Interface, InterfaceStats, IntoTopic, LinkState, Medium, MediumStats, Node, OpenError,
+    SendError, Transport, TryRecvError,
 };
 pub use message::{Kind, Message, Origin, Provenance, Stamp};
 pub use payload::{ConvertError, Format, Payload};

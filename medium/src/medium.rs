@@ -19,7 +19,7 @@ use std::fmt;
 use std::future::Future;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, RwLock, Weak};
+use std::sync::{Arc, Mutex, OnceLock, RwLock, Weak};
 use std::task::{Context, Poll};
 use thiserror::Error;
 use tokio::sync::watch;
@@ -178,7 +178,7 @@ pub(crate) struct Inner {
     seq: AtomicU64,
     subs: RwLock<Arc<[Sub]>>,
     next_id: AtomicU64,
-    transport: Option<Arc<dyn Transport>>,
+    transport: OnceLock<Arc<dyn Transport>>,
     faults: Option<Faults>,
     counters: Counters,
     rejected: Mutex<BTreeMap<String, u64>>,
@@ -189,7 +189,12 @@ pub(crate) struct Inner {
 
 impl Drop for Inner {
     fn drop(&mut self) {
-        for t in self.tasks.get_mut().unwrap_or_else(|p| p.into_inner()).drain(..) {
+        for t in self
+            .tasks
+            .get_mut()
+            .unwrap_or_else(|p| p.into_inner())
+            .drain(..)
+        {
             t.abort();
         }
     }
@@ -232,43 +237,33 @@ struct Builder {
 }
 
 impl Builder {
+    /// Builds the medium, then its transport (which gets a working ingress), then joins the two.
     fn build<F>(self, make_transport: F) -> Result<Medium, OpenError>
     where
         F: FnOnce(Ingress) -> Result<Option<Arc<dyn Transport>>, OpenError>,
     {
         let (link, _) = watch::channel(LinkState::Up);
-        let mut err = None;
-        let inner = Arc::new_cyclic(|weak: &Weak<Inner>| {
-            let transport = match make_transport(Ingress {
-                inner: weak.clone(),
-            }) {
-                Ok(t) => t,
-                Err(e) => {
-                    err = Some(e);
-                    None
-                }
-            };
-            Inner {
-                origin: Origin::new(&self.node.name, &self.name, self.node.boot),
-                name: self.name,
-                url: self.url,
-                node: self.node,
-                seq: AtomicU64::new(0),
-                subs: RwLock::new(Arc::from(Vec::new())),
-                next_id: AtomicU64::new(1),
-                transport,
-                faults: self.faults.map(Faults::new),
-                counters: Counters::default(),
-                rejected: Mutex::new(BTreeMap::new()),
-                link,
-                tasks: Mutex::new(Vec::new()),
-                closed: AtomicBool::new(false),
-            }
+        let inner = Arc::new(Inner {
+            origin: Origin::new(&self.node.name, &self.name, self.node.boot),
+            name: self.name,
+            url: self.url,
+            node: self.node,
+            seq: AtomicU64::new(0),
+            subs: RwLock::new(Arc::from(Vec::new())),
+            next_id: AtomicU64::new(1),
+            transport: OnceLock::new(),
+            faults: self.faults.map(Faults::new),
+            counters: Counters::default(),
+            rejected: Mutex::new(BTreeMap::new()),
+            link,
+            tasks: Mutex::new(Vec::new()),
+            closed: AtomicBool::new(false),
         });
-        match err {
-            Some(e) => Err(e),
-            None => Ok(Medium { inner }),
+        let medium = Medium { inner };
+        if let Some(t) = make_transport(medium.ingress())? {
+            let _ = medium.inner.transport.set(t);
         }
+        Ok(medium)
     }
 }
 
@@ -357,7 +352,12 @@ impl Medium {
     }
 
     /// Attaches a new passive interface with the given queue capacities.
-    pub fn attach_with(&self, label: &str, data_capacity: usize, command_capacity: usize) -> Interface {
+    pub fn attach_with(
+        &self,
+        label: &str,
+        data_capacity: usize,
+        command_capacity: usize,
+    ) -> Interface {
         let id = self.inner.next_id.fetch_add(1, Ordering::Relaxed);
         let queue = Arc::new(Queue::new(data_capacity, command_capacity));
         if self.inner.closed.load(Ordering::Acquire) {
@@ -385,7 +385,12 @@ impl Medium {
     /// The medium's counters.
     pub fn stats(&self) -> MediumStats {
         let c = &self.inner.counters;
-        let f = self.inner.faults.as_ref().map(Faults::stats).unwrap_or_default();
+        let f = self
+            .inner
+            .faults
+            .as_ref()
+            .map(Faults::stats)
+            .unwrap_or_default();
         MediumStats {
             published: c.published.load(Ordering::Relaxed),
             delivered: c.delivered.load(Ordering::Relaxed),
@@ -507,7 +512,7 @@ impl Inner {
         if self.closed.load(Ordering::Acquire) {
             return Err(self.closed_error());
         }
-        let frame = match &self.transport {
+        let frame = match self.transport.get() {
             Some(t) => Some(t.encode(&msg)?),
             None => None,
         };
@@ -541,8 +546,13 @@ impl Inner {
                             delivered += 1;
                         }
                     } else {
-                        s.queue.counters.commands_refused.fetch_add(1, Ordering::Relaxed);
-                        self.counters.commands_refused.fetch_add(1, Ordering::Relaxed);
+                        s.queue
+                            .counters
+                            .commands_refused
+                            .fetch_add(1, Ordering::Relaxed);
+                        self.counters
+                            .commands_refused
+                            .fetch_add(1, Ordering::Relaxed);
                         tracing::error!(
                             medium = %self.name,
                             topic = %msg.topic,
@@ -553,8 +563,10 @@ impl Inner {
                 }
             }
         }
-        self.counters.delivered.fetch_add(delivered, Ordering::Relaxed);
-        if let (Some(frame), Some(t)) = (frame, &self.transport) {
+        self.counters
+            .delivered
+            .fetch_add(delivered, Ordering::Relaxed);
+        if let (Some(frame), Some(t)) = (frame, self.transport.get()) {
             match t.transmit(frame).await {
                 Ok(()) => {
                     self.counters.transmitted.fetch_add(1, Ordering::Relaxed);
@@ -804,12 +816,20 @@ impl Interface {
     }
 
     /// Publishes data on `topic`.
-    pub async fn send(&self, topic: impl IntoTopic, payload: impl Into<Payload>) -> Result<(), SendError> {
+    pub async fn send(
+        &self,
+        topic: impl IntoTopic,
+        payload: impl Into<Payload>,
+    ) -> Result<(), SendError> {
         self.publish(Kind::Data, topic, payload).await
     }
 
     /// Publishes a command on `topic`. Waits while a local receiver's command queue is full.
-    pub async fn command(&self, topic: impl IntoTopic, payload: impl Into<Payload>) -> Result<(), SendError> {
+    pub async fn command(
+        &self,
+        topic: impl IntoTopic,
+        payload: impl Into<Payload>,
+    ) -> Result<(), SendError> {
         self.publish(Kind::Command, topic, payload).await
     }
 
@@ -928,7 +948,9 @@ impl Drop for Interface {
     fn drop(&mut self) {
         let id = self.id;
         self.queue.close();
-        self.medium.inner.update_subs(|subs| subs.retain(|s| s.id != id));
+        self.medium
+            .inner
+            .update_subs(|subs| subs.retain(|s| s.id != id));
     }
 }
 

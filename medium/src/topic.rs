@@ -170,7 +170,10 @@ impl Pattern {
 
     /// Number of wildcard segments.
     pub fn wildcards(&self) -> usize {
-        self.segs.iter().filter(|s| !matches!(s, Seg::Lit(_))).count()
+        self.segs
+            .iter()
+            .filter(|s| !matches!(s, Seg::Lit(_)))
+            .count()
     }
 
     /// True when `topic` matches.
@@ -225,11 +228,7 @@ impl Pattern {
     }
 }
 
-fn match_segs<'t>(
-    segs: &[Seg],
-    parts: &[&'t str],
-    caps: &mut Option<Vec<Vec<&'t str>>>,
-) -> bool {
+fn match_segs<'t>(segs: &[Seg], parts: &[&'t str], caps: &mut Option<Vec<Vec<&'t str>>>) -> bool {
     match segs.split_first() {
         None => parts.is_empty(),
         Some((Seg::Lit(l), rest)) => {
@@ -285,7 +284,9 @@ fn overlap(a: &[Seg], b: &[Seg], i: usize, j: usize, memo: &mut Vec<Vec<Option<b
         (Some(Seg::Any), _) => {
             overlap(a, b, i + 1, j, memo) || (j < b.len() && overlap(a, b, i, j + 1, memo))
         }
-        (_, Some(Seg::Any)) => overlap(a, b, i, j + 1, memo) || (i < a.len() && overlap(a, b, i + 1, j, memo)),
+        (_, Some(Seg::Any)) => {
+            overlap(a, b, i, j + 1, memo) || (i < a.len() && overlap(a, b, i + 1, j, memo))
+        }
         (None, Some(_)) | (Some(_), None) => false,
         (Some(x), Some(y)) => {
             let compatible = match (x, y) {
@@ -355,11 +356,26 @@ mod tests {
     fn topics_are_checked() {
         assert!(Topic::new("nav.attitude").is_ok());
         assert_eq!(Topic::new(""), Err(TopicError::Empty));
-        assert!(matches!(Topic::new("nav..x"), Err(TopicError::EmptySegment(_))));
-        assert!(matches!(Topic::new("nav.x "), Err(TopicError::BadChar(_, ' '))));
-        assert!(matches!(Topic::new("nav.*"), Err(TopicError::BadChar(_, '*'))));
-        assert!(matches!(Pattern::new("nav.a*"), Err(TopicError::PartialWildcard(_))));
-        assert!(matches!(Topic::new(&"x".repeat(256)), Err(TopicError::TooLong(256))));
+        assert!(matches!(
+            Topic::new("nav..x"),
+            Err(TopicError::EmptySegment(_))
+        ));
+        assert!(matches!(
+            Topic::new("nav.x "),
+            Err(TopicError::BadChar(_, ' '))
+        ));
+        assert!(matches!(
+            Topic::new("nav.*"),
+            Err(TopicError::BadChar(_, '*'))
+        ));
+        assert!(matches!(
+            Pattern::new("nav.a*"),
+            Err(TopicError::PartialWildcard(_))
+        ));
+        assert!(matches!(
+            Topic::new(&"x".repeat(256)),
+            Err(TopicError::TooLong(256))
+        ));
     }
 
     #[test]
@@ -384,7 +400,10 @@ mod tests {
         let from = p("nav.*.**");
         let caps = from.captures("nav.gps.raw.x").unwrap();
         assert_eq!(caps, vec![vec!["gps"], vec!["raw", "x"]]);
-        assert_eq!(p("auv1.*.data.**").fill(&caps).unwrap(), "auv1.gps.data.raw.x");
+        assert_eq!(
+            p("auv1.*.data.**").fill(&caps).unwrap(),
+            "auv1.gps.data.raw.x"
+        );
         let caps = p("nav.**").captures("nav").unwrap();
         assert_eq!(p("auv1.nav.**").fill(&caps).unwrap(), "auv1.nav");
         assert!(p("x.*").fill(&[]).is_none());

@@ -42,9 +42,9 @@ impl MediumUrl {
             url: text.to_string(),
             reason,
         };
-        let (scheme, rest) = text
-            .split_once("://")
-            .ok_or_else(|| err("expected `scheme://…` (for example udp://239.255.42.1:47800)".into()))?;
+        let (scheme, rest) = text.split_once("://").ok_or_else(|| {
+            err("expected `scheme://…` (for example udp://239.255.42.1:47800)".into())
+        })?;
         if scheme.is_empty()
             || !scheme
                 .chars()
@@ -145,7 +145,11 @@ impl MediumUrl {
     }
 
     /// Takes option `key` and parses it, naming the option and the expected form on failure.
-    pub fn take_parsed<T: FromStr>(&mut self, key: &str, expected: &str) -> Result<Option<T>, UrlError> {
+    pub fn take_parsed<T: FromStr>(
+        &mut self,
+        key: &str,
+        expected: &str,
+    ) -> Result<Option<T>, UrlError> {
         match self.take(key) {
             None => Ok(None),
             Some(v) => v
@@ -232,14 +236,21 @@ mod tests {
 
     #[test]
     fn parses_the_parts() {
-        let mut u = MediumUrl::parse("udp://239.255.42.1:47800?ttl=0&peer=a:1,b:2&peer=c:3").unwrap();
-        assert_eq!((u.scheme.as_str(), u.host.as_str(), u.port), ("udp", "239.255.42.1", Some(47800)));
+        let mut u =
+            MediumUrl::parse("udp://239.255.42.1:47800?ttl=0&peer=a:1,b:2&peer=c:3").unwrap();
+        assert_eq!(
+            (u.scheme.as_str(), u.host.as_str(), u.port),
+            ("udp", "239.255.42.1", Some(47800))
+        );
         assert_eq!(u.take("ttl").as_deref(), Some("0"));
         assert_eq!(u.take_all("peer"), ["a:1", "b:2", "c:3"]);
         assert!(u.finish(&[]).is_ok());
 
         let u = MediumUrl::parse("serial:///dev/ttyUSB0?baud=19200").unwrap();
-        assert_eq!((u.host.as_str(), u.path.as_str(), u.port), ("", "/dev/ttyUSB0", None));
+        assert_eq!(
+            (u.host.as_str(), u.path.as_str(), u.port),
+            ("", "/dev/ttyUSB0", None)
+        );
         let u = MediumUrl::parse("udp://[::1]:5000").unwrap();
         assert_eq!((u.host.as_str(), u.port), ("::1", Some(5000)));
         let u = MediumUrl::parse("inproc://").unwrap();
@@ -254,7 +265,10 @@ mod tests {
         assert!(e.reason.contains("`99999` is not a port"), "{e}");
         let u = MediumUrl::parse("udp://h:1?tll=0").unwrap();
         let e = u.finish(&["ttl", "iface"]).unwrap_err();
-        assert_eq!(e.to_string(), "bad medium URL `udp://h:1?tll=0`: unknown option `tll` for udp://; known options: ttl, iface");
+        assert_eq!(
+            e.to_string(),
+            "bad medium URL `udp://h:1?tll=0`: unknown option `tll` for udp://; known options: ttl, iface"
+        );
         let mut u = MediumUrl::parse("udp://h:1?ttl=x").unwrap();
         let e = u.take_parsed::<u8>("ttl", "a number 0–255").unwrap_err();
         assert_eq!(e.reason, "option `ttl=x`: expected a number 0–255");

@@ -61,7 +61,8 @@ pub struct Attr {
 impl Attr {
     /// An error about this attribute's value.
     pub fn error(&self, message: impl fmt::Display) -> FileError {
-        self.pos.error(format!("attribute `{}`: {message}", self.name))
+        self.pos
+            .error(format!("attribute `{}`: {message}", self.name))
     }
 
     /// Parses the value, naming the expected form on failure.
@@ -101,8 +102,10 @@ impl Element {
 
     /// The attribute called `name`, or an error saying it is missing.
     pub fn required(&self, name: &str) -> Result<&Attr, FileError> {
-        self.attr(name)
-            .ok_or_else(|| self.pos.error(format!("<{}> is missing attribute `{name}`", self.name)))
+        self.attr(name).ok_or_else(|| {
+            self.pos
+                .error(format!("<{}> is missing attribute `{name}`", self.name))
+        })
     }
 
     /// Parses attribute `name` when present.
@@ -129,7 +132,11 @@ impl Element {
 
     /// Fails on the first attribute not in `known`.
     pub fn only_attrs(&self, known: &[&str]) -> Result<(), FileError> {
-        match self.attrs.iter().find(|a| !known.contains(&a.name.as_str())) {
+        match self
+            .attrs
+            .iter()
+            .find(|a| !known.contains(&a.name.as_str()))
+        {
             None => Ok(()),
             Some(a) => Err(a.pos.error(format!(
                 "unknown attribute `{}` on <{}>; expected one of: {}",
@@ -142,7 +149,11 @@ impl Element {
 
     /// Fails on the first child element not in `known`.
     pub fn only_children(&self, known: &[&str]) -> Result<(), FileError> {
-        match self.children.iter().find(|c| !known.contains(&c.name.as_str())) {
+        match self
+            .children
+            .iter()
+            .find(|c| !known.contains(&c.name.as_str()))
+        {
             None => Ok(()),
             Some(c) => Err(c.pos.error(format!(
                 "unexpected element <{}> inside <{}>; expected {}",
@@ -151,7 +162,11 @@ impl Element {
                 if known.is_empty() {
                     "no elements".to_string()
                 } else {
-                    known.iter().map(|k| format!("<{k}>")).collect::<Vec<_>>().join(", ")
+                    known
+                        .iter()
+                        .map(|k| format!("<{k}>"))
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 }
             ))),
         }
@@ -210,7 +225,9 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
         match event {
             Event::Start(e) | Event::Empty(e) if root.is_some() => {
                 let _ = e;
-                return Err(lines.pos(&file, at).error("a second root element; a file has one root"));
+                return Err(lines
+                    .pos(&file, at)
+                    .error("a second root element; a file has one root"));
             }
             Event::Start(e) => {
                 let el = element(&e, at, text, &lines, &file)?;
@@ -225,7 +242,9 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
             }
             Event::End(_) => {
                 let Some(el) = stack.pop() else {
-                    return Err(lines.pos(&file, at).error("closing tag without an opening tag"));
+                    return Err(lines
+                        .pos(&file, at)
+                        .error("closing tag without an opening tag"));
                 };
                 match stack.last_mut() {
                     Some(parent) => parent.children.push(el),
@@ -237,7 +256,9 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
                 match stack.last_mut() {
                     Some(el) => el.text.push_str(&s),
                     None if s.trim().is_empty() => {}
-                    None => return Err(lines.pos(&file, at).error("text outside the root element")),
+                    None => {
+                        return Err(lines.pos(&file, at).error("text outside the root element"));
+                    }
                 }
             }
             Event::GeneralRef(r) => {
@@ -248,7 +269,9 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
                 })?;
                 match stack.last_mut() {
                     Some(el) => el.text.push(c),
-                    None => return Err(lines.pos(&file, at).error("text outside the root element")),
+                    None => {
+                        return Err(lines.pos(&file, at).error("text outside the root element"));
+                    }
                 }
             }
             Event::CData(c) => {
@@ -261,11 +284,16 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
         }
     }
     if let Some(open) = stack.last() {
-        return Err(lines
-            .pos(&file, text.len())
-            .error(format!("file ends inside <{}> opened at line {}", open.name, open.pos.line)));
+        return Err(lines.pos(&file, text.len()).error(format!(
+            "file ends inside <{}> opened at line {}",
+            open.name, open.pos.line
+        )));
     }
-    root.ok_or_else(|| lines.pos(&file, text.len()).error("no root element: the file is empty"))
+    root.ok_or_else(|| {
+        lines
+            .pos(&file, text.len())
+            .error("no root element: the file is empty")
+    })
 }
 
 /// Reads and parses a file.
@@ -282,7 +310,13 @@ pub fn parse_file(path: &std::path::Path) -> Result<Element, FileError> {
     parse(&name, &text)
 }
 
-fn element(e: &BytesStart<'_>, at: usize, text: &str, lines: &Lines<'_>, file: &Arc<str>) -> Result<Element, FileError> {
+fn element(
+    e: &BytesStart<'_>,
+    at: usize,
+    text: &str,
+    lines: &Lines<'_>,
+    file: &Arc<str>,
+) -> Result<Element, FileError> {
     let name = e.name().as_ref().to_string();
     let raw_start = at + 1 + name.len();
     let raw = e.attributes_raw();
@@ -304,17 +338,25 @@ fn element(e: &BytesStart<'_>, at: usize, text: &str, lines: &Lines<'_>, file: &
             }
         })?;
         let key = a.key.as_ref().to_string();
-        let rel = raw[search_from..].find(key.as_str()).map(|i| i + search_from);
+        let rel = raw[search_from..]
+            .find(key.as_str())
+            .map(|i| i + search_from);
         let attr_at = rel.map_or(at, |r| raw_start + r);
         if let Some(r) = rel {
             search_from = r + key.len();
         }
         let value = a
             .normalized_value(quick_xml::XmlVersion::Implicit1_0)
-            .map_err(|err| lines.pos(file, attr_at).error(format!("bad value of attribute `{key}`: {err}")))?
+            .map_err(|err| {
+                lines
+                    .pos(file, attr_at)
+                    .error(format!("bad value of attribute `{key}`: {err}"))
+            })?
             .into_owned();
         if attrs.iter().any(|x: &Attr| x.name == key) {
-            return Err(lines.pos(file, attr_at).error(format!("attribute `{key}` given twice")));
+            return Err(lines
+                .pos(file, attr_at)
+                .error(format!("attribute `{key}` given twice")));
         }
         attrs.push(Attr {
             name: key,
@@ -366,11 +408,21 @@ mod tests {
     #[test]
     fn helpers_explain_what_is_missing() {
         let root = parse("f.xml", "<m type=\"x\" rate=\"fast\" bogus=\"1\"><p/></m>").unwrap();
-        assert_eq!(root.required("name").unwrap_err().to_string(), "f.xml:1:1: <m> is missing attribute `name`");
+        assert_eq!(
+            root.required("name").unwrap_err().to_string(),
+            "f.xml:1:1: <m> is missing attribute `name`"
+        );
         let e = root.parsed::<f64>("rate", "a number").unwrap_err();
-        assert_eq!(e.to_string(), "f.xml:1:13: attribute `rate`: `fast` is not a number");
+        assert_eq!(
+            e.to_string(),
+            "f.xml:1:13: attribute `rate`: `fast` is not a number"
+        );
         let e = root.only_attrs(&["type", "rate"]).unwrap_err();
-        assert!(e.to_string().starts_with("f.xml:1:25: unknown attribute `bogus`"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("f.xml:1:25: unknown attribute `bogus`"),
+            "{e}"
+        );
         let e = root.only_children(&["param"]).unwrap_err();
         assert!(e.message.contains("unexpected element <p>"), "{e}");
     }

@@ -296,21 +296,27 @@ impl<'a> Parser<'a> {
                 }
                 Event::Eof => return Err(self.err(at, XmlFormErrorKind::Incomplete)),
                 Event::Decl(_) | Event::DocType(_) => {
-                    return Err(self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into())));
+                    return Err(
+                        self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into()))
+                    );
                 }
             };
             let tag = tag_name(&start);
             let mut name = None;
             let mut base64 = false;
             for attr in start.attributes() {
-                let attr = attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
+                let attr =
+                    attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
                 let value = attr
                     .normalized_value(quick_xml::XmlVersion::Implicit1_0)
                     .map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
                 match attr.key.as_ref() {
                     "name" => name = Some(value.into_owned()),
                     "name-base64" => {
-                        let raw = B64.decode(value.as_bytes()).ok().and_then(|b| String::from_utf8(b).ok());
+                        let raw = B64
+                            .decode(value.as_bytes())
+                            .ok()
+                            .and_then(|b| String::from_utf8(b).ok());
                         match raw {
                             Some(n) => name = Some(n),
                             None => {
@@ -367,10 +373,7 @@ impl<'a> Parser<'a> {
                     None => {
                         return Err(self.err(
                             at,
-                            XmlFormErrorKind::Syntax(format!(
-                                "unknown entity &{};",
-                                &*r
-                            )),
+                            XmlFormErrorKind::Syntax(format!("unknown entity &{};", &*r)),
                         ));
                     }
                 },
@@ -381,13 +384,21 @@ impl<'a> Parser<'a> {
                     return Err(self.err(at, XmlFormErrorKind::UnknownElement(tag_name(&e))));
                 }
                 Event::Decl(_) | Event::DocType(_) => {
-                    return Err(self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into())));
+                    return Err(
+                        self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into()))
+                    );
                 }
             }
         }
     }
 
-    fn scalar(&self, tag: &str, text: String, base64: bool, at: usize) -> Result<Value, XmlFormError> {
+    fn scalar(
+        &self,
+        tag: &str,
+        text: String,
+        base64: bool,
+        at: usize,
+    ) -> Result<Value, XmlFormError> {
         let bad = |ty: &'static str, text: &str| {
             self.err(
                 at,
@@ -517,9 +528,15 @@ mod tests {
         let e = from_xml("<other/>").unwrap_err();
         assert_eq!(e.kind, XmlFormErrorKind::NotADataMap("other".into()));
         let e = from_xml("<datamap><int>1</int></datamap>").unwrap_err();
-        assert_eq!((e.offset, e.kind), (9, XmlFormErrorKind::MissingName("int".into())));
+        assert_eq!(
+            (e.offset, e.kind),
+            (9, XmlFormErrorKind::MissingName("int".into()))
+        );
         let e = from_xml("<datamap><int name=\"a\">x</int></datamap>").unwrap_err();
-        assert!(matches!(e.kind, XmlFormErrorKind::BadValue { ty: "int", .. }));
+        assert!(matches!(
+            e.kind,
+            XmlFormErrorKind::BadValue { ty: "int", .. }
+        ));
         let e = from_xml("<datamap><date name=\"a\"/></datamap>").unwrap_err();
         assert_eq!(e.kind, XmlFormErrorKind::UnknownElement("date".into()));
         let e = from_xml("<datamap></datamap><x/>").unwrap_err();

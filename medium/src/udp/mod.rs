@@ -29,7 +29,16 @@ pub const MAX_DATAGRAM: usize = 65_507;
 /// Default socket receive buffer.
 pub const DEFAULT_RECV_BUF: usize = 4 << 20;
 
-const OPTIONS: [&str; 8] = ["ttl", "iface", "peer", "bind", "broadcast", "loop", "recv_buf", "max"];
+const OPTIONS: [&str; 8] = [
+    "ttl",
+    "iface",
+    "peer",
+    "bind",
+    "broadcast",
+    "loop",
+    "recv_buf",
+    "max",
+];
 
 /// How a UDP medium reaches its peers.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -89,7 +98,11 @@ impl UdpConfig {
                 name.parse::<Ipv4Addr>()
                     .ok()
                     .or_else(|| interface_address(&name))
-                    .ok_or_else(|| url.error(format!("option `iface={name}`: no such interface or IPv4 address")))?,
+                    .ok_or_else(|| {
+                        url.error(format!(
+                            "option `iface={name}`: no such interface or IPv4 address"
+                        ))
+                    })?,
             ),
         };
         let mut peers = Vec::new();
@@ -103,10 +116,17 @@ impl UdpConfig {
         let bind_override: Option<Ipv4Addr> = url.take_parsed("bind", "an IPv4 address")?;
         let broadcast = url.take_flag("broadcast")?.unwrap_or(false);
         let multicast_loop = url.take_flag("loop")?.unwrap_or(true);
-        let recv_buf = url.take_parsed("recv_buf", "a size in bytes")?.unwrap_or(DEFAULT_RECV_BUF);
-        let max = url.take_parsed("max", "a size in bytes")?.unwrap_or(MAX_DATAGRAM);
+        let recv_buf = url
+            .take_parsed("recv_buf", "a size in bytes")?
+            .unwrap_or(DEFAULT_RECV_BUF);
+        let max = url
+            .take_parsed("max", "a size in bytes")?
+            .unwrap_or(MAX_DATAGRAM);
         if max > MAX_DATAGRAM || max < wire::FIXED + 3 {
-            return Err(url.error(format!("option `max={max}`: expected {}–{MAX_DATAGRAM}", wire::FIXED + 3)));
+            return Err(url.error(format!(
+                "option `max={max}`: expected {}–{MAX_DATAGRAM}",
+                wire::FIXED + 3
+            )));
         }
         url.finish(&OPTIONS)?;
 
@@ -119,14 +139,23 @@ impl UdpConfig {
             } else {
                 Ipv4Addr::UNSPECIFIED
             });
-            (Mode::Multicast { group: host, iface, ttl }, host)
+            (
+                Mode::Multicast {
+                    group: host,
+                    iface,
+                    ttl,
+                },
+                host,
+            )
         } else if broadcast || host == Ipv4Addr::BROADCAST {
             (Mode::Broadcast(host), Ipv4Addr::UNSPECIFIED)
         } else {
             (Mode::Unicast(peers.clone()), host)
         };
         if !matches!(mode, Mode::Unicast(_)) && !peers.is_empty() {
-            return Err(url.error("option `peer` is for unicast URLs; multicast and broadcast reach every listener"));
+            return Err(url.error(
+                "option `peer` is for unicast URLs; multicast and broadcast reach every listener",
+            ));
         }
         Ok(UdpConfig {
             mode,
@@ -140,7 +169,9 @@ impl UdpConfig {
 
     fn destinations(&self) -> Vec<SocketAddr> {
         match &self.mode {
-            Mode::Multicast { group, .. } => vec![SocketAddr::V4(SocketAddrV4::new(*group, self.port))],
+            Mode::Multicast { group, .. } => {
+                vec![SocketAddr::V4(SocketAddrV4::new(*group, self.port))]
+            }
             Mode::Broadcast(addr) => vec![SocketAddr::V4(SocketAddrV4::new(*addr, self.port))],
             Mode::Unicast(peers) => peers.clone(),
         }
@@ -228,10 +259,15 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let cfg = UdpConfig::from_url(&mut o.url)?;
     let io_err = |context: String| {
         let url = o.url.to_string();
-        move |source| OpenError::Io { url, context, source }
+        move |source| OpenError::Io {
+            url,
+            context,
+            source,
+        }
     };
     let (std_socket, recv_buf) = socket(&cfg).map_err(io_err(format!("binding {}", cfg.bind)))?;
-    let socket = Arc::new(UdpSocket::from_std(std_socket).map_err(io_err("registering the socket".into()))?);
+    let socket =
+        Arc::new(UdpSocket::from_std(std_socket).map_err(io_err("registering the socket".into()))?);
     if recv_buf < cfg.recv_buf {
         tracing::debug!(medium = %o.name, "receive buffer is {recv_buf} bytes (asked for {})", cfg.recv_buf);
     }
@@ -351,12 +387,42 @@ mod tests {
 
     #[test]
     fn bad_urls_say_why() {
-        assert!(cfg("udp://239.255.42.1").unwrap_err().reason.contains("needs a port"));
-        assert!(cfg("udp://example:1").unwrap_err().reason.contains("not an IPv4 address"));
-        assert!(cfg("udp://239.1.1.1:1?ttl=300").unwrap_err().reason.contains("hop count"));
-        assert!(cfg("udp://239.1.1.1:1?iface=nosuch0").unwrap_err().reason.contains("no such interface"));
-        assert!(cfg("udp://239.1.1.1:1?peer=1.2.3.4:5").unwrap_err().reason.contains("for unicast"));
-        assert!(cfg("udp://1.2.3.4:1?peer=nonsense").unwrap_err().reason.contains("HOST:PORT"));
+        assert!(
+            cfg("udp://239.255.42.1")
+                .unwrap_err()
+                .reason
+                .contains("needs a port")
+        );
+        assert!(
+            cfg("udp://example:1")
+                .unwrap_err()
+                .reason
+                .contains("not an IPv4 address")
+        );
+        assert!(
+            cfg("udp://239.1.1.1:1?ttl=300")
+                .unwrap_err()
+                .reason
+                .contains("hop count")
+        );
+        assert!(
+            cfg("udp://239.1.1.1:1?iface=nosuch0")
+                .unwrap_err()
+                .reason
+                .contains("no such interface")
+        );
+        assert!(
+            cfg("udp://239.1.1.1:1?peer=1.2.3.4:5")
+                .unwrap_err()
+                .reason
+                .contains("for unicast")
+        );
+        assert!(
+            cfg("udp://1.2.3.4:1?peer=nonsense")
+                .unwrap_err()
+                .reason
+                .contains("HOST:PORT")
+        );
         assert!(cfg("udp://1.2.3.4:1?max=10").is_err());
     }
 }

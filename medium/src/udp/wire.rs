@@ -106,7 +106,8 @@ pub fn encode(msg: &Message, sender: u64) -> Result<Bytes, &'static str> {
         Payload::Xml(x) => x.len(),
         Payload::Map(m) => m.len() * 16 + 8,
     };
-    let mut buf = BytesMut::with_capacity(FIXED + node.len() + medium.len() + topic.len() + payload_hint);
+    let mut buf =
+        BytesMut::with_capacity(FIXED + node.len() + medium.len() + topic.len() + payload_hint);
     buf.put_slice(&MAGIC);
     buf.put_u8(VERSION);
     let kind = match msg.kind {
@@ -190,7 +191,11 @@ pub fn header(d: &[u8]) -> Result<Header<'_>, WireError> {
     if flags & !0b111 != 0 || format == 3 {
         return Err(err(3, WireErrorKind::BadFlags(flags)));
     }
-    let kind = if flags & 1 == 1 { Kind::Command } else { Kind::Data };
+    let kind = if flags & 1 == 1 {
+        Kind::Command
+    } else {
+        Kind::Data
+    };
     let (n, m, t) = (d[5] as usize, d[6] as usize, d[7] as usize);
     let end = FIXED + n + m + t;
     if d.len() < end {
@@ -200,7 +205,8 @@ pub fn header(d: &[u8]) -> Result<Header<'_>, WireError> {
         if len == 0 {
             return Err(err(at, WireErrorKind::BadText(what)));
         }
-        std::str::from_utf8(&d[at..at + len]).map_err(|e| err(at + e.valid_up_to(), WireErrorKind::BadText(what)))
+        std::str::from_utf8(&d[at..at + len])
+            .map_err(|e| err(at + e.valid_up_to(), WireErrorKind::BadText(what)))
     };
     let node = text(FIXED, n, "origin node name")?;
     let medium = text(FIXED + n, m, "origin medium name")?;
@@ -263,9 +269,11 @@ pub fn decode(datagram: &Bytes, origins: &mut Origins) -> Result<(u64, Message),
             offset: h.payload_at + e.offset,
             kind: WireErrorKind::BadPayload(e.kind.to_string()),
         })?),
-        _ => Payload::Xml(Arc::from(std::str::from_utf8(body).map_err(|e| WireError {
-            offset: h.payload_at + e.valid_up_to(),
-            kind: WireErrorKind::BadText("XML payload"),
+        _ => Payload::Xml(Arc::from(std::str::from_utf8(body).map_err(|e| {
+            WireError {
+                offset: h.payload_at + e.valid_up_to(),
+                kind: WireErrorKind::BadText("XML payload"),
+            }
         })?)),
     };
     let origin = origins.get(h.node, h.medium, h.boot);
@@ -339,11 +347,16 @@ mod tests {
 
     #[test]
     fn every_truncation_and_corruption_is_an_error_not_a_panic() {
-        let m = msg(Payload::from(DataMap::new().with("x", 1i64).with("s", "text")));
+        let m = msg(Payload::from(
+            DataMap::new().with("x", 1i64).with("s", "text"),
+        ));
         let d = encode(&m, 1).unwrap();
         let mut origins = Origins::default();
         for cut in 0..d.len() {
-            assert!(decode(&d.slice(..cut), &mut origins).is_err(), "cut at {cut}");
+            assert!(
+                decode(&d.slice(..cut), &mut origins).is_err(),
+                "cut at {cut}"
+            );
         }
         for i in 0..d.len() {
             for flip in [0x01u8, 0x80, 0xff] {
@@ -371,6 +384,9 @@ mod tests {
         d[3] = 0;
         d[FIXED] = 0xff;
         let e = decode(&Bytes::from(d), &mut origins).unwrap_err();
-        assert_eq!((e.offset, e.kind), (FIXED, WireErrorKind::BadText("origin node name")));
+        assert_eq!(
+            (e.offset, e.kind),
+            (FIXED, WireErrorKind::BadText("origin node name"))
+        );
     }
 }

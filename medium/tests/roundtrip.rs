@@ -1,0 +1,114 @@
+//! Property tests: every conversion between the three payload formats round-trips, and no decoder
+//! panics on any input.
+
+use bytes::Bytes;
+use proptest::prelude::*;
+use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
+use seabus_medium::udp::wire;
+use seabus_medium::{DataMap, Format, Payload, Topic, Value, binary, xmlform};
+
+fn scalar() -> impl Strategy<Value = Value> {
+    prop_oneof![
+        any::<bool>().prop_map(Value::Bool),
+        any::<i64>().prop_map(Value::Int),
+        // any bit pattern: NaNs with payloads, infinities, negative zero, subnormals
+        any::<u64>().prop_map(|b| Value::Float(f64::from_bits(b))),
+        any::<f64>().prop_map(Value::Float),
+        ".*".prop_map(Value::Str),
+        "[\\x00-\\x1f\\u{fffe}\\u{ffff}a<&>\"' \r\n\t]{0,8}".prop_map(Value::Str),
+        proptest::collection::vec(any::<u8>(), 0..40).prop_map(Value::Bytes),
+    ]
+}
+
+fn value() -> impl Strategy<Value = Value> {
+    scalar().prop_recursive(3, 24, 6, |inner| {
+        proptest::collection::vec(inner, 0..6).prop_map(Value::List)
+    })
+}
+
+fn key() -> impl Strategy<Value = String> {
+    prop_oneof![
+        "[a-z_][a-z0-9_]{0,12}",
+        ".{0,10}",
+        "[\\x00-\\x1f \t\n\r\"<>&]{1,5}",
+    ]
+}
+
+fn datamap() -> impl Strategy<Value = DataMap> {
+    proptest::collection::vec((key(), value()), 0..10)
+        .prop_map(|entries| entries.into_iter().collect())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(400))]
+
+    #[test]
+    fn binary_round_trips(m in datamap()) {
+        prop_assert_eq!(binary::decode(&binary::encode(&m)).unwrap(), m);
+    }
+
+    #[test]
+    fn xml_round_trips(m in datamap()) {
+        let xml = xmlform::to_xml(&m);
+        prop_assert_eq!(xmlform::from_xml(&xml).unwrap(), m);
+    }
+
+    #[test]
+    fn every_conversion_chain_round_trips(m in datamap(), path in proptest::collection::vec(0u8..3, 1..6)) {
+        let fmt = |i: u8| [Format::Bytes, Format::Map, Format::Xml][i as usize];
+        let mut p = Payload::from(m.clone());
+        for step in path {
+            p = p.convert(fmt(step)).unwrap();
+            prop_assert_eq!(p.format(), fmt(step));
+        }
+        prop_assert_eq!(&*p.to_map().unwrap(), &m);
+        // and the binary form is the same whichever way it was reached
+        let direct = binary::encode(&m);
+        let via_xml = Payload::from(m.clone()).convert(Format::Xml).unwrap().convert(Format::Bytes).unwrap();
+        prop_assert_eq!(via_xml.as_bytes().unwrap().as_ref(), &direct[..]);
+    }
+
+    #[test]
+    fn udp_datagrams_round_trip(m in datamap(), topic in "[a-z]{1,8}(\\.[a-z0-9_]{1,8}){0,4}",
+                                seq in any::<u64>(), hops in any::<u8>(), stamp in any::<i64>(),
+                                command in any::<bool>(), boot in any::<u32>(), sender in any::<u64>()) {
+        let msg = Message {
+            topic: Topic::new(&topic).unwrap(),
+            kind: if command { Kind::Command } else { Kind::Data },
+            provenance: Provenance { origin: Origin::new("node-1", "bus", boot), seq, hops },
+            stamp: Stamp(stamp),
+            payload: Payload::from(m.clone()),
+        };
+        let d = wire::encode(&msg, sender).unwrap();
+        let (s, back) = wire::decode(&d, &mut wire::Origins::default()).unwrap();
+        prop_assert_eq!(s, sender);
+        prop_assert_eq!(back.topic, msg.topic);
+        prop_assert_eq!(back.kind, msg.kind);
+        prop_assert_eq!(back.provenance, msg.provenance);
+        prop_assert_eq!(back.stamp, msg.stamp);
+        prop_assert_eq!(&*back.payload.to_map().unwrap(), &m);
+    }
+
+    #[test]
+    fn binary_decoder_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..200)) {
+        let _ = binary::decode(&bytes);
+        let mut with_magic = b"SM\x01".to_vec();
+        with_magic.extend_from_slice(&bytes);
+        let _ = binary::decode(&with_magic);
+    }
+
+    #[test]
+    fn xml_reader_never_panics(text in ".{0,200}", tail in "[<>/=\"a-z &;#x0-9]{0,80}") {
+        let _ = xmlform::from_xml(&text);
+        let _ = xmlform::from_xml(&format!("<datamap>{tail}"));
+        let _ = seabus_medium::xml::parse("f.xml", &format!("<a>{tail}"));
+    }
+
+    #[test]
+    fn wire_decoder_never_panics(bytes in proptest::collection::vec(any::<u8>(), 0..120)) {
+        let _ = wire::decode(&Bytes::from(bytes.clone()), &mut wire::Origins::default());
+        let mut framed = b"SB\x01".to_vec();
+        framed.extend_from_slice(&bytes);
+        let _ = wire::decode(&Bytes::from(framed), &mut wire::Origins::default());
+    }
+}
