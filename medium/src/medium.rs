@@ -283,35 +283,40 @@ impl Medium {
     /// Opens the medium a URL names. `fault.*` options add the fault stage to any medium.
     /// Must be called inside a tokio runtime.
     pub fn open(name: &str, url: &str, node: &Node) -> Result<Medium, OpenError> {
-        let mut parsed = MediumUrl::parse(url)?;
-        let faults = FaultConfig::from_url(&mut parsed)?;
-        let builder = Builder {
+        let (scheme, parsed, faults) = Self::parse_url(url)?;
+        (scheme.check)(&mut parsed.clone())?;
+        Builder {
             name: Arc::from(name),
             url: url.to_string(),
             node: node.clone(),
             faults,
-        };
-        let scheme = parsed.scheme.clone();
-        match scheme.as_str() {
-            "inproc" => {
-                parsed.finish(&FaultConfig::OPTIONS)?;
-                builder.build(|_| Ok(None))
-            }
-            "udp" => builder.build(|ingress| {
-                let t = crate::udp::open(Opening {
-                    name: Arc::from(name),
-                    node: node.clone(),
-                    url: parsed,
-                    ingress,
-                })?;
-                Ok(Some(t as Arc<dyn Transport>))
-            }),
-            _ => Err(OpenError::UnknownScheme {
-                scheme,
-                url: url.to_string(),
-                known: SCHEMES.join(", "),
-            }),
         }
+        .build(|ingress| {
+            (scheme.open)(Opening {
+                name: Arc::from(name),
+                node: node.clone(),
+                url: parsed,
+                ingress,
+            })
+        })
+    }
+
+    /// Checks a medium URL without opening anything: scheme, options and their values.
+    pub fn check_url(url: &str) -> Result<(), OpenError> {
+        let (scheme, mut parsed, _) = Self::parse_url(url)?;
+        (scheme.check)(&mut parsed)?;
+        Ok(())
+    }
+
+    fn parse_url(url: &str) -> Result<(&'static Scheme, MediumUrl, Option<FaultConfig>), OpenError> {
+        let mut parsed = MediumUrl::parse(url)?;
+        let faults = FaultConfig::from_url(&mut parsed)?;
+        let scheme = SCHEMES.iter().find(|s| s.name == parsed.scheme).ok_or_else(|| OpenError::UnknownScheme {
+            scheme: parsed.scheme.clone(),
+            url: url.to_string(),
+            known: schemes().join(", "),
+        })?;
+        Ok((scheme, parsed, faults))
     }
 
     /// Adds the fault stage (loss, duplication, reordering, delay) to a medium being built in code.
@@ -445,8 +450,32 @@ impl Medium {
     }
 }
 
-/// The schemes [`Medium::open`] knows.
-pub const SCHEMES: [&str; 2] = ["inproc", "udp"];
+/// One kind of medium: how to check its URL and how to open its transport.
+struct Scheme {
+    name: &'static str,
+    /// Takes and checks every option of the URL, without opening anything.
+    check: fn(&mut MediumUrl) -> Result<(), UrlError>,
+    /// Opens the transport (`None` for a medium without a wire).
+    open: fn(Opening) -> Result<Option<Arc<dyn Transport>>, OpenError>,
+}
+
+const SCHEMES: &[Scheme] = &[
+    Scheme {
+        name: "inproc",
+        check: |url| url.finish(&[]),
+        open: |_| Ok(None),
+    },
+    Scheme {
+        name: "udp",
+        check: |url| crate::udp::UdpConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::udp::open(o)? as Arc<dyn Transport>)),
+    },
+];
+
+/// The URL schemes [`Medium::open`] knows.
+pub fn schemes() -> Vec<&'static str> {
+    SCHEMES.iter().map(|s| s.name).collect()
+}
 
 /// A snapshot of a medium's counters.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]

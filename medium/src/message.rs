@@ -105,7 +105,7 @@ impl Stamp {
 }
 
 /// A message on a medium.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct Message {
     /// The topic.
     pub topic: Topic,

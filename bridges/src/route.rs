@@ -1,0 +1,356 @@
+//! The generic bridge (`<bridge type="route">`, the default): forwards messages between two media
+//! by routes, renaming topics and fields, limiting rates and converting payload formats.
+//!
+//! Loop safety, in order of the checks:
+//! 1. each side's interface drops duplicates it receives (origin + sequence window);
+//! 2. the bridge keeps one more window over both sides, so a message it has seen on either side is
+//!    forwarded at most once, whichever way it comes back;
+//! 3. a message that has crossed `hops` bridges is not forwarded again;
+//! 4. a message is never sent to the medium it was first published on, nor back to the side it came
+//!    from (a route leads from one medium to the other).
+//!
+//! Every second (the `report` parameter) it publishes its counters and latency on
+//! `seabus.bridge.<name>` on its first medium.
+
+use async_trait::async_trait;
+use seabus_medium::dedup::{Dedup, Seen};
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Format, Kind, Message, Pattern, Payload, Stamp, Topic, Value};
+use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl};
+use seabus_modules::registry::{BridgeType, Built};
+use seabus_modules::system::BridgeSpec;
+use seabus_modules::Catalogue;
+use std::collections::HashMap;
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// The `route` bridge type.
+pub const TYPE: BridgeType = BridgeType {
+    name: "route",
+    summary: "forwards messages between two media by routes (rename, rate limit, format)",
+    build,
+};
+
+const REPORT: TimerId = 1;
+
+/// A route compiled for one direction.
+struct Leg {
+    from: usize,
+    to: usize,
+    topics: Pattern,
+    rename: Option<Pattern>,
+    min_interval: Option<Duration>,
+    format: Option<Format>,
+    kind: Option<Kind>,
+    fields: Vec<(String, String)>,
+}
+
+#[derive(Default, Clone, Copy)]
+struct LegStats {
+    forwarded: u64,
+    rate_limited: u64,
+    latency_sum_ms: f64,
+    latency_max_ms: f64,
+    latency_n: u64,
+}
+
+#[derive(Default)]
+struct Counters {
+    duplicates: u64,
+    hop_limited: u64,
+    returned: u64,
+    unrouted: u64,
+    errors: u64,
+}
+
+/// The generic bridge.
+pub struct RouteBridge {
+    media: [String; 2],
+    hops: u8,
+    legs: Vec<Leg>,
+    stats: Vec<LegStats>,
+    counters: Counters,
+    seen: Dedup,
+    last_sent: HashMap<(usize, Topic), Instant>,
+    report: Option<Duration>,
+    report_topic: Topic,
+}
+
+fn build(spec: &BridgeSpec, _: &Catalogue) -> Result<Built, FileError> {
+    let (bridge, decl) = RouteBridge::new(spec)?;
+    Ok(Built {
+        decl,
+        module: Box::new(bridge),
+    })
+}
+
+impl RouteBridge {
+    /// Compiles a bridge from its system-file form, with its declaration.
+    pub fn new(spec: &BridgeSpec) -> Result<(RouteBridge, Declaration), FileError> {
+        let port_of = |name: &str| if name == spec.media[0] { 0 } else { 1 };
+        let mut legs = Vec::new();
+        let mut decl = Declaration::new(ModuleKind::Bridge).format(0, None).format(1, None);
+        for r in &spec.routes {
+            for (from, to) in r.legs(&spec.media[0], &spec.media[1]) {
+                let (from, to) = (port_of(from), port_of(to));
+                decl = decl
+                    .consumes(TopicDecl::topic(r.topics.as_str()).on_port(from))
+                    .produces(TopicDecl::topic(r.out_pattern().as_str()).on_port(to));
+                legs.push(Leg {
+                    from,
+                    to,
+                    topics: r.topics.clone(),
+                    rename: r.rename.clone(),
+                    min_interval: r.rate.map(|hz| Duration::from_secs_f64(1.0 / hz)),
+                    format: r.format,
+                    kind: r.kind,
+                    fields: r.fields.clone(),
+                });
+            }
+        }
+        let report = spec.params.duration_or("report", Duration::from_secs(1))?;
+        let report_topic =
+            Topic::new(&format!("seabus.bridge.{}", spec.name)).map_err(|e| spec.pos.error(e.to_string()))?;
+        let bridge = RouteBridge {
+            media: spec.media.clone(),
+            hops: spec.hops,
+            stats: vec![LegStats::default(); legs.len()],
+            legs,
+            counters: Counters::default(),
+            seen: Dedup::new(),
+            last_sent: HashMap::new(),
+            report: (!report.is_zero()).then_some(report),
+            report_topic,
+        };
+        Ok((bridge, decl))
+    }
+}
+
+/// What became of one message.
+#[derive(Debug, PartialEq)]
+enum Verdict {
+    Forward(usize, Message),
+    Drop(&'static str),
+}
+
+impl RouteBridge {
+    fn route(&mut self, node: &str, port: usize, msg: Message) -> Verdict {
+        match self.seen.check(&msg) {
+            Seen::New => {}
+            Seen::Duplicate | Seen::Late => {
+                self.counters.duplicates += 1;
+                return Verdict::Drop("duplicate");
+            }
+        }
+        let Some(i) = self.legs.iter().position(|l| {
+            l.from == port && l.topics.matches(&msg.topic) && l.kind.is_none_or(|k| k == msg.kind)
+        }) else {
+            self.counters.unrouted += 1;
+            return Verdict::Drop("no route");
+        };
+        if msg.provenance.hops >= self.hops {
+            self.counters.hop_limited += 1;
+            return Verdict::Drop("hop limit");
+        }
+        let leg = &self.legs[i];
+        let origin = &msg.provenance.origin;
+        if &*origin.node == node && *origin.medium == *self.media[leg.to] {
+            self.counters.returned += 1;
+            return Verdict::Drop("would return to its origin medium");
+        }
+        let topic = match &leg.rename {
+            None => msg.topic.clone(),
+            Some(to) => {
+                let renamed = leg
+                    .topics
+                    .captures(&msg.topic)
+                    .and_then(|caps| to.fill(&caps))
+                    .and_then(|t| Topic::new(&t).ok());
+                match renamed {
+                    Some(t) => t,
+                    None => {
+                        self.counters.errors += 1;
+                        return Verdict::Drop("rename produced no valid topic");
+                    }
+                }
+            }
+        };
+        if let (Some(gap), Kind::Data) = (leg.min_interval, msg.kind) {
+            let now = Instant::now();
+            let key = (i, topic.clone());
+            if let Some(last) = self.last_sent.get(&key)
+                && now.duration_since(*last) < gap
+            {
+                self.stats[i].rate_limited += 1;
+                return Verdict::Drop("rate limit");
+            }
+            self.last_sent.insert(key, now);
+        }
+        let payload = match convert(&msg.payload, &leg.fields, leg.format) {
+            Ok(p) => p,
+            Err(e) => {
+                self.counters.errors += 1;
+                tracing::warn!(topic = %msg.topic, "bridge cannot convert the payload: {e}");
+                return Verdict::Drop("conversion");
+            }
+        };
+        let st = &mut self.stats[i];
+        st.forwarded += 1;
+        let latency = Stamp::now().since(msg.stamp).as_secs_f64() * 1e3;
+        st.latency_sum_ms += latency;
+        st.latency_max_ms = st.latency_max_ms.max(latency);
+        st.latency_n += 1;
+        let to = leg.to;
+        let mut out = msg;
+        out.topic = topic;
+        out.payload = payload;
+        out.provenance.hops = out.provenance.hops.saturating_add(1);
+        Verdict::Forward(to, out)
+    }
+
+    fn report_map(&mut self) -> DataMap {
+        let c = &self.counters;
+        let list = |f: &dyn Fn(&LegStats) -> Value| Value::List(self.stats.iter().map(f).collect());
+        let forwarded: u64 = self.stats.iter().map(|s| s.forwarded).sum();
+        let rate_limited: u64 = self.stats.iter().map(|s| s.rate_limited).sum();
+        let map = DataMap::new()
+            .with("forwarded", forwarded as i64)
+            .with("duplicates", c.duplicates as i64)
+            .with("hop_limited", c.hop_limited as i64)
+            .with("returned", c.returned as i64)
+            .with("rate_limited", rate_limited as i64)
+            .with("unrouted", c.unrouted as i64)
+            .with("errors", c.errors as i64)
+            .with("route_forwarded", list(&|s| Value::Int(s.forwarded as i64)))
+            .with("route_rate_limited", list(&|s| Value::Int(s.rate_limited as i64)))
+            .with(
+                "route_latency_ms",
+                list(&|s| Value::Float(if s.latency_n > 0 { s.latency_sum_ms / s.latency_n as f64 } else { 0.0 })),
+            )
+            .with("route_latency_max_ms", list(&|s| Value::Float(s.latency_max_ms)));
+        // latency is reported per period
+        for s in &mut self.stats {
+            s.latency_sum_ms = 0.0;
+            s.latency_max_ms = 0.0;
+            s.latency_n = 0;
+        }
+        map
+    }
+}
+
+/// Applies field renames (which need a datamap) and the far side's format.
+fn convert(p: &Payload, fields: &[(String, String)], format: Option<Format>) -> Result<Payload, seabus_medium::ConvertError> {
+    let p = if fields.is_empty() {
+        p.clone()
+    } else {
+        let mut map = (*p.to_map()?).clone();
+        for (from, to) in fields {
+            map.rename(from, to);
+        }
+        Payload::from(map)
+    };
+    match format {
+        Some(f) => p.convert(f),
+        None => Ok(p),
+    }
+}
+
+#[async_trait]
+impl Module for RouteBridge {
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        if let Some(r) = self.report {
+            ctx.every(REPORT, r);
+        }
+        Ok(())
+    }
+
+    async fn on_message(&mut self, ctx: &mut Context, port: usize, msg: Message) -> Result<(), ModuleError> {
+        let node = ctx.node().name.clone();
+        if let Verdict::Forward(to, out) = self.route(&node, port, msg) {
+            let Some(iface) = ctx.port(to) else {
+                return Err(ModuleError::msg(format!("bridge has no port {to}")));
+            };
+            if let Err(e) = iface.forward(out).await {
+                self.counters.errors += 1;
+                tracing::warn!(bridge = ctx.name(), to = %self.media[to], "not forwarded: {e}");
+            }
+        }
+        Ok(())
+    }
+
+    async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
+        let map = self.report_map();
+        ctx.publish(&self.report_topic, map).await
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use seabus_medium::{Origin, Provenance};
+    use seabus_modules::system::SystemSpec;
+
+    fn bridge(routes: &str, hops: u8) -> RouteBridge {
+        let text = format!(
+            "<seabus><medium name=\"a\" url=\"inproc://\"/><medium name=\"b\" url=\"inproc://\"/>\
+             <bridge name=\"x\" media=\"a b\" hops=\"{hops}\">{routes}</bridge></seabus>"
+        );
+        let spec = SystemSpec::parse("t.xml", &text).unwrap();
+        RouteBridge::new(&spec.bridges[0]).unwrap().0
+    }
+
+    fn msg(topic: &str, node: &str, medium: &str, seq: u64, hops: u8) -> Message {
+        Message {
+            topic: Topic::new(topic).unwrap(),
+            kind: Kind::Data,
+            provenance: Provenance {
+                origin: Origin::new(node, medium, 1),
+                seq,
+                hops,
+            },
+            stamp: Stamp::now(),
+            payload: Payload::from(DataMap::new().with("hdg", 1.5f64)),
+        }
+    }
+
+    #[test]
+    fn forwards_once_renames_and_counts_hops() {
+        let mut b = bridge(r#"<route topics="nav.*" rename="auv1.nav.*"/>"#, 8);
+        let Verdict::Forward(to, out) = b.route("me", 0, msg("nav.depth", "me", "a", 1, 0)) else { panic!() };
+        assert_eq!((to, out.topic.as_str(), out.provenance.hops), (1, "auv1.nav.depth", 1));
+        assert_eq!(out.provenance.seq, 1, "provenance is kept");
+        // the same message coming back from the other side is not forwarded again
+        assert_eq!(b.route("me", 1, msg("nav.depth", "me", "a", 1, 1)), Verdict::Drop("duplicate"));
+        assert_eq!(b.route("me", 0, msg("cmd.x", "me", "a", 2, 0)), Verdict::Drop("no route"));
+    }
+
+    #[test]
+    fn never_returns_a_message_to_its_origin_medium_and_honours_the_hop_limit() {
+        let mut b = bridge(r#"<route topics="**"/>"#, 3);
+        assert_eq!(b.route("me", 0, msg("t", "me", "b", 1, 1)), Verdict::Drop("would return to its origin medium"));
+        // the same medium name on another node is another medium
+        assert!(matches!(b.route("me", 0, msg("t", "other", "b", 1, 1)), Verdict::Forward(1, _)));
+        assert_eq!(b.route("me", 0, msg("t", "me", "a", 7, 3)), Verdict::Drop("hop limit"));
+        assert!(matches!(b.route("me", 0, msg("t", "me", "a", 8, 2)), Verdict::Forward(1, _)));
+    }
+
+    #[test]
+    fn rate_limits_data_per_topic_and_converts_formats_and_fields() {
+        let mut b = bridge(r#"<route from="a" topics="nav.*" rate="1" format="xml"><field name="hdg" rename="heading"/></route>"#, 8);
+        let Verdict::Forward(_, out) = b.route("me", 0, msg("nav.x", "n", "a", 1, 0)) else { panic!() };
+        assert_eq!(out.payload.format(), Format::Xml);
+        assert_eq!(out.payload.to_map().unwrap().get_f64("heading"), Some(1.5));
+        assert_eq!(b.route("me", 0, msg("nav.x", "n", "a", 2, 0)), Verdict::Drop("rate limit"));
+        assert!(matches!(b.route("me", 0, msg("nav.y", "n", "a", 3, 0)), Verdict::Forward(..)), "per topic");
+        // a command is never rate-limited
+        let mut c = msg("nav.x", "n", "a", 4, 0);
+        c.kind = Kind::Command;
+        assert!(matches!(b.route("me", 0, c), Verdict::Forward(..)));
+        // nothing routes from b
+        assert_eq!(b.route("me", 1, msg("nav.z", "n", "b", 5, 0)), Verdict::Drop("no route"));
+        let report = b.report_map();
+        assert_eq!(report.get_i64("forwarded"), Some(3));
+        assert_eq!(report.get_i64("rate_limited"), Some(1));
+        assert_eq!(report.get_i64("unrouted"), Some(1));
+    }
+}

@@ -1,0 +1,19 @@
+//! Supporting modules: conversion, test signals, and an example helm.
+//!
+//! - `generator` publishes a counter and a sine wave at its tick rate, for testing links end to end;
+//! - `convert` turns fields of one topic into fields of another by linear conversions declared in
+//!   the system file (`depth_ft*0.3048 as depth`);
+//! - `square` drives a vehicle around a square with course commands, leg by leg, from its position.
+
+pub mod convert;
+pub mod generator;
+pub mod square;
+
+use crate::registry::Registry;
+
+/// Registers the supporting module types.
+pub fn register(reg: &mut Registry) {
+    reg.add_module(generator::TYPE)
+        .add_module(convert::TYPE)
+        .add_module(square::TYPE);
+}
