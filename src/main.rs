@@ -1,1 +1,383 @@
-fn main() {}
+//! `seabus`: the command-line program. It parses arguments and wires a system file to the runtime;
+//! everything else lives in the library crates.
+
+mod spy;
+
+use clap::{Parser, Subcommand};
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Format, Kind, Medium, Node, Payload, Value};
+use seabus_modules::system::{self, SystemSpec};
+use seabus_modules::{Catalogue, Registry, Runtime};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::time::Duration;
+
+/// The demo system, built in.
+const DEMO: &str = include_str!("../configs/demo.xml");
+
+#[derive(Parser)]
+#[command(
+    name = "seabus",
+    version,
+    about = "Message-bus gateway and module framework for marine robots"
+)]
+struct Cli {
+    /// More log output (-v debug, -vv trace); RUST_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a system file until Ctrl-C or SIGTERM.
+    Run {
+        /// The system file.
+        file: PathBuf,
+        /// Stop by itself after this many seconds.
+        #[arg(long = "for", value_name = "SECS")]
+        duration: Option<f64>,
+    },
+    /// Run the built-in demo: a simulated vehicle, traffic on udp://239.255.42.1:47800.
+    Demo {
+        /// Stop by itself after this many seconds.
+        #[arg(long = "for", value_name = "SECS")]
+        duration: Option<f64>,
+    },
+    /// Validate a system file: exit 0 when valid, 1 when valid with warnings, 2 when not valid.
+    Check {
+        /// The system file.
+        file: PathBuf,
+    },
+    /// Show the traffic on a medium: a live table of topics, or one JSON object per message.
+    Spy {
+        /// The medium, for example udp://239.255.42.1:47800.
+        url: String,
+        /// Stop after this many seconds.
+        #[arg(long = "for", value_name = "SECS")]
+        duration: Option<f64>,
+        /// Print one JSON object per message instead of the table.
+        #[arg(long)]
+        json: bool,
+        /// Only topics matching this pattern.
+        #[arg(long, default_value = "**")]
+        topics: String,
+    },
+    /// Publish a datamap on a medium.
+    Pub {
+        /// The medium, for example udp://239.255.42.1:47800.
+        url: String,
+        /// The topic.
+        topic: String,
+        /// Fields as key=value (true/false, integers and numbers are typed; "quoted" is a string).
+        fields: Vec<String>,
+        /// How many messages to send.
+        #[arg(long, default_value_t = 1)]
+        count: u64,
+        /// Messages per second when sending several.
+        #[arg(long, default_value_t = 1.0)]
+        rate: f64,
+        /// Send as a command rather than data.
+        #[arg(long)]
+        command: bool,
+        /// Payload format: map, xml or bytes.
+        #[arg(long, default_value = "map")]
+        format: String,
+    },
+    /// List the module types, bridge types, medium schemes and standard datasets.
+    Types,
+}
+
+fn registry() -> Registry {
+    let mut reg = seabus_modules::registry();
+    seabus_drivers::register(&mut reg);
+    seabus_bridges::register(&mut reg);
+    reg
+}
+
+fn init_logs(verbose: u8) {
+    let ours = [
+        "seabus",
+        "seabus_medium",
+        "seabus_modules",
+        "seabus_drivers",
+        "seabus_bridges",
+        "seabus_ui",
+    ];
+    let level = match verbose {
+        0 => "info",
+        1 => "debug",
+        _ => "trace",
+    };
+    let default: Vec<String> = std::iter::once("warn".to_string())
+        .chain(ours.iter().map(|c| format!("{c}={level}")))
+        .collect();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default.join(",")));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_target(false)
+        .init();
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    init_logs(cli.verbose);
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("seabus: cannot start the runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let code = rt.block_on(async move {
+        match cli.command {
+            Command::Run { file, duration } => match SystemSpec::load(&file) {
+                Ok(spec) => run(spec, duration).await,
+                Err(e) => file_error(&e),
+            },
+            Command::Demo { duration } => match SystemSpec::parse("configs/demo.xml (built in)", DEMO) {
+                Ok(spec) => {
+                    eprintln!(
+                        "seabus demo: a simulated vehicle driven around a square.\n  \
+                         Its traffic is on udp://239.255.42.1:47800 (loopback only): in another terminal run\n  \
+                         seabus spy udp://239.255.42.1:47800\n  Ctrl-C stops."
+                    );
+                    run(spec, duration).await
+                }
+                Err(e) => file_error(&e),
+            },
+            Command::Check { file } => check(&file),
+            Command::Spy {
+                url,
+                duration,
+                json,
+                topics,
+            } => spy::spy(&url, duration.map(Duration::from_secs_f64), json, &topics).await,
+            Command::Pub {
+                url,
+                topic,
+                fields,
+                count,
+                rate,
+                command,
+                format,
+            } => publish(&url, &topic, &fields, count, rate, command, &format).await,
+            Command::Types => {
+                types();
+                ExitCode::SUCCESS
+            }
+        }
+    });
+    // modules that ignored the shutdown must not hold the process
+    rt.shutdown_timeout(Duration::from_millis(200));
+    code
+}
+
+fn file_error(e: &FileError) -> ExitCode {
+    eprintln!("{e}");
+    ExitCode::from(2)
+}
+
+/// Completes on Ctrl-C or SIGTERM.
+async fn terminated() {
+    let ctrl_c = tokio::signal::ctrl_c();
+    #[cfg(unix)]
+    {
+        let mut term =
+            match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+                Ok(s) => s,
+                Err(_) => {
+                    let _ = ctrl_c.await;
+                    return;
+                }
+            };
+        tokio::select! {
+            _ = ctrl_c => {}
+            _ = term.recv() => {}
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = ctrl_c.await;
+    }
+}
+
+async fn run(spec: SystemSpec, duration: Option<f64>) -> ExitCode {
+    let runtime = match Runtime::start(&spec, &registry(), Catalogue::built_in()).await {
+        Ok(r) => r,
+        Err(e) => return file_error(&e),
+    };
+    tracing::info!(
+        node = %runtime.node().name,
+        "running {}: media {}; modules {}",
+        spec.file,
+        spec.media.iter().map(|m| format!("{} ({})", m.name, m.url)).collect::<Vec<_>>().join(", "),
+        spec.modules
+            .iter()
+            .map(|m| m.name.as_str())
+            .chain(spec.bridges.iter().map(|b| b.name.as_str()))
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    match duration {
+        Some(secs) => {
+            tokio::select! {
+                _ = terminated() => {}
+                _ = tokio::time::sleep(Duration::from_secs_f64(secs.max(0.0))) => {}
+            }
+        }
+        None => terminated().await,
+    }
+    tracing::info!("shutting down");
+    runtime.shutdown().await;
+    ExitCode::SUCCESS
+}
+
+fn check(file: &std::path::Path) -> ExitCode {
+    let spec = match SystemSpec::load(file) {
+        Ok(s) => s,
+        Err(e) => return file_error(&e),
+    };
+    match system::check(&spec, &registry(), &Catalogue::built_in()) {
+        Err(e) => file_error(&e),
+        Ok(report) if report.warnings.is_empty() => {
+            println!(
+                "{}: valid ({} media, {} modules, {} bridges)",
+                spec.file,
+                spec.media.len(),
+                spec.modules.len(),
+                spec.bridges.len()
+            );
+            ExitCode::SUCCESS
+        }
+        Ok(report) => {
+            for w in &report.warnings {
+                eprintln!("{w}");
+            }
+            ExitCode::from(1)
+        }
+    }
+}
+
+/// Builds a datamap from `key=value` arguments.
+fn fields_map(fields: &[String]) -> Result<DataMap, String> {
+    let mut map = DataMap::new();
+    for f in fields {
+        let (k, v) = f
+            .split_once('=')
+            .ok_or_else(|| format!("`{f}` is not key=value"))?;
+        if k.is_empty() {
+            return Err(format!("`{f}` has an empty key"));
+        }
+        map.insert(k, Value::parse_loose(v));
+    }
+    Ok(map)
+}
+
+async fn publish(
+    url: &str,
+    topic: &str,
+    fields: &[String],
+    count: u64,
+    rate: f64,
+    command: bool,
+    format: &str,
+) -> ExitCode {
+    let usage = |msg: String| {
+        eprintln!("seabus pub: {msg}");
+        ExitCode::from(2)
+    };
+    let map = match fields_map(fields) {
+        Ok(m) => m,
+        Err(e) => return usage(e),
+    };
+    let Some(format) = Format::parse(format) else {
+        return usage(format!("`{format}` is not a format: map, xml or bytes"));
+    };
+    if !(rate.is_finite() && rate > 0.0) {
+        return usage(format!("rate {rate} must be above 0"));
+    }
+    let payload = match Payload::from(map).convert(format) {
+        Ok(p) => p,
+        Err(e) => return usage(e.to_string()),
+    };
+    let node = Node::new(&format!("pub-{}", std::process::id()));
+    let medium = match Medium::open("pub", url, &node) {
+        Ok(m) => m,
+        Err(e) => return usage(e.to_string()),
+    };
+    let port = medium.attach("pub");
+    let kind = if command { Kind::Command } else { Kind::Data };
+    let mut ticker = tokio::time::interval(Duration::from_secs_f64(1.0 / rate));
+    for _ in 0..count {
+        ticker.tick().await;
+        if let Err(e) = port.publish(kind, topic, payload.clone()).await {
+            return usage(e.to_string());
+        }
+    }
+    ExitCode::SUCCESS
+}
+
+fn types() {
+    let reg = registry();
+    println!("module types:");
+    for t in reg.module_types() {
+        println!("  {:<14} {:<11} {}", t.name, t.kind.name(), t.summary);
+    }
+    println!("bridge types:");
+    for t in reg.bridge_types() {
+        println!("  {:<14} {}", t.name, t.summary);
+    }
+    println!(
+        "medium schemes: {}",
+        seabus_medium::medium::schemes().join(", ")
+    );
+    println!("standard datasets:");
+    for d in Catalogue::built_in().iter() {
+        let required: Vec<&str> = d.required().map(|f| f.name.as_str()).collect();
+        println!(
+            "  {:<18} {:<14} required: {}",
+            d.name,
+            d.topic,
+            required.join(", ")
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fields_are_typed() {
+        let m = fields_map(&[
+            "a=1".into(),
+            "b=2.5".into(),
+            "c=true".into(),
+            "d=\"7\"".into(),
+            "e=x=y".into(),
+        ])
+        .unwrap();
+        assert_eq!(m.get("a"), Some(&Value::Int(1)));
+        assert_eq!(m.get("b"), Some(&Value::Float(2.5)));
+        assert_eq!(m.get("c"), Some(&Value::Bool(true)));
+        assert_eq!(m.get("d"), Some(&Value::Str("7".into())));
+        assert_eq!(m.get("e"), Some(&Value::Str("x=y".into())));
+        assert!(fields_map(&["novalue".into()]).is_err());
+        assert!(fields_map(&["=1".into()]).is_err());
+    }
+
+    #[test]
+    fn the_demo_system_is_valid() {
+        let spec = SystemSpec::parse("demo.xml", DEMO).unwrap();
+        let report = system::check(&spec, &registry(), &Catalogue::built_in()).unwrap();
+        assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+    }
+}

@@ -10,16 +10,18 @@
 //!    from (a route leads from one medium to the other).
 //!
 //! Every second (the `report` parameter) it publishes its counters and latency on
-//! `seabus.bridge.<name>` on its first medium.
+//! `seabus.bridge.<name>` on both its media.
 
 use async_trait::async_trait;
 use seabus_medium::dedup::{Dedup, Seen};
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Format, Kind, Message, Pattern, Payload, Stamp, Topic, Value};
-use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl};
+use seabus_modules::Catalogue;
+use seabus_modules::module::{
+    Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
+};
 use seabus_modules::registry::{BridgeType, Built};
 use seabus_modules::system::BridgeSpec;
-use seabus_modules::Catalogue;
 use std::collections::HashMap;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -89,7 +91,9 @@ impl RouteBridge {
     pub fn new(spec: &BridgeSpec) -> Result<(RouteBridge, Declaration), FileError> {
         let port_of = |name: &str| if name == spec.media[0] { 0 } else { 1 };
         let mut legs = Vec::new();
-        let mut decl = Declaration::new(ModuleKind::Bridge).format(0, None).format(1, None);
+        let mut decl = Declaration::new(ModuleKind::Bridge)
+            .format(0, None)
+            .format(1, None);
         for r in &spec.routes {
             for (from, to) in r.legs(&spec.media[0], &spec.media[1]) {
                 let (from, to) = (port_of(from), port_of(to));
@@ -109,8 +113,8 @@ impl RouteBridge {
             }
         }
         let report = spec.params.duration_or("report", Duration::from_secs(1))?;
-        let report_topic =
-            Topic::new(&format!("seabus.bridge.{}", spec.name)).map_err(|e| spec.pos.error(e.to_string()))?;
+        let report_topic = Topic::new(&format!("seabus.bridge.{}", spec.name))
+            .map_err(|e| spec.pos.error(e.to_string()))?;
         let bridge = RouteBridge {
             media: spec.media.clone(),
             hops: spec.hops,
@@ -222,12 +226,24 @@ impl RouteBridge {
             .with("unrouted", c.unrouted as i64)
             .with("errors", c.errors as i64)
             .with("route_forwarded", list(&|s| Value::Int(s.forwarded as i64)))
-            .with("route_rate_limited", list(&|s| Value::Int(s.rate_limited as i64)))
+            .with(
+                "route_rate_limited",
+                list(&|s| Value::Int(s.rate_limited as i64)),
+            )
             .with(
                 "route_latency_ms",
-                list(&|s| Value::Float(if s.latency_n > 0 { s.latency_sum_ms / s.latency_n as f64 } else { 0.0 })),
+                list(&|s| {
+                    Value::Float(if s.latency_n > 0 {
+                        s.latency_sum_ms / s.latency_n as f64
+                    } else {
+                        0.0
+                    })
+                }),
             )
-            .with("route_latency_max_ms", list(&|s| Value::Float(s.latency_max_ms)));
+            .with(
+                "route_latency_max_ms",
+                list(&|s| Value::Float(s.latency_max_ms)),
+            );
         // latency is reported per period
         for s in &mut self.stats {
             s.latency_sum_ms = 0.0;
@@ -239,7 +255,11 @@ impl RouteBridge {
 }
 
 /// Applies field renames (which need a datamap) and the far side's format.
-fn convert(p: &Payload, fields: &[(String, String)], format: Option<Format>) -> Result<Payload, seabus_medium::ConvertError> {
+fn convert(
+    p: &Payload,
+    fields: &[(String, String)],
+    format: Option<Format>,
+) -> Result<Payload, seabus_medium::ConvertError> {
     let p = if fields.is_empty() {
         p.clone()
     } else {
@@ -264,7 +284,12 @@ impl Module for RouteBridge {
         Ok(())
     }
 
-    async fn on_message(&mut self, ctx: &mut Context, port: usize, msg: Message) -> Result<(), ModuleError> {
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        port: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
         let node = ctx.node().name.clone();
         if let Verdict::Forward(to, out) = self.route(&node, port, msg) {
             let Some(iface) = ctx.port(to) else {
@@ -279,8 +304,13 @@ impl Module for RouteBridge {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
+        // both media hear about the bridge between them
         let map = self.report_map();
-        ctx.publish(&self.report_topic, map).await
+        for port in 0..ctx.ports() {
+            ctx.publish_on(port, Kind::Data, &self.report_topic, map.clone())
+                .await?;
+        }
+        Ok(())
     }
 }
 
@@ -316,38 +346,78 @@ mod tests {
     #[test]
     fn forwards_once_renames_and_counts_hops() {
         let mut b = bridge(r#"<route topics="nav.*" rename="auv1.nav.*"/>"#, 8);
-        let Verdict::Forward(to, out) = b.route("me", 0, msg("nav.depth", "me", "a", 1, 0)) else { panic!() };
-        assert_eq!((to, out.topic.as_str(), out.provenance.hops), (1, "auv1.nav.depth", 1));
+        let Verdict::Forward(to, out) = b.route("me", 0, msg("nav.depth", "me", "a", 1, 0)) else {
+            panic!()
+        };
+        assert_eq!(
+            (to, out.topic.as_str(), out.provenance.hops),
+            (1, "auv1.nav.depth", 1)
+        );
         assert_eq!(out.provenance.seq, 1, "provenance is kept");
         // the same message coming back from the other side is not forwarded again
-        assert_eq!(b.route("me", 1, msg("nav.depth", "me", "a", 1, 1)), Verdict::Drop("duplicate"));
-        assert_eq!(b.route("me", 0, msg("cmd.x", "me", "a", 2, 0)), Verdict::Drop("no route"));
+        assert_eq!(
+            b.route("me", 1, msg("nav.depth", "me", "a", 1, 1)),
+            Verdict::Drop("duplicate")
+        );
+        assert_eq!(
+            b.route("me", 0, msg("cmd.x", "me", "a", 2, 0)),
+            Verdict::Drop("no route")
+        );
     }
 
     #[test]
     fn never_returns_a_message_to_its_origin_medium_and_honours_the_hop_limit() {
         let mut b = bridge(r#"<route topics="**"/>"#, 3);
-        assert_eq!(b.route("me", 0, msg("t", "me", "b", 1, 1)), Verdict::Drop("would return to its origin medium"));
+        assert_eq!(
+            b.route("me", 0, msg("t", "me", "b", 1, 1)),
+            Verdict::Drop("would return to its origin medium")
+        );
         // the same medium name on another node is another medium
-        assert!(matches!(b.route("me", 0, msg("t", "other", "b", 1, 1)), Verdict::Forward(1, _)));
-        assert_eq!(b.route("me", 0, msg("t", "me", "a", 7, 3)), Verdict::Drop("hop limit"));
-        assert!(matches!(b.route("me", 0, msg("t", "me", "a", 8, 2)), Verdict::Forward(1, _)));
+        assert!(matches!(
+            b.route("me", 0, msg("t", "other", "b", 1, 1)),
+            Verdict::Forward(1, _)
+        ));
+        assert_eq!(
+            b.route("me", 0, msg("t", "me", "a", 7, 3)),
+            Verdict::Drop("hop limit")
+        );
+        assert!(matches!(
+            b.route("me", 0, msg("t", "me", "a", 8, 2)),
+            Verdict::Forward(1, _)
+        ));
     }
 
     #[test]
     fn rate_limits_data_per_topic_and_converts_formats_and_fields() {
-        let mut b = bridge(r#"<route from="a" topics="nav.*" rate="1" format="xml"><field name="hdg" rename="heading"/></route>"#, 8);
-        let Verdict::Forward(_, out) = b.route("me", 0, msg("nav.x", "n", "a", 1, 0)) else { panic!() };
+        let mut b = bridge(
+            r#"<route from="a" topics="nav.*" rate="1" format="xml"><field name="hdg" rename="heading"/></route>"#,
+            8,
+        );
+        let Verdict::Forward(_, out) = b.route("me", 0, msg("nav.x", "n", "a", 1, 0)) else {
+            panic!()
+        };
         assert_eq!(out.payload.format(), Format::Xml);
         assert_eq!(out.payload.to_map().unwrap().get_f64("heading"), Some(1.5));
-        assert_eq!(b.route("me", 0, msg("nav.x", "n", "a", 2, 0)), Verdict::Drop("rate limit"));
-        assert!(matches!(b.route("me", 0, msg("nav.y", "n", "a", 3, 0)), Verdict::Forward(..)), "per topic");
+        assert_eq!(
+            b.route("me", 0, msg("nav.x", "n", "a", 2, 0)),
+            Verdict::Drop("rate limit")
+        );
+        assert!(
+            matches!(
+                b.route("me", 0, msg("nav.y", "n", "a", 3, 0)),
+                Verdict::Forward(..)
+            ),
+            "per topic"
+        );
         // a command is never rate-limited
         let mut c = msg("nav.x", "n", "a", 4, 0);
         c.kind = Kind::Command;
         assert!(matches!(b.route("me", 0, c), Verdict::Forward(..)));
         // nothing routes from b
-        assert_eq!(b.route("me", 1, msg("nav.z", "n", "b", 5, 0)), Verdict::Drop("no route"));
+        assert_eq!(
+            b.route("me", 1, msg("nav.z", "n", "b", 5, 0)),
+            Verdict::Drop("no route")
+        );
         let report = b.report_map();
         assert_eq!(report.get_i64("forwarded"), Some(3));
         assert_eq!(report.get_i64("rate_limited"), Some(1));

@@ -22,6 +22,7 @@ pub mod binary;
 pub mod datamap;
 pub mod dedup;
 pub mod fault;
+pub mod json;
 pub mod medium;
 pub mod message;
 pub mod payload;

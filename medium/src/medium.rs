@@ -308,14 +308,19 @@ impl Medium {
         Ok(())
     }
 
-    fn parse_url(url: &str) -> Result<(&'static Scheme, MediumUrl, Option<FaultConfig>), OpenError> {
+    fn parse_url(
+        url: &str,
+    ) -> Result<(&'static Scheme, MediumUrl, Option<FaultConfig>), OpenError> {
         let mut parsed = MediumUrl::parse(url)?;
         let faults = FaultConfig::from_url(&mut parsed)?;
-        let scheme = SCHEMES.iter().find(|s| s.name == parsed.scheme).ok_or_else(|| OpenError::UnknownScheme {
-            scheme: parsed.scheme.clone(),
-            url: url.to_string(),
-            known: schemes().join(", "),
-        })?;
+        let scheme = SCHEMES
+            .iter()
+            .find(|s| s.name == parsed.scheme)
+            .ok_or_else(|| OpenError::UnknownScheme {
+                scheme: parsed.scheme.clone(),
+                url: url.to_string(),
+                known: schemes().join(", "),
+            })?;
         Ok((scheme, parsed, faults))
     }
 
@@ -450,13 +455,16 @@ impl Medium {
     }
 }
 
+/// Opens a medium's transport (`None` for a medium without a wire).
+type OpenTransport = fn(Opening) -> Result<Option<Arc<dyn Transport>>, OpenError>;
+
 /// One kind of medium: how to check its URL and how to open its transport.
 struct Scheme {
     name: &'static str,
     /// Takes and checks every option of the URL, without opening anything.
     check: fn(&mut MediumUrl) -> Result<(), UrlError>,
-    /// Opens the transport (`None` for a medium without a wire).
-    open: fn(Opening) -> Result<Option<Arc<dyn Transport>>, OpenError>,
+    /// Opens the transport.
+    open: OpenTransport,
 }
 
 const SCHEMES: &[Scheme] = &[

@@ -249,20 +249,11 @@ impl<'a> Parser<'a> {
     fn next(&mut self) -> Result<Event<'a>, XmlFormError> {
         self.reader.read_event().map_err(|e| {
             let offset = self.reader.error_position() as usize;
+            use quick_xml::errors::SyntaxError as S;
             let kind = match &e {
-                quick_xml::Error::Syntax(s)
-                    if matches!(
-                        s,
-                        quick_xml::errors::SyntaxError::UnclosedTag
-                            | quick_xml::errors::SyntaxError::UnclosedComment
-                            | quick_xml::errors::SyntaxError::UnclosedCData
-                            | quick_xml::errors::SyntaxError::UnclosedDoctype
-                            | quick_xml::errors::SyntaxError::UnclosedPI
-                            | quick_xml::errors::SyntaxError::UnclosedXmlDecl
-                    ) =>
-                {
-                    XmlFormErrorKind::Incomplete
-                }
+                quick_xml::Error::Syntax(
+                    S::UnclosedTag | S::UnclosedComment | S::UnclosedCData | S::UnclosedDoctype | S::UnclosedPI | S::UnclosedXmlDecl,
+                ) => XmlFormErrorKind::Incomplete,
                 _ => XmlFormErrorKind::Syntax(e.to_string()),
             };
             XmlFormError { offset, kind }

@@ -144,10 +144,23 @@ impl fmt::Display for Problem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Problem::Missing(field) => write!(f, "required field `{field}` is missing"),
-            Problem::WrongType { field, expected, found } => {
-                write!(f, "field `{field}` is {found}, expected {}", expected.name())
+            Problem::WrongType {
+                field,
+                expected,
+                found,
+            } => {
+                write!(
+                    f,
+                    "field `{field}` is {found}, expected {}",
+                    expected.name()
+                )
             }
-            Problem::OutOfRange { field, value, min, max } => {
+            Problem::OutOfRange {
+                field,
+                value,
+                min,
+                max,
+            } => {
                 write!(f, "field `{field}` = {value} is outside [")?;
                 match min {
                     Some(m) => write!(f, "{m}")?,
@@ -191,7 +204,10 @@ impl Catalogue {
     pub fn built_in() -> Arc<Catalogue> {
         static CAT: OnceLock<Arc<Catalogue>> = OnceLock::new();
         CAT.get_or_init(|| {
-            Arc::new(Catalogue::parse("configs/datasets.xml", BUILT_IN).expect("the built-in catalogue is valid"))
+            Arc::new(
+                Catalogue::parse("configs/datasets.xml", BUILT_IN)
+                    .expect("the built-in catalogue is valid"),
+            )
         })
         .clone()
     }
@@ -204,7 +220,10 @@ impl Catalogue {
 
     fn from_element(root: &Element) -> Result<Catalogue, FileError> {
         if root.name != "datasets" {
-            return Err(root.error(format!("root element is <{}>, expected <datasets>", root.name)));
+            return Err(root.error(format!(
+                "root element is <{}>, expected <datasets>",
+                root.name
+            )));
         }
         root.only_attrs(&[])?;
         root.only_children(&["dataset"])?;
@@ -220,11 +239,16 @@ impl Catalogue {
                 f.only_attrs(&["name", "type", "unit", "required", "min", "max", "summary"])?;
                 let fname = f.required("name")?.value.clone();
                 if fields.iter().any(|x| x.name == fname) {
-                    return Err(f.error(format!("field `{fname}` is listed twice in dataset `{name}`")));
+                    return Err(f.error(format!(
+                        "field `{fname}` is listed twice in dataset `{name}`"
+                    )));
                 }
                 let ty_attr = f.required("type")?;
                 let ty = FieldType::parse(&ty_attr.value).ok_or_else(|| {
-                    ty_attr.error(format!("`{}` is not one of float, int, bool, string, bytes, list", ty_attr.value))
+                    ty_attr.error(format!(
+                        "`{}` is not one of float, int, bool, string, bytes, list",
+                        ty_attr.value
+                    ))
                 })?;
                 fields.push(Field {
                     name: fname,
@@ -269,7 +293,9 @@ impl Catalogue {
 
     /// Checks `map` against dataset `name`.
     pub fn validate(&self, name: &str, map: &DataMap) -> Result<(), ValidationError> {
-        let ds = self.get(name).ok_or_else(|| ValidationError::Unknown(name.to_string()))?;
+        let ds = self
+            .get(name)
+            .ok_or_else(|| ValidationError::Unknown(name.to_string()))?;
         let mut problems = Vec::new();
         for field in &ds.fields {
             let Some(v) = map.get(&field.name) else {
@@ -329,38 +355,60 @@ mod tests {
             "actuator-command",
             "mission-command",
         ] {
-            let d = c.get(name).unwrap_or_else(|| panic!("{name} is in the catalogue"));
+            let d = c
+                .get(name)
+                .unwrap_or_else(|| panic!("{name} is in the catalogue"));
             assert!(d.required().count() > 0);
         }
         let att = c.get("attitude").unwrap();
         let req: Vec<_> = att.required().map(|f| f.name.as_str()).collect();
         assert_eq!(req, ["yaw", "pitch", "roll"]);
         assert_eq!(att.field("yaw").unwrap().unit, "deg");
-        let course: Vec<_> = c.get("course-command").unwrap().required().map(|f| f.name.as_str()).collect();
+        let course: Vec<_> = c
+            .get("course-command")
+            .unwrap()
+            .required()
+            .map(|f| f.name.as_str())
+            .collect();
         assert_eq!(course, ["heading", "depth", "speed"]);
     }
 
     #[test]
     fn validation_lists_every_problem() {
         let c = Catalogue::built_in();
-        let ok = DataMap::new().with("yaw", 10.0).with("pitch", 1i64).with("roll", -2.0).with("vendor_x", "extra");
+        let ok = DataMap::new()
+            .with("yaw", 10.0)
+            .with("pitch", 1i64)
+            .with("roll", -2.0)
+            .with("vendor_x", "extra");
         assert_eq!(c.validate("attitude", &ok), Ok(()));
-        let bad = DataMap::new().with("yaw", 400.0).with("pitch", "up").with("temperature", true);
+        let bad = DataMap::new()
+            .with("yaw", 400.0)
+            .with("pitch", "up")
+            .with("temperature", true);
         let err = c.validate("attitude", &bad).unwrap_err();
-        let ValidationError::Invalid { problems, .. } = &err else { panic!("{err}") };
+        let ValidationError::Invalid { problems, .. } = &err else {
+            panic!("{err}")
+        };
         assert_eq!(problems.len(), 4, "{err}");
         assert_eq!(
             err.to_string(),
             "not a valid `attitude`: field `yaw` = 400 is outside [0, 360]; field `pitch` is string, expected float; \
              required field `roll` is missing; field `temperature` is bool, expected float"
         );
-        assert_eq!(c.validate("nope", &ok), Err(ValidationError::Unknown("nope".into())));
+        assert_eq!(
+            c.validate("nope", &ok),
+            Err(ValidationError::Unknown("nope".into()))
+        );
     }
 
     #[test]
     fn catalogue_file_errors_are_placed() {
         let e = Catalogue::parse("d.xml", "<datasets>\n <dataset name=\"x\" topic=\"a.b\">\n  <field name=\"f\" type=\"real\"/>\n </dataset>\n</datasets>").unwrap_err();
-        assert_eq!(e.to_string(), "d.xml:3:19: attribute `type`: `real` is not one of float, int, bool, string, bytes, list");
+        assert_eq!(
+            e.to_string(),
+            "d.xml:3:19: attribute `type`: `real` is not one of float, int, bool, string, bytes, list"
+        );
         let e = Catalogue::parse("d.xml", "<datasets><dataset name=\"x\" topic=\"a.b\"><field name=\"f\" type=\"int\"/></dataset></datasets>").unwrap_err();
         assert!(e.message.contains("no required field"), "{e}");
     }

@@ -10,7 +10,9 @@
 
 use crate::datasets::Catalogue;
 use async_trait::async_trait;
-use seabus_medium::{DataMap, Format, Interface, IntoTopic, Kind, Message, Node, Payload, SendError, TopicError};
+use seabus_medium::{
+    DataMap, Format, Interface, IntoTopic, Kind, Message, Node, Payload, SendError, TopicError,
+};
 use std::fmt;
 use std::sync::Arc;
 use std::time::Duration;
@@ -204,7 +206,12 @@ pub trait Module: Send + 'static {
     }
 
     /// Called with each message on port `port`, in that port's declared format.
-    async fn on_message(&mut self, _ctx: &mut Context, _port: usize, _msg: Message) -> Result<(), ModuleError> {
+    async fn on_message(
+        &mut self,
+        _ctx: &mut Context,
+        _port: usize,
+        _msg: Message,
+    ) -> Result<(), ModuleError> {
         Ok(())
     }
 
@@ -242,7 +249,12 @@ pub(crate) enum Event {
 
 impl Context {
     /// A context over `ports`.
-    pub fn new(name: &str, node: Node, ports: Vec<Interface>, catalogue: Arc<Catalogue>) -> Context {
+    pub fn new(
+        name: &str,
+        node: Node,
+        ports: Vec<Interface>,
+        catalogue: Arc<Catalogue>,
+    ) -> Context {
         Context {
             name: Arc::from(name),
             node,
@@ -290,12 +302,20 @@ impl Context {
     }
 
     /// Publishes data on port 0.
-    pub async fn publish(&self, topic: impl IntoTopic, payload: impl Into<Payload>) -> Result<(), ModuleError> {
+    pub async fn publish(
+        &self,
+        topic: impl IntoTopic,
+        payload: impl Into<Payload>,
+    ) -> Result<(), ModuleError> {
         self.publish_on(0, Kind::Data, topic, payload).await
     }
 
     /// Publishes a command on port 0.
-    pub async fn command(&self, topic: impl IntoTopic, payload: impl Into<Payload>) -> Result<(), ModuleError> {
+    pub async fn command(
+        &self,
+        topic: impl IntoTopic,
+        payload: impl Into<Payload>,
+    ) -> Result<(), ModuleError> {
         self.publish_on(0, Kind::Command, topic, payload).await
     }
 
@@ -307,16 +327,29 @@ impl Context {
         topic: impl IntoTopic,
         payload: impl Into<Payload>,
     ) -> Result<(), ModuleError> {
-        Ok(self.port_or_err(port)?.publish(kind, topic, payload).await?)
+        Ok(self
+            .port_or_err(port)?
+            .publish(kind, topic, payload)
+            .await?)
     }
 
     /// Publishes a standard dataset as data on port 0 after checking it; an invalid map is not sent.
-    pub async fn publish_dataset(&self, dataset: &str, topic: impl IntoTopic, map: DataMap) -> Result<(), ModuleError> {
+    pub async fn publish_dataset(
+        &self,
+        dataset: &str,
+        topic: impl IntoTopic,
+        map: DataMap,
+    ) -> Result<(), ModuleError> {
         self.dataset_on(0, Kind::Data, dataset, topic, map).await
     }
 
     /// Sends a standard dataset as a command on port 0 after checking it.
-    pub async fn command_dataset(&self, dataset: &str, topic: impl IntoTopic, map: DataMap) -> Result<(), ModuleError> {
+    pub async fn command_dataset(
+        &self,
+        dataset: &str,
+        topic: impl IntoTopic,
+        map: DataMap,
+    ) -> Result<(), ModuleError> {
         self.dataset_on(0, Kind::Command, dataset, topic, map).await
     }
 
@@ -353,7 +386,11 @@ impl Context {
 
     /// Waits for the next message on any port, or the next timer.
     pub(crate) async fn next_event(&mut self) -> Event {
-        let due = self.timers.iter().min_by_key(|t| t.due).map(|t| (t.id, t.due));
+        let due = self
+            .timers
+            .iter()
+            .min_by_key(|t| t.due)
+            .map(|t| (t.id, t.due));
         let n = self.ports.len();
         let start = self.next_port;
         let ports = &mut self.ports;

@@ -7,8 +7,8 @@
 use seabus_medium::fault::parse_duration;
 use seabus_medium::xml::{FileError, Pos};
 use seabus_medium::{Pattern, Topic};
-use std::sync::Mutex;
 use std::str::FromStr;
+use std::sync::Mutex;
 use std::time::Duration;
 
 /// One parameter.
@@ -25,7 +25,8 @@ pub struct Param {
 impl Param {
     /// An error about this parameter's value.
     pub fn error(&self, message: impl std::fmt::Display) -> FileError {
-        self.pos.error(format!("parameter `{}`: {message}", self.name))
+        self.pos
+            .error(format!("parameter `{}`: {message}", self.name))
     }
 }
 
@@ -138,7 +139,12 @@ impl Params {
     }
 
     /// Parses parameter `name`, or gives `default`.
-    pub fn parse_or<T: FromStr>(&self, name: &str, default: T, expected: &str) -> Result<T, FileError> {
+    pub fn parse_or<T: FromStr>(
+        &self,
+        name: &str,
+        default: T,
+        expected: &str,
+    ) -> Result<T, FileError> {
         Ok(self.parse(name, expected)?.unwrap_or(default))
     }
 
@@ -146,7 +152,10 @@ impl Params {
     pub fn float_or(&self, name: &str, default: f64) -> Result<f64, FileError> {
         let v: f64 = self.parse_or(name, default, "a number")?;
         if !v.is_finite() {
-            return Err(self.get(name).map_or_else(|| self.pos.error("not finite"), |p| p.error("must be finite")));
+            return Err(self.get(name).map_or_else(
+                || self.pos.error("not finite"),
+                |p| p.error("must be finite"),
+            ));
         }
         Ok(v)
     }
@@ -154,7 +163,8 @@ impl Params {
     /// A topic parameter, or `default`.
     pub fn topic_or(&self, name: &str, default: &str) -> Result<Topic, FileError> {
         match self.get(name) {
-            None => Topic::new(default).map_err(|e| self.pos.error(format!("default topic `{default}`: {e}"))),
+            None => Topic::new(default)
+                .map_err(|e| self.pos.error(format!("default topic `{default}`: {e}"))),
             Some(p) => Topic::new(p.value.trim()).map_err(|e| p.error(e)),
         }
     }
@@ -162,7 +172,8 @@ impl Params {
     /// A topic-pattern parameter, or `default`.
     pub fn pattern_or(&self, name: &str, default: &str) -> Result<Pattern, FileError> {
         match self.get(name) {
-            None => Pattern::new(default).map_err(|e| self.pos.error(format!("default pattern `{default}`: {e}"))),
+            None => Pattern::new(default)
+                .map_err(|e| self.pos.error(format!("default pattern `{default}`: {e}"))),
             Some(p) => Pattern::new(p.value.trim()).map_err(|e| p.error(e)),
         }
     }
@@ -171,7 +182,12 @@ impl Params {
     pub fn duration_or(&self, name: &str, default: Duration) -> Result<Duration, FileError> {
         match self.get(name) {
             None => Ok(default),
-            Some(p) => parse_duration(&p.value).ok_or_else(|| p.error(format!("`{}` is not a duration such as 500ms or 2s", p.value))),
+            Some(p) => parse_duration(&p.value).ok_or_else(|| {
+                p.error(format!(
+                    "`{}` is not a duration such as 500ms or 2s",
+                    p.value
+                ))
+            }),
         }
     }
 
@@ -192,7 +208,10 @@ impl Params {
         let used = self.used();
         match self.items.iter().zip(used.iter()).find(|(_, u)| !**u) {
             None => Ok(()),
-            Some((p, _)) => Err(p.pos.error(format!("module type `{module_type}` has no parameter `{}`", p.name))),
+            Some((p, _)) => Err(p.pos.error(format!(
+                "module type `{module_type}` has no parameter `{}`",
+                p.name
+            ))),
         }
     }
 }
@@ -200,7 +219,10 @@ impl Params {
 /// Parses a rate: `10` or `10Hz` (per second), or a period such as `500ms` or `2s`.
 pub fn parse_rate(text: &str) -> Option<Duration> {
     let t = text.trim();
-    let hz = t.strip_suffix("Hz").or_else(|| t.strip_suffix("hz")).unwrap_or(t);
+    let hz = t
+        .strip_suffix("Hz")
+        .or_else(|| t.strip_suffix("hz"))
+        .unwrap_or(t);
     if let Ok(f) = hz.trim().parse::<f64>() {
         return (f.is_finite() && f > 0.0 && f <= 1e6).then(|| Duration::from_secs_f64(1.0 / f));
     }
@@ -222,7 +244,12 @@ mod tests {
     #[test]
     fn values_are_checked() {
         let p = Params::from_pairs(&[("n", "x"), ("t", "a..b"), ("d", "5 parsecs")]);
-        assert!(p.parse::<i64>("n", "an integer").unwrap_err().message.contains("`x` is not an integer"));
+        assert!(
+            p.parse::<i64>("n", "an integer")
+                .unwrap_err()
+                .message
+                .contains("`x` is not an integer")
+        );
         assert!(p.topic_or("t", "x").is_err());
         assert!(p.duration_or("d", Duration::ZERO).is_err());
         assert_eq!(p.parse_or("missing", 3, "n").unwrap(), 3);

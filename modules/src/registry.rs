@@ -152,7 +152,11 @@ impl Registry {
 
     /// Builds the module `cfg` describes, checking that its parameters were all used and that its
     /// declaration fits the media it is placed on.
-    pub fn build_module(&self, cfg: &ModuleConfig, catalogue: &Catalogue) -> Result<Built, FileError> {
+    pub fn build_module(
+        &self,
+        cfg: &ModuleConfig,
+        catalogue: &Catalogue,
+    ) -> Result<Built, FileError> {
         let t = self.module_for(cfg)?;
         let built = (t.build)(cfg, catalogue)?;
         cfg.params.finish(t.name)?;
@@ -161,7 +165,11 @@ impl Registry {
     }
 
     /// Builds the bridge `spec` describes.
-    pub fn build_bridge(&self, spec: &BridgeSpec, catalogue: &Catalogue) -> Result<Built, FileError> {
+    pub fn build_bridge(
+        &self,
+        spec: &BridgeSpec,
+        catalogue: &Catalogue,
+    ) -> Result<Built, FileError> {
         let t = self.bridge_for(spec)?;
         let built = (t.build)(spec, catalogue)?;
         spec.params.finish(t.name)?;

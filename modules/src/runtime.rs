@@ -135,7 +135,11 @@ fn open_error(pos: &Pos, e: impl std::fmt::Display) -> FileError {
 impl Runtime {
     /// Checks `spec`, opens its media and starts its modules and bridges.
     /// Must be called inside a tokio runtime.
-    pub async fn start(spec: &SystemSpec, registry: &Registry, catalogue: Arc<Catalogue>) -> Result<Runtime, FileError> {
+    pub async fn start(
+        spec: &SystemSpec,
+        registry: &Registry,
+        catalogue: Arc<Catalogue>,
+    ) -> Result<Runtime, FileError> {
         let report = check(spec, registry, &catalogue)?;
         for w in &report.warnings {
             tracing::warn!("{w}");
@@ -167,7 +171,13 @@ impl Runtime {
                 build: Arc::new(move || reg.build_bridge(&bs, &cat)),
             });
         }
-        Ok(Runtime::with_units(node, media, spec.default_medium(), units, catalogue))
+        Ok(Runtime::with_units(
+            node,
+            media,
+            spec.default_medium(),
+            units,
+            catalogue,
+        ))
     }
 
     /// Starts `units` on already opened `media`; status goes to the medium called `default`.
@@ -224,7 +234,10 @@ impl Runtime {
     /// The status of every module, in system-file order.
     pub fn status(&self) -> Vec<UnitStatus> {
         let board = self.shared.board.lock().unwrap_or_else(|p| p.into_inner());
-        self.order.iter().filter_map(|n| board.get(n).cloned()).collect()
+        self.order
+            .iter()
+            .filter_map(|n| board.get(n).cloned())
+            .collect()
     }
 
     /// Stops every module (each gets [`Module::stop`]), cuts off those still running after
@@ -260,7 +273,9 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
                 let mut task = tokio::spawn(run(module, ctx, shutdown.clone()));
                 match (&mut task).await {
                     Ok(r) => r.map_err(|e| e.to_string()),
-                    Err(e) if e.is_panic() => Err(format!("panicked: {}", panic_text(e.into_panic()))),
+                    Err(e) if e.is_panic() => {
+                        Err(format!("panicked: {}", panic_text(e.into_panic())))
+                    }
                     Err(_) => Err("cancelled".to_string()),
                 }
             }
@@ -273,7 +288,9 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
             }
             Err(e) => {
                 if *shutdown.borrow() {
-                    shared.report(&unit, State::Stopped, restarts, Some(e)).await;
+                    shared
+                        .report(&unit, State::Stopped, restarts, Some(e))
+                        .await;
                     return;
                 }
                 if started.elapsed() >= STABLE {
@@ -307,19 +324,29 @@ fn instance(unit: &Unit, shared: &Shared) -> Result<(Box<dyn Module>, Context), 
         port.set_accept(built.decl.format_of(i));
         for t in built.decl.consumes.iter().chain(&built.decl.accepts) {
             if t.port == i {
-                port.subscribe(&t.topic).map_err(|e| format!("subscription `{}`: {e}", t.topic))?;
+                port.subscribe(&t.topic)
+                    .map_err(|e| format!("subscription `{}`: {e}", t.topic))?;
             }
         }
         ports.push(port);
     }
-    let mut ctx = Context::new(&unit.name, shared.node.clone(), ports, shared.catalogue.clone());
+    let mut ctx = Context::new(
+        &unit.name,
+        shared.node.clone(),
+        ports,
+        shared.catalogue.clone(),
+    );
     if let Some(t) = unit.tick {
         ctx.every(TICK, t);
     }
     Ok((built.module, ctx))
 }
 
-async fn run(mut module: Box<dyn Module>, mut ctx: Context, mut shutdown: watch::Receiver<bool>) -> Result<(), ModuleError> {
+async fn run(
+    mut module: Box<dyn Module>,
+    mut ctx: Context,
+    mut shutdown: watch::Receiver<bool>,
+) -> Result<(), ModuleError> {
     let body = async {
         module.start(&mut ctx).await?;
         loop {

@@ -121,7 +121,11 @@ const TOP_TAGS: [&str; 3] = ["medium", "module", "bridge"];
 
 fn check_name(attr: &xml::Attr) -> Result<String, FileError> {
     let v = attr.value.trim();
-    if v.is_empty() || !v.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-') {
+    if v.is_empty()
+        || !v
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
+    {
         return Err(attr.error(format!(
             "`{v}` is not a name: use letters, digits, `_` and `-` (it becomes part of topics)"
         )));
@@ -149,7 +153,10 @@ impl SystemSpec {
 
     fn from_element(root: &Element) -> Result<SystemSpec, FileError> {
         if root.name != "seabus" {
-            return Err(root.error(format!("root element is <{}>, expected <seabus>", root.name)));
+            return Err(root.error(format!(
+                "root element is <{}>, expected <seabus>",
+                root.name
+            )));
         }
         root.only_attrs(&["node"])?;
         let node = match root.attr("node") {
@@ -166,10 +173,16 @@ impl SystemSpec {
             pos: root.pos.clone(),
         };
         let mut unit_names: BTreeMap<String, Pos> = BTreeMap::new();
-        let claim = |attr: &xml::Attr, what: &str, names: &mut BTreeMap<String, Pos>| -> Result<String, FileError> {
+        let claim = |attr: &xml::Attr,
+                     what: &str,
+                     names: &mut BTreeMap<String, Pos>|
+         -> Result<String, FileError> {
             let name = check_name(attr)?;
             if let Some(prev) = names.get(&name) {
-                return Err(attr.error(format!("{what} `{name}` is already defined at line {}", prev.line)));
+                return Err(attr.error(format!(
+                    "{what} `{name}` is already defined at line {}",
+                    prev.line
+                )));
             }
             names.insert(name.clone(), attr.pos.clone());
             Ok(name)
@@ -188,8 +201,12 @@ impl SystemSpec {
                         pos: url.pos.clone(),
                     });
                 }
-                "module" => spec.modules.push(module_config(el, &mut |a| claim(a, "a module or bridge", &mut unit_names))?),
-                "bridge" => spec.bridges.push(bridge_spec(el, &mut |a| claim(a, "a module or bridge", &mut unit_names))?),
+                "module" => spec.modules.push(module_config(el, &mut |a| {
+                    claim(a, "a module or bridge", &mut unit_names)
+                })?),
+                "bridge" => spec.bridges.push(bridge_spec(el, &mut |a| {
+                    claim(a, "a module or bridge", &mut unit_names)
+                })?),
                 _ => spec.sections.push(el.clone()),
             }
         }
@@ -215,7 +232,10 @@ impl SystemSpec {
     }
 }
 
-fn module_config(el: &Element, claim: &mut dyn FnMut(&xml::Attr) -> Result<String, FileError>) -> Result<ModuleConfig, FileError> {
+fn module_config(
+    el: &Element,
+    claim: &mut dyn FnMut(&xml::Attr) -> Result<String, FileError>,
+) -> Result<ModuleConfig, FileError> {
     el.only_children(&["param"])?;
     let name = claim(el.required("name")?)?;
     let type_name = el.required("type")?.value.trim().to_string();
@@ -233,7 +253,10 @@ fn module_config(el: &Element, claim: &mut dyn FnMut(&xml::Attr) -> Result<Strin
     let tick = match el.attr("tick") {
         None => None,
         Some(a) => Some(parse_rate(&a.value).ok_or_else(|| {
-            a.error(format!("`{}` is not a rate (10, 10Hz) or a period (100ms, 2s)", a.value))
+            a.error(format!(
+                "`{}` is not a rate (10, 10Hz) or a period (100ms, 2s)",
+                a.value
+            ))
         })?),
     };
     let mut params: Vec<Param> = el
@@ -270,19 +293,36 @@ fn module_config(el: &Element, claim: &mut dyn FnMut(&xml::Attr) -> Result<Strin
     })
 }
 
-fn bridge_spec(el: &Element, claim: &mut dyn FnMut(&xml::Attr) -> Result<String, FileError>) -> Result<BridgeSpec, FileError> {
+fn bridge_spec(
+    el: &Element,
+    claim: &mut dyn FnMut(&xml::Attr) -> Result<String, FileError>,
+) -> Result<BridgeSpec, FileError> {
     el.only_children(&["route"])?;
     let name = claim(el.required("name")?)?;
     let media_attr = el.required("media")?;
     let media = split_list(&media_attr.value);
     let media: [String; 2] = match media.as_slice() {
         [a, b] if a != b => [a.clone(), b.clone()],
-        [a, b] if a == b => return Err(media_attr.error(format!("a bridge joins two different media, `{a}` is given twice"))),
-        _ => return Err(media_attr.error(format!("a bridge joins exactly two media, `{}` names {}", media_attr.value, media.len()))),
+        [a, b] if a == b => {
+            return Err(media_attr.error(format!(
+                "a bridge joins two different media, `{a}` is given twice"
+            )));
+        }
+        _ => {
+            return Err(media_attr.error(format!(
+                "a bridge joins exactly two media, `{}` names {}",
+                media_attr.value,
+                media.len()
+            )));
+        }
     };
-    let hops = el.parsed::<u8>("hops", "a hop count 1–255")?.unwrap_or(DEFAULT_HOPS);
+    let hops = el
+        .parsed::<u8>("hops", "a hop count 1–255")?
+        .unwrap_or(DEFAULT_HOPS);
     if hops == 0 {
-        return Err(el.required("hops")?.error("the hop limit must be at least 1"));
+        return Err(el
+            .required("hops")?
+            .error("the hop limit must be at least 1"));
     }
     let mut routes = Vec::new();
     for r in el.children_named("route") {
@@ -332,7 +372,10 @@ fn bridge_spec(el: &Element, claim: &mut dyn FnMut(&xml::Attr) -> Result<String,
         };
         let format = match r.attr("format") {
             None => None,
-            Some(a) => Some(Format::parse(a.value.trim()).ok_or_else(|| a.error("expected bytes, map or xml"))?),
+            Some(a) => Some(
+                Format::parse(a.value.trim())
+                    .ok_or_else(|| a.error("expected bytes, map or xml"))?,
+            ),
         };
         let kind = match r.get("kind") {
             None | Some("any") => None,
@@ -343,7 +386,10 @@ fn bridge_spec(el: &Element, claim: &mut dyn FnMut(&xml::Attr) -> Result<String,
         let mut fields = Vec::new();
         for f in r.children_named("field") {
             f.only_attrs(&["name", "rename"])?;
-            fields.push((f.required("name")?.value.clone(), f.required("rename")?.value.clone()));
+            fields.push((
+                f.required("name")?.value.clone(),
+                f.required("rename")?.value.clone(),
+            ));
         }
         routes.push(RouteSpec {
             from,
@@ -419,14 +465,16 @@ pub fn route_cycles(spec: &SystemSpec) -> Vec<Cycle> {
         .iter()
         .flat_map(|b| {
             b.routes.iter().flat_map(move |r| {
-                r.legs(&b.media[0], &b.media[1]).into_iter().map(move |(from, to)| Leg {
-                    from,
-                    to,
-                    bridge: &b.name,
-                    inp: &r.topics,
-                    out: r.out_pattern(),
-                    pos: &r.pos,
-                })
+                r.legs(&b.media[0], &b.media[1])
+                    .into_iter()
+                    .map(move |(from, to)| Leg {
+                        from,
+                        to,
+                        bridge: &b.name,
+                        inp: &r.topics,
+                        out: r.out_pattern(),
+                        pos: &r.pos,
+                    })
             })
         })
         .collect();
@@ -439,20 +487,29 @@ pub fn route_cycles(spec: &SystemSpec) -> Vec<Cycle> {
     found
 }
 
-fn walk(legs: &[Leg<'_>], path: &mut Vec<usize>, found: &mut Vec<Cycle>, seen: &mut Vec<Vec<usize>>) {
+fn walk(
+    legs: &[Leg<'_>],
+    path: &mut Vec<usize>,
+    found: &mut Vec<Cycle>,
+    seen: &mut Vec<Vec<usize>>,
+) {
     const MAX_LEN: usize = 12;
     let last = &legs[*path.last().expect("path is never empty")];
     let first = &legs[path[0]];
     // closing the loop: back at the start medium, topic still matching the first leg
     if path.len() >= 2 && last.to == first.from && last.out.overlaps(first.inp) {
         let bridges: Vec<&str> = path.iter().map(|&i| legs[i].bridge).collect();
-        let distinct = bridges.iter().collect::<std::collections::BTreeSet<_>>().len();
+        let distinct = bridges
+            .iter()
+            .collect::<std::collections::BTreeSet<_>>()
+            .len();
         if distinct >= 2 {
             let mut key = path.clone();
             key.sort_unstable();
             if !seen.contains(&key) {
                 seen.push(key);
-                let mut media: Vec<String> = path.iter().map(|&i| legs[i].from.to_string()).collect();
+                let mut media: Vec<String> =
+                    path.iter().map(|&i| legs[i].from.to_string()).collect();
                 media.push(first.from.to_string());
                 found.push(Cycle {
                     media,
@@ -493,8 +550,16 @@ pub struct Report {
 
 /// Checks a system against a registry: every medium URL, every module (built, so its parameters are
 /// checked), every bridge and route. Returns warnings (route cycles) when valid.
-pub fn check(spec: &SystemSpec, registry: &Registry, catalogue: &Catalogue) -> Result<Report, FileError> {
-    if let Some(el) = spec.sections.iter().find(|e| !registry.sections().any(|s| s == e.name)) {
+pub fn check(
+    spec: &SystemSpec,
+    registry: &Registry,
+    catalogue: &Catalogue,
+) -> Result<Report, FileError> {
+    if let Some(el) = spec
+        .sections
+        .iter()
+        .find(|e| !registry.sections().any(|s| s == e.name))
+    {
         let known: Vec<String> = TOP_TAGS
             .iter()
             .copied()
@@ -514,7 +579,11 @@ pub fn check(spec: &SystemSpec, registry: &Registry, catalogue: &Catalogue) -> R
         if spec.medium(name).is_none() {
             return Err(pos.error(format!(
                 "no medium called `{name}`; media: {}",
-                spec.media.iter().map(|m| m.name.as_str()).collect::<Vec<_>>().join(", ")
+                spec.media
+                    .iter()
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
             )));
         }
         Ok(())
@@ -563,23 +632,45 @@ mod tests {
         assert_eq!(s.node.as_deref(), Some("auv1"));
         assert_eq!(s.default_medium(), "bus");
         let m = &s.modules[0];
-        assert_eq!((m.type_name.as_str(), m.media.clone(), m.tick), ("generator", vec!["bus".to_string()], Some(std::time::Duration::from_millis(200))));
+        assert_eq!(
+            (m.type_name.as_str(), m.media.clone(), m.tick),
+            (
+                "generator",
+                vec!["bus".to_string()],
+                Some(std::time::Duration::from_millis(200))
+            )
+        );
         assert_eq!(m.params.str("topic"), Some("a.b"));
         assert_eq!(m.params.str("amplitude"), Some("2"));
         let b = &s.bridges[0];
         assert_eq!((b.hops, b.type_name.as_str()), (4, "route"));
         assert_eq!(b.routes[0].legs("bus", "net"), [("bus", "net")]);
-        assert_eq!(b.routes[1].legs("bus", "net"), [("bus", "net"), ("net", "bus")]);
-        assert_eq!(b.routes[1].fields, [("hdg".to_string(), "heading".to_string())]);
+        assert_eq!(
+            b.routes[1].legs("bus", "net"),
+            [("bus", "net"), ("net", "bus")]
+        );
+        assert_eq!(
+            b.routes[1].fields,
+            [("hdg".to_string(), "heading".to_string())]
+        );
         assert_eq!(b.routes[0].format, Some(Format::Xml));
     }
 
     #[test]
     fn structural_errors_are_placed_and_explained() {
         let cases = [
-            ("<system/>", "sys.xml:1:1: root element is <system>, expected <seabus>"),
-            ("<seabus>\n</seabus>", "sys.xml:1:1: a system needs at least one <medium>"),
-            ("<seabus>\n  <medium url=\"inproc://\"/>\n</seabus>", "sys.xml:2:3: <medium> is missing attribute `name`"),
+            (
+                "<system/>",
+                "sys.xml:1:1: root element is <system>, expected <seabus>",
+            ),
+            (
+                "<seabus>\n</seabus>",
+                "sys.xml:1:1: a system needs at least one <medium>",
+            ),
+            (
+                "<seabus>\n  <medium url=\"inproc://\"/>\n</seabus>",
+                "sys.xml:2:3: <medium> is missing attribute `name`",
+            ),
             (
                 "<seabus><medium name=\"a\" url=\"inproc://\"/><medium name=\"a\" url=\"inproc://\"/></seabus>",
                 "sys.xml:1:51: attribute `name`: a medium `a` is already defined at line 1",
@@ -607,11 +698,18 @@ mod tests {
             )
         };
         let e = parse(&base("<route from=\"c\" topics=\"**\"/>")).unwrap_err();
-        assert_eq!(e.to_string(), "sys.xml:3:8: attribute `from`: `c` is not one of this bridge's media (a and b)");
+        assert_eq!(
+            e.to_string(),
+            "sys.xml:3:8: attribute `from`: `c` is not one of this bridge's media (a and b)"
+        );
         let e = parse(&base("<route topics=\"nav.*\" rename=\"x.*.*\"/>")).unwrap_err();
         assert!(e.message.contains("wildcards"), "{e}");
         let e = parse(&base("<route topics=\"nav..x\"/>")).unwrap_err();
-        assert!(e.to_string().starts_with("sys.xml:3:8: attribute `topics`: empty segment"), "{e}");
+        assert!(
+            e.to_string()
+                .starts_with("sys.xml:3:8: attribute `topics`: empty segment"),
+            "{e}"
+        );
         let e = parse(&base("<route topics=\"**\" rate=\"0\"/>")).unwrap_err();
         assert!(e.message.contains("above 0"), "{e}");
         let e = parse(&base("<route topics=\"**\" format=\"json\"/>")).unwrap_err();
@@ -622,7 +720,10 @@ mod tests {
     fn unknown_sections_are_refused_by_check() {
         let s = parse("<seabus><medium name=\"bus\" url=\"inproc://\"/><gizmo/></seabus>").unwrap();
         let e = check(&s, &Registry::new(), &Catalogue::default()).unwrap_err();
-        assert_eq!(e.to_string(), "sys.xml:1:45: unexpected element <gizmo> inside <seabus>; expected <medium>, <module>, <bridge>");
+        assert_eq!(
+            e.to_string(),
+            "sys.xml:1:45: unexpected element <gizmo> inside <seabus>; expected <medium>, <module>, <bridge>"
+        );
     }
 
     fn cycles_of(text: &str) -> Vec<Cycle> {
@@ -641,7 +742,12 @@ mod tests {
         assert_eq!(cycles.len(), 2, "one each way round: {cycles:?}");
         assert_eq!(cycles[0].media, ["a", "b", "c", "a"]);
         assert_eq!(cycles[0].bridges, ["ab", "bc", "ca"]);
-        assert!(cycles[0].warning().to_string().starts_with("sys.xml:3:32: warning: route cycle a -> b -> c -> a"));
+        assert!(
+            cycles[0]
+                .warning()
+                .to_string()
+                .starts_with("sys.xml:3:32: warning: route cycle a -> b -> c -> a")
+        );
 
         // one bridge both ways is not a cycle; two bridges between the same media are
         let one = r#"<seabus><medium name="a" url="inproc://"/><medium name="b" url="inproc://"/>

@@ -177,7 +177,11 @@ mod tests {
             speed: 1.5,
         };
         run(&mut v, 60.0, Some(sp));
-        assert!((v.heading - 270.0).abs() < 0.01, "turned the short way to {}", v.heading);
+        assert!(
+            (v.heading - 270.0).abs() < 0.01,
+            "turned the short way to {}",
+            v.heading
+        );
         assert!((v.depth - 5.0).abs() < 1e-9);
         assert!((v.speed - 1.5).abs() < 1e-9);
         assert!(v.lon < 16.4, "went west");

@@ -15,9 +15,11 @@ use super::kinematics::{Limits, Setpoint, Vehicle};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Message};
-use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl};
-use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
 use seabus_modules::Catalogue;
+use seabus_modules::module::{
+    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
+};
+use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
 use std::time::Duration;
 use tokio::time::Instant;
 
@@ -70,7 +72,10 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         max_speed: p.float_or("max_speed", 2.5)?,
         max_depth: p.float_or("max_depth", 100.0)?,
     };
-    let topic = |dataset: &str, fallback: &str| cat.get(dataset).map_or(fallback.to_string(), |d| d.topic.clone());
+    let topic = |dataset: &str, fallback: &str| {
+        cat.get(dataset)
+            .map_or(fallback.to_string(), |d| d.topic.clone())
+    };
     let topics = Topics {
         attitude: topic("attitude", "nav.attitude"),
         position: topic("position", "nav.position"),
@@ -95,7 +100,12 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
     Ok(Built {
         decl,
         module: Box::new(Sim {
-            vehicle: Vehicle::at(lat, lon, p.float_or("heading", 0.0)?, p.float_or("battery", 600.0)?),
+            vehicle: Vehicle::at(
+                lat,
+                lon,
+                p.float_or("heading", 0.0)?,
+                p.float_or("battery", 600.0)?,
+            ),
             limits,
             water_depth: p.float_or("water_depth", 40.0)?,
             default_timeout: p.duration_or("timeout", Duration::from_secs(5))?,
@@ -110,7 +120,9 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
 
 impl Sim {
     fn active(&self, now: Instant) -> Option<Setpoint> {
-        self.course.filter(|(_, until)| now < *until).map(|(sp, _)| sp)
+        self.course
+            .filter(|(_, until)| now < *until)
+            .map(|(sp, _)| sp)
     }
 
     async fn publish_nav(&self, ctx: &Context) -> Result<(), ModuleError> {
@@ -133,7 +145,14 @@ impl Sim {
                 .with("lat", v.lat)
                 .with("lon", v.lon)
                 .with("fix", if v.depth < 0.5 { 1i64 } else { 6 })
-                .with("source", if v.depth < 0.5 { "gps" } else { "dead-reckoning" }),
+                .with(
+                    "source",
+                    if v.depth < 0.5 {
+                        "gps"
+                    } else {
+                        "dead-reckoning"
+                    },
+                ),
         )
         .await?;
         ctx.publish_dataset(
@@ -193,7 +212,8 @@ impl Sim {
             }
         }
         state.insert("error", "");
-        ctx.publish_dataset("vehicle-state", &self.topics.state, state).await
+        ctx.publish_dataset("vehicle-state", &self.topics.state, state)
+            .await
     }
 }
 
@@ -208,7 +228,12 @@ impl Module for Sim {
         Ok(())
     }
 
-    async fn on_message(&mut self, ctx: &mut Context, _: usize, msg: Message) -> Result<(), ModuleError> {
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        _: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
         let Some(map) = msg.payload.as_map() else {
             return Ok(());
         };
@@ -225,7 +250,9 @@ impl Module for Sim {
             let timeout = map
                 .get_f64("timeout")
                 .filter(|t| t.is_finite() && *t > 0.0)
-                .map_or(self.default_timeout, |t| Duration::from_secs_f64(t.min(3600.0)));
+                .map_or(self.default_timeout, |t| {
+                    Duration::from_secs_f64(t.min(3600.0))
+                });
             self.course = Some((sp, Instant::now() + timeout));
             self.commands += 1;
         } else if *msg.topic == *self.topics.mission && map.get_str("action") == Some("stop") {
@@ -239,7 +266,10 @@ impl Module for Sim {
             return self.publish_slow(ctx).await;
         }
         let now = Instant::now();
-        let dt = self.last_step.map_or(0.1, |t| now.duration_since(t).as_secs_f64()).min(1.0);
+        let dt = self
+            .last_step
+            .map_or(0.1, |t| now.duration_since(t).as_secs_f64())
+            .min(1.0);
         self.last_step = Some(now);
         let target = self.active(now);
         self.vehicle.step(dt, target, &self.limits);

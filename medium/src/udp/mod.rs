@@ -122,7 +122,7 @@ impl UdpConfig {
         let max = url
             .take_parsed("max", "a size in bytes")?
             .unwrap_or(MAX_DATAGRAM);
-        if max > MAX_DATAGRAM || max < wire::FIXED + 3 {
+        if !(wire::FIXED + 3..=MAX_DATAGRAM).contains(&max) {
             return Err(url.error(format!(
                 "option `max={max}`: expected {}–{MAX_DATAGRAM}",
                 wire::FIXED + 3

@@ -161,11 +161,20 @@ fn build(cfg: &ModuleConfig, catalogue: &Catalogue) -> Result<Built, FileError> 
 
 #[async_trait]
 impl Module for Convert {
-    async fn on_message(&mut self, ctx: &mut Context, _: usize, msg: Message) -> Result<(), ModuleError> {
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        _: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
         let Some(input) = msg.payload.as_map() else {
             return Ok(());
         };
-        let mut out = if self.keep { input.clone() } else { DataMap::new() };
+        let mut out = if self.keep {
+            input.clone()
+        } else {
+            DataMap::new()
+        };
         for c in &self.conversions {
             match input.get(&c.source).and_then(Value::as_f64) {
                 Some(x) => {
@@ -194,7 +203,10 @@ mod tests {
     #[test]
     fn conversions_parse_and_apply_left_to_right() {
         let c = Conversion::parse("depth_ft*0.3048 as depth").unwrap();
-        assert_eq!((c.source.as_str(), c.target.as_str()), ("depth_ft", "depth"));
+        assert_eq!(
+            (c.source.as_str(), c.target.as_str()),
+            ("depth_ft", "depth")
+        );
         assert!((c.apply(10.0) - 3.048).abs() < 1e-12);
         let c = Conversion::parse("temp_f - 32 * 0.5 as temp_c").unwrap();
         assert_eq!(c.apply(50.0), 9.0);
@@ -209,7 +221,11 @@ mod tests {
     fn bad_conversions_say_why() {
         assert!(Conversion::parse("*2").unwrap_err().contains("field name"));
         assert!(Conversion::parse("x*two").unwrap_err().contains("`two`"));
-        assert!(Conversion::parse("x/0").unwrap_err().contains("division by zero"));
+        assert!(
+            Conversion::parse("x/0")
+                .unwrap_err()
+                .contains("division by zero")
+        );
         assert!(Conversion::parse("x^2").unwrap_err().contains("expected *"));
     }
 }

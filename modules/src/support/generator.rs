@@ -5,7 +5,9 @@
 //! `count` (stop publishing after this many; default: never).
 
 use crate::datasets::Catalogue;
-use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl};
+use crate::module::{
+    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
+};
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
@@ -36,7 +38,9 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
     let topic = p.topic_or("topic", "test.counter")?;
     let format = match p.get("format") {
         None => Format::Map,
-        Some(f) => Format::parse(f.value.trim()).ok_or_else(|| f.error("expected map, xml or bytes"))?,
+        Some(f) => {
+            Format::parse(f.value.trim()).ok_or_else(|| f.error("expected map, xml or bytes"))?
+        }
     };
     let kind = match p.get("kind") {
         None => Kind::Data,
@@ -48,10 +52,17 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
     };
     let period = p.duration_or("period", Duration::from_secs(10))?;
     if period.is_zero() {
-        return Err(p.get("period").map_or_else(|| cfg.pos.error("period is zero"), |x| x.error("must be above zero")));
+        return Err(p.get("period").map_or_else(
+            || cfg.pos.error("period is zero"),
+            |x| x.error("must be above zero"),
+        ));
     }
-    let decl = Declaration::new(ModuleKind::Supporting)
-        .produces(TopicDecl::topic(topic.as_str()).field("counter", "").field("sine", "").field("time", "s"));
+    let decl = Declaration::new(ModuleKind::Supporting).produces(
+        TopicDecl::topic(topic.as_str())
+            .field("counter", "")
+            .field("sine", "")
+            .field("time", "s"),
+    );
     Ok(Built {
         decl,
         module: Box::new(Generator {
@@ -86,9 +97,9 @@ impl Module for Generator {
             .with("counter", self.sent as i64)
             .with("sine", self.amplitude * phase.sin())
             .with("time", t);
-        let payload = Payload::from(map)
-            .convert(self.format)
-            .map_err(|e| ModuleError::msg(format!("cannot build a {} payload: {e}", self.format)))?;
+        let payload = Payload::from(map).convert(self.format).map_err(|e| {
+            ModuleError::msg(format!("cannot build a {} payload: {e}", self.format))
+        })?;
         ctx.publish_on(0, self.kind, &self.topic, payload).await?;
         self.sent += 1;
         Ok(())

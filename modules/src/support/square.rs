@@ -7,7 +7,9 @@
 //! course command's validity, 5).
 
 use crate::datasets::Catalogue;
-use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl};
+use crate::module::{
+    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
+};
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
@@ -55,8 +57,12 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         Some("left") => -90.0,
         Some(_) => return Err(p.required("turn")?.error("expected right or left")),
     };
-    let course = cat.get("course-command").map_or("cmd.course", |d| d.topic.as_str());
-    let position = cat.get("position").map_or("nav.position", |d| d.topic.as_str());
+    let course = cat
+        .get("course-command")
+        .map_or("cmd.course", |d| d.topic.as_str());
+    let position = cat
+        .get("position")
+        .map_or("nav.position", |d| d.topic.as_str());
     let decl = Declaration::new(ModuleKind::Supporting)
         .consumes(TopicDecl::dataset(position, "position"))
         .produces(TopicDecl::dataset(course, "course-command"));
@@ -95,7 +101,12 @@ impl Module for Square {
         Ok(())
     }
 
-    async fn on_message(&mut self, ctx: &mut Context, _: usize, msg: Message) -> Result<(), ModuleError> {
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        _: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
         let Some(pos) = msg.payload.as_map() else {
             return Ok(());
         };
@@ -108,8 +119,14 @@ impl Module for Square {
                 self.heading = (self.heading + self.turn).rem_euclid(360.0);
                 self.legs += 1;
                 self.leg_start = Some((lat, lon));
-                tracing::info!(module = ctx.name(), leg = self.legs, heading = self.heading, "next leg");
-                ctx.command_dataset("course-command", "cmd.course", self.command()).await?;
+                tracing::info!(
+                    module = ctx.name(),
+                    leg = self.legs,
+                    heading = self.heading,
+                    "next leg"
+                );
+                ctx.command_dataset("course-command", "cmd.course", self.command())
+                    .await?;
             }
             Some(_) => {}
         }
@@ -117,7 +134,8 @@ impl Module for Square {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
-        ctx.command_dataset("course-command", "cmd.course", self.command()).await
+        ctx.command_dataset("course-command", "cmd.course", self.command())
+            .await
     }
 }
 

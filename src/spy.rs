@@ -1,0 +1,154 @@
+//! `seabus spy`: a live table of the topics on a medium, or one JSON object per message.
+
+use seabus_medium::{Medium, Message, Node, Payload};
+use std::collections::BTreeMap;
+use std::io::{IsTerminal, Write};
+use std::process::ExitCode;
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// One message as a JSON object: topic, kind, origin, seq, hops, stamp (seconds), format, payload.
+pub fn message_json(m: &Message) -> serde_json::Value {
+    let payload = match &m.payload {
+        Payload::Map(map) => serde_json::to_value(&**map).unwrap_or(serde_json::Value::Null),
+        Payload::Xml(x) => serde_json::Value::String(x.to_string()),
+        Payload::Bytes(b) => {
+            serde_json::to_value(seabus_medium::Value::Bytes(b.to_vec())).unwrap_or_default()
+        }
+    };
+    serde_json::json!({
+        "topic": m.topic.as_str(),
+        "kind": m.kind.name(),
+        "origin": m.origin().to_string(),
+        "seq": m.seq(),
+        "hops": m.provenance.hops,
+        "stamp": m.stamp.as_secs_f64(),
+        "format": m.payload.format().name(),
+        "payload": payload,
+    })
+}
+
+struct Row {
+    count: u64,
+    counted_at_refresh: u64,
+    rate: f64,
+    origin: String,
+    last: String,
+}
+
+fn shorten(text: String, max: usize) -> String {
+    if text.chars().count() <= max {
+        return text;
+    }
+    let mut s: String = text.chars().take(max.saturating_sub(1)).collect();
+    s.push('…');
+    s
+}
+
+fn print_table(rows: &BTreeMap<String, Row>, out: &mut impl Write, clear: bool) {
+    if clear {
+        let _ = write!(out, "\x1b[2J\x1b[H");
+    }
+    let _ = writeln!(
+        out,
+        "{:<32} {:>8} {:>9}  {:<22} last value",
+        "topic", "count", "rate/s", "origin"
+    );
+    for (topic, r) in rows {
+        let _ = writeln!(
+            out,
+            "{:<32} {:>8} {:>9.1}  {:<22} {}",
+            shorten(topic.clone(), 32),
+            r.count,
+            r.rate,
+            shorten(r.origin.clone(), 22),
+            r.last
+        );
+    }
+    let _ = out.flush();
+}
+
+/// Runs the spy until `duration` passes (or Ctrl-C).
+pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str) -> ExitCode {
+    let node = Node::new(&format!("spy-{}", std::process::id()));
+    let medium = match Medium::open("spy", url, &node) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("seabus spy: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let mut port = match medium
+        .attach_with("spy", 1 << 16, 1 << 10)
+        .subscribed(topics)
+    {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("seabus spy: --topics: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let deadline = duration.map(|d| Instant::now() + d);
+    let live = !json && std::io::stdout().is_terminal();
+    let mut rows: BTreeMap<String, Row> = BTreeMap::new();
+    let mut refresh = tokio::time::interval(Duration::from_secs(1));
+    let mut last_refresh = Instant::now();
+    let stdout = std::io::stdout();
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    loop {
+        tokio::select! {
+            _ = &mut ctrl_c => break,
+            _ = async {
+                match deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            } => break,
+            _ = refresh.tick(), if !json => {
+                let elapsed = last_refresh.elapsed().as_secs_f64().max(1e-3);
+                last_refresh = Instant::now();
+                for r in rows.values_mut() {
+                    r.rate = (r.count - r.counted_at_refresh) as f64 / elapsed;
+                    r.counted_at_refresh = r.count;
+                }
+                if live {
+                    print_table(&rows, &mut stdout.lock(), true);
+                }
+            }
+            m = port.recv() => {
+                let Some(m) = m else { break };
+                if json {
+                    let mut out = stdout.lock();
+                    if writeln!(out, "{}", message_json(&m)).is_err() {
+                        break;
+                    }
+                } else {
+                    let row = rows.entry(m.topic.to_string()).or_insert(Row {
+                        count: 0,
+                        counted_at_refresh: 0,
+                        rate: 0.0,
+                        origin: String::new(),
+                        last: String::new(),
+                    });
+                    row.count += 1;
+                    row.origin = m.origin().to_string();
+                    row.last = shorten(m.payload.to_string(), 70);
+                }
+            }
+        }
+    }
+    if !json {
+        print_table(&rows, &mut stdout.lock(), false);
+    }
+    let st = port.stats();
+    if st.dropped_oldest > 0 || medium.stats().rejected_total() > 0 {
+        eprintln!(
+            "seabus spy: {} messages dropped (too slow), {} rejected from the wire: {:?}",
+            st.dropped_oldest,
+            medium.stats().rejected_total(),
+            medium.stats().rejected
+        );
+    }
+    ExitCode::SUCCESS
+}

@@ -1,0 +1,139 @@
+//! `seabus check` and `seabus run` on good and bad system files: the exact error and exit code.
+
+mod common;
+use common::*;
+
+fn expect_error(text: &str, line_col_msg: &str) {
+    let (_dir, path) = system_file("system.xml", text);
+    for cmd in ["check", "run"] {
+        let out = seabus().arg(cmd).arg(&path).output().expect("seabus runs");
+        assert_eq!(out.status.code(), Some(2), "{cmd}: exit code for {text}");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        let expected = format!("{}:{line_col_msg}", path.display());
+        assert_eq!(
+            stderr.lines().last(),
+            Some(expected.as_str()),
+            "{cmd}: stderr was {stderr}"
+        );
+    }
+}
+
+#[test]
+fn xml_syntax_errors_name_line_and_column() {
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\">\n</seabus>\n",
+        "3:1: XML syntax error: ill-formed document: expected `</medium>`, but `</seabus>` was found",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"a\" type=\"generator\" medium=\"bus\"\n",
+        "3:3: XML syntax error: syntax error: tag not closed: `>` not found before end of input",
+    );
+}
+
+#[test]
+fn unknown_types_list_the_known_ones() {
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"x\" type=\"gizmo\" medium=\"bus\"/>\n</seabus>\n",
+        "3:3: unknown module type `gizmo`; known types: convert, generator, square, vehicle-sim",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"tcp://1.2.3.4:5\"/>\n</seabus>\n",
+        "2:22: unknown medium scheme `tcp://` in `tcp://1.2.3.4:5`; known schemes: inproc, udp",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"a\" url=\"inproc://\"/>\n  <medium name=\"b\" url=\"inproc://\"/>\n  \
+         <bridge name=\"x\" type=\"magic\" media=\"a b\"/>\n</seabus>\n",
+        "4:3: unknown bridge type `magic`; known types: route",
+    );
+}
+
+#[test]
+fn missing_attributes_are_named() {
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"x\" medium=\"bus\"/>\n</seabus>\n",
+        "3:3: <module> is missing attribute `type`",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\"/>\n</seabus>\n",
+        "2:3: <medium> is missing attribute `url`",
+    );
+}
+
+#[test]
+fn bad_urls_say_what_is_wrong() {
+    expect_error(
+        "<seabus>\n  <medium name=\"net\" url=\"udp://239.255.42.1\"/>\n</seabus>\n",
+        "2:22: bad medium URL `udp://239.255.42.1`: needs a port (udp://HOST:PORT)",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"net\" url=\"udp://239.255.42.1:47800?tll=0\"/>\n</seabus>\n",
+        "2:22: bad medium URL `udp://239.255.42.1:47800?tll=0`: unknown option `tll` for udp://; known options: \
+         ttl, iface, peer, bind, broadcast, loop, recv_buf, max",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"net\" url=\"239.255.42.1:47800\"/>\n</seabus>\n",
+        "2:22: bad medium URL `239.255.42.1:47800`: expected `scheme://…` (for example udp://239.255.42.1:47800)",
+    );
+}
+
+#[test]
+fn bad_module_placement_and_parameters_are_refused() {
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"g\" type=\"generator\" medium=\"bsu\"/>\n</seabus>\n",
+        "3:3: no medium called `bsu`; media: bus",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"g\" type=\"generator\" medium=\"bus\" rtae=\"5\"/>\n</seabus>\n",
+        "3:50: module type `generator` has no parameter `rtae`",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"g\" type=\"generator\" medium=\"bus\" tick=\"fast\"/>\n</seabus>\n",
+        "3:50: attribute `tick`: `fast` is not a rate (10, 10Hz) or a period (100ms, 2s)",
+    );
+}
+
+#[test]
+fn a_valid_file_checks_clean_and_a_missing_one_is_an_error() {
+    let (_dir, path) = system_file(
+        "ok.xml",
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"g\" type=\"generator\" medium=\"bus\"/>\n</seabus>\n",
+    );
+    let out = check(&path);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(String::from_utf8_lossy(&out.stdout).contains("valid (1 media, 1 modules, 0 bridges)"));
+    let out = seabus()
+        .args(["check", "/no/such/system.xml"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).starts_with("/no/such/system.xml:1:1: cannot read")
+    );
+}
+
+#[test]
+fn every_shipped_config_is_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap_or_default();
+        if path.extension().is_some_and(|e| e == "xml") && text.contains("<seabus") {
+            let out = check(&path);
+            assert_eq!(
+                out.status.code(),
+                Some(0),
+                "{}: {}",
+                path.display(),
+                String::from_utf8_lossy(&out.stderr)
+            );
+            checked += 1;
+        }
+    }
+    assert!(checked >= 1);
+}
