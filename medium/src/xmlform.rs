@@ -252,7 +252,12 @@ impl<'a> Parser<'a> {
             use quick_xml::errors::SyntaxError as S;
             let kind = match &e {
                 quick_xml::Error::Syntax(
-                    S::UnclosedTag | S::UnclosedComment | S::UnclosedCData | S::UnclosedDoctype | S::UnclosedPI | S::UnclosedXmlDecl,
+                    S::UnclosedTag
+                    | S::UnclosedComment
+                    | S::UnclosedCData
+                    | S::UnclosedDoctype
+                    | S::UnclosedPI
+                    | S::UnclosedXmlDecl,
                 ) => XmlFormErrorKind::Incomplete,
                 _ => XmlFormErrorKind::Syntax(e.to_string()),
             };
