@@ -19,8 +19,9 @@
 use crate::datamap::{DataMap, Value};
 use base64::Engine as _;
 use base64::engine::general_purpose::STANDARD as B64;
-use quick_xml::events::{BytesStart, Event};
+use quick_xml::events::Event;
 use quick_xml::reader::Reader;
+use std::borrow::Cow;
 use std::fmt::Write as _;
 use thiserror::Error;
 
@@ -108,10 +109,12 @@ fn write_value(out: &mut String, name: Option<&str>, v: &Value) {
     }
     match v {
         Value::Bool(b) => {
-            let _ = write!(out, ">{b}");
+            out.push('>');
+            out.push_str(if *b { "true" } else { "false" });
         }
         Value::Int(i) => {
-            let _ = write!(out, ">{i}");
+            out.push('>');
+            out.push_str(itoa::Buffer::new().format(*i));
         }
         Value::Float(f) => {
             out.push('>');
@@ -143,11 +146,17 @@ fn write_value(out: &mut String, name: Option<&str>, v: &Value) {
 }
 
 fn write_float(out: &mut String, f: f64) {
-    if f.is_nan() && f.to_bits() != f64::NAN.to_bits() {
+    if f.is_finite() {
+        // the shortest text that parses back to the same bits ("1.0", "1e300", "-0.0")
+        out.push_str(zmij::Buffer::new().format_finite(f));
+    } else if f.is_nan() && f.to_bits() != f64::NAN.to_bits() {
         let _ = write!(out, "NaN:0x{:016x}", f.to_bits());
+    } else if f.is_nan() {
+        out.push_str("NaN");
+    } else if f > 0.0 {
+        out.push_str("inf");
     } else {
-        // Debug prints the shortest text that parses back to the same value ("1.0", "1e300", "NaN")
-        let _ = write!(out, "{f:?}");
+        out.push_str("-inf");
     }
 }
 
@@ -192,21 +201,23 @@ pub fn from_xml(text: &str) -> Result<DataMap, XmlFormError> {
     let (root, empty) = loop {
         let at = p.pos();
         match p.next()? {
-            Event::Start(e) => break (e.into_owned(), false),
-            Event::Empty(e) => break (e.into_owned(), true),
+            Event::Start(e) => break (e, false),
+            Event::Empty(e) => break (e, true),
             Event::Decl(_) | Event::Comment(_) | Event::PI(_) | Event::DocType(_) => {}
-            Event::Text(t) if t.chars().all(char::is_whitespace) => {}
+            Event::Text(t) if is_blank(&t) => {}
             Event::Eof => return Err(p.err(at, XmlFormErrorKind::Incomplete)),
             _ => return Err(p.err(at, XmlFormErrorKind::NotADataMap("text".into()))),
         }
     };
-    let root_name = tag_name(&root);
-    if root_name != "datamap" {
-        return Err(p.err(0, XmlFormErrorKind::NotADataMap(root_name)));
+    if root.name().as_ref() != "datamap" {
+        return Err(p.err(
+            0,
+            XmlFormErrorKind::NotADataMap(root.name().as_ref().to_string()),
+        ));
     }
-    let mut map = DataMap::new();
+    let mut map = DataMap::with_capacity(16);
     if !empty {
-        while let Some((name, value)) = p.child(true, 0)? {
+        while let Some((name, value)) = p.child(Some("datamap"), 0)? {
             map.push_raw(name.unwrap_or_default(), value);
         }
     }
@@ -215,14 +226,50 @@ pub fn from_xml(text: &str) -> Result<DataMap, XmlFormError> {
         match p.next()? {
             Event::Eof => return Ok(map),
             Event::Comment(_) | Event::PI(_) => {}
-            Event::Text(t) if t.chars().all(char::is_whitespace) => {}
+            Event::Text(t) if is_blank(&t) => {}
             _ => return Err(p.err(at, XmlFormErrorKind::Trailing)),
         }
     }
 }
 
-fn tag_name(e: &BytesStart<'_>) -> String {
-    e.name().as_ref().to_string()
+fn is_blank(t: &str) -> bool {
+    t.bytes().all(|b| b.is_ascii_whitespace())
+}
+
+/// The value elements.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Tag {
+    Bool,
+    Int,
+    Float,
+    Str,
+    Bytes,
+    List,
+}
+
+impl Tag {
+    fn parse(name: &str) -> Option<Tag> {
+        Some(match name {
+            "bool" => Tag::Bool,
+            "int" => Tag::Int,
+            "float" => Tag::Float,
+            "string" => Tag::Str,
+            "bytes" => Tag::Bytes,
+            "list" => Tag::List,
+            _ => return None,
+        })
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Tag::Bool => "bool",
+            Tag::Int => "int",
+            Tag::Float => "float",
+            Tag::Str => "string",
+            Tag::Bytes => "bytes",
+            Tag::List => "list",
+        }
+    }
 }
 
 struct Parser<'a> {
@@ -232,9 +279,8 @@ struct Parser<'a> {
 impl<'a> Parser<'a> {
     fn new(text: &'a str) -> Self {
         let mut reader = Reader::from_str(text);
-        let cfg = reader.config_mut();
-        cfg.check_end_names = true;
-        cfg.expand_empty_elements = false;
+        // end tags are matched here, against the element each one closes
+        reader.config_mut().check_end_names = false;
         Parser { reader }
     }
 
@@ -265,10 +311,22 @@ impl<'a> Parser<'a> {
         })
     }
 
-    /// Reads the next child value of a `<datamap>` (`named`) or `<list>`; `None` at the parent's end tag.
+    fn check_end(&self, at: usize, end: &str, open: &str) -> Result<(), XmlFormError> {
+        if end == open {
+            Ok(())
+        } else {
+            Err(self.err(
+                at,
+                XmlFormErrorKind::Syntax(format!("expected `</{open}>`, found `</{end}>`")),
+            ))
+        }
+    }
+
+    /// Reads the next child value of `<datamap>` (whose children are named) or of a `<list>`
+    /// (`parent` is `None`); `None` at the parent's end tag.
     fn child(
         &mut self,
-        named: bool,
+        parent: Option<&str>,
         depth: usize,
     ) -> Result<Option<(Option<String>, Value)>, XmlFormError> {
         loop {
@@ -276,9 +334,12 @@ impl<'a> Parser<'a> {
             let (start, empty) = match self.next()? {
                 Event::Start(e) => (e, false),
                 Event::Empty(e) => (e, true),
-                Event::End(_) => return Ok(None),
+                Event::End(e) => {
+                    self.check_end(at, e.name().as_ref(), parent.unwrap_or("list"))?;
+                    return Ok(None);
+                }
                 Event::Comment(_) | Event::PI(_) => continue,
-                Event::Text(t) if t.chars().all(char::is_whitespace) => continue,
+                Event::Text(t) if is_blank(&t) => continue,
                 Event::Text(t) => {
                     let text = t.trim().to_string();
                     return Err(self.err(at, XmlFormErrorKind::StrayText(text)));
@@ -297,15 +358,24 @@ impl<'a> Parser<'a> {
                     );
                 }
             };
-            let tag = tag_name(&start);
+            let tag = Tag::parse(start.name().as_ref()).ok_or_else(|| {
+                self.err(
+                    at,
+                    XmlFormErrorKind::UnknownElement(start.name().as_ref().to_string()),
+                )
+            })?;
             let mut name = None;
             let mut base64 = false;
-            for attr in start.attributes() {
+            for attr in start.attributes().with_checks(false) {
                 let attr =
                     attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
-                let value = attr
-                    .normalized_value(quick_xml::XmlVersion::Implicit1_0)
-                    .map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
+                // a value with no reference and no whitespace to normalise is used as written
+                let value = if attr.value.contains(['&', '\t', '\n', '\r']) {
+                    attr.normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                        .map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?
+                } else {
+                    attr.value.clone()
+                };
                 match attr.key.as_ref() {
                     "name" => name = Some(value.into_owned()),
                     "name-base64" => {
@@ -330,42 +400,43 @@ impl<'a> Parser<'a> {
                     _ => {}
                 }
             }
-            if named && name.is_none() {
-                return Err(self.err(at, XmlFormErrorKind::MissingName(tag)));
+            if parent.is_some() && name.is_none() {
+                return Err(self.err(at, XmlFormErrorKind::MissingName(tag.name().to_string())));
             }
-            let value = match tag.as_str() {
-                "list" => {
-                    if depth >= MAX_DEPTH {
-                        return Err(self.err(at, XmlFormErrorKind::TooDeep));
-                    }
-                    let mut items = Vec::new();
-                    if !empty {
-                        while let Some((_, v)) = self.child(false, depth + 1)? {
-                            items.push(v);
-                        }
-                    }
-                    Value::List(items)
+            let value = if tag == Tag::List {
+                if depth >= MAX_DEPTH {
+                    return Err(self.err(at, XmlFormErrorKind::TooDeep));
                 }
-                "bool" | "int" | "float" | "string" | "bytes" => {
-                    let text = if empty { String::new() } else { self.text()? };
-                    self.scalar(&tag, text, base64, at)?
+                let mut items = Vec::new();
+                if !empty {
+                    while let Some((_, v)) = self.child(None, depth + 1)? {
+                        items.push(v);
+                    }
                 }
-                _ => return Err(self.err(at, XmlFormErrorKind::UnknownElement(tag))),
+                Value::List(items)
+            } else {
+                let text = if empty {
+                    Cow::Borrowed("")
+                } else {
+                    self.text(tag)?
+                };
+                self.scalar(tag, text, base64, at)?
             };
             return Ok(Some((name, value)));
         }
     }
 
-    /// Collects the text of an element up to its end tag, resolving references.
-    fn text(&mut self) -> Result<String, XmlFormError> {
-        let mut out = String::new();
+    /// Collects the text of a `tag` element up to its end tag, resolving references; borrowed
+    /// from the input when it is one plain run of text.
+    fn text(&mut self, tag: Tag) -> Result<Cow<'a, str>, XmlFormError> {
+        let mut out: Option<Cow<'a, str>> = None;
         loop {
             let at = self.pos();
-            match self.next()? {
-                Event::Text(t) => out.push_str(&t.xml10_content()),
-                Event::CData(c) => out.push_str(&c),
+            let piece: Cow<'a, str> = match self.next()? {
+                Event::Text(t) => t.xml10_content(),
+                Event::CData(c) => c.into_inner(),
                 Event::GeneralRef(r) => match resolve_ref(&r) {
-                    Some(c) => out.push(c),
+                    Some(c) => Cow::Owned(c.to_string()),
                     None => {
                         return Err(self.err(
                             at,
@@ -373,25 +444,35 @@ impl<'a> Parser<'a> {
                         ));
                     }
                 },
-                Event::End(_) => return Ok(out),
-                Event::Comment(_) | Event::PI(_) => {}
+                Event::End(e) => {
+                    self.check_end(at, e.name().as_ref(), tag.name())?;
+                    return Ok(out.unwrap_or(Cow::Borrowed("")));
+                }
+                Event::Comment(_) | Event::PI(_) => continue,
                 Event::Eof => return Err(self.err(at, XmlFormErrorKind::Incomplete)),
                 Event::Start(e) | Event::Empty(e) => {
-                    return Err(self.err(at, XmlFormErrorKind::UnknownElement(tag_name(&e))));
+                    return Err(self.err(
+                        at,
+                        XmlFormErrorKind::UnknownElement(e.name().as_ref().to_string()),
+                    ));
                 }
                 Event::Decl(_) | Event::DocType(_) => {
                     return Err(
                         self.err(at, XmlFormErrorKind::Syntax("misplaced declaration".into()))
                     );
                 }
-            }
+            };
+            out = Some(match out {
+                None => piece,
+                Some(prev) => Cow::Owned(prev.into_owned() + &piece),
+            });
         }
     }
 
     fn scalar(
         &self,
-        tag: &str,
-        text: String,
+        tag: Tag,
+        text: Cow<'_, str>,
         base64: bool,
         at: usize,
     ) -> Result<Value, XmlFormError> {
@@ -405,25 +486,28 @@ impl<'a> Parser<'a> {
             )
         };
         Ok(match tag {
-            "bool" => match text.trim() {
+            Tag::Bool => match text.trim() {
                 "true" | "1" => Value::Bool(true),
                 "false" | "0" => Value::Bool(false),
                 t => return Err(bad("bool", t)),
             },
-            "int" => Value::Int(text.trim().parse().map_err(|_| bad("int", &text))?),
-            "float" => Value::Float(parse_float(text.trim()).ok_or_else(|| bad("float", &text))?),
-            "string" if base64 => {
+            Tag::Int => Value::Int(text.trim().parse().map_err(|_| bad("int", &text))?),
+            Tag::Float => {
+                Value::Float(parse_float(text.trim()).ok_or_else(|| bad("float", &text))?)
+            }
+            Tag::Str if base64 => {
                 let raw = B64
                     .decode(strip_ws(&text))
                     .ok()
                     .and_then(|b| String::from_utf8(b).ok());
                 Value::Str(raw.ok_or_else(|| bad("base64 string", &text))?)
             }
-            "string" => Value::Str(text),
-            _ => Value::Bytes(
+            Tag::Str => Value::Str(text.into_owned()),
+            Tag::Bytes => Value::Bytes(
                 B64.decode(strip_ws(&text))
                     .map_err(|_| bad("base64 bytes", &text))?,
             ),
+            Tag::List => return Err(bad("list", &text)),
         })
     }
 }

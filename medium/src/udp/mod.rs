@@ -54,8 +54,8 @@ pub enum Mode {
     },
     /// Broadcast to an address.
     Broadcast(Ipv4Addr),
-    /// Unicast to listed peers.
-    Unicast(Vec<SocketAddr>),
+    /// Unicast to listed peers, as `(host, port)`; host names are resolved when the medium opens.
+    Unicast(Vec<(String, u16)>),
 }
 
 /// A UDP medium's settings, read from its URL.
@@ -107,11 +107,17 @@ impl UdpConfig {
         };
         let mut peers = Vec::new();
         for p in url.take_all("peer") {
-            let addr = std::net::ToSocketAddrs::to_socket_addrs(&p)
-                .ok()
-                .and_then(|mut a| a.find(SocketAddr::is_ipv4))
-                .ok_or_else(|| url.error(format!("option `peer={p}`: expected HOST:PORT")))?;
-            peers.push(addr);
+            let bad = || url.error(format!("option `peer={p}`: expected HOST:PORT"));
+            let (host, port) = p.rsplit_once(':').ok_or_else(bad)?;
+            let port: u16 = port.parse().map_err(|_| bad())?;
+            let name_like = !host.is_empty()
+                && host
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.');
+            if host.parse::<Ipv4Addr>().is_err() && !name_like {
+                return Err(bad());
+            }
+            peers.push((host.to_string(), port));
         }
         let bind_override: Option<Ipv4Addr> = url.take_parsed("bind", "an IPv4 address")?;
         let broadcast = url.take_flag("broadcast")?.unwrap_or(false);
@@ -167,14 +173,29 @@ impl UdpConfig {
         })
     }
 
-    fn destinations(&self) -> Vec<SocketAddr> {
-        match &self.mode {
+    /// Where datagrams go, resolving peer host names.
+    fn destinations(&self) -> std::io::Result<Vec<SocketAddr>> {
+        Ok(match &self.mode {
             Mode::Multicast { group, .. } => {
                 vec![SocketAddr::V4(SocketAddrV4::new(*group, self.port))]
             }
             Mode::Broadcast(addr) => vec![SocketAddr::V4(SocketAddrV4::new(*addr, self.port))],
-            Mode::Unicast(peers) => peers.clone(),
-        }
+            Mode::Unicast(peers) => {
+                let mut out = Vec::with_capacity(peers.len());
+                for (host, port) in peers {
+                    let addr = std::net::ToSocketAddrs::to_socket_addrs(&(host.as_str(), *port))?
+                        .find(SocketAddr::is_ipv4)
+                        .ok_or_else(|| {
+                            std::io::Error::new(
+                                std::io::ErrorKind::NotFound,
+                                format!("{host} has no IPv4 address"),
+                            )
+                        })?;
+                    out.push(addr);
+                }
+                out
+            }
+        })
     }
 }
 
@@ -276,7 +297,9 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
         name: o.name.clone(),
         socket: socket.clone(),
         sender,
-        dests: cfg.destinations(),
+        dests: cfg
+            .destinations()
+            .map_err(io_err("resolving the peers".into()))?,
         max: cfg.max,
     });
     let task = tokio::spawn(receive(socket, sender, o.ingress.clone()));
@@ -380,7 +403,7 @@ mod tests {
         assert_eq!(c.mode, Mode::Broadcast(Ipv4Addr::BROADCAST));
         assert_eq!(c.bind, SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, 5000));
         let c = cfg("udp://127.0.0.1:5000?peer=127.0.0.1:5001,127.0.0.1:5002").unwrap();
-        assert_eq!(c.destinations().len(), 2);
+        assert_eq!(c.destinations().unwrap().len(), 2);
         let c = cfg("udp://239.255.42.1:47800?iface=lo").unwrap();
         assert!(matches!(c.mode, Mode::Multicast { iface, .. } if iface == Ipv4Addr::LOCALHOST));
     }

@@ -1,0 +1,111 @@
+//! In-process delivery: one publisher to one and to four subscribers, a ten-field datamap per
+//! message, against a bare `tokio::sync::broadcast` carrying the same messages in the same run.
+//! Prints messages per second (delivered to each subscriber) and the ratio to broadcast.
+//!
+//! Run: `cargo bench -p seabus-medium --bench inproc`
+
+mod common;
+
+use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
+use seabus_medium::{Medium, Node, Payload, Topic};
+use std::time::Instant;
+
+const N: usize = 200_000;
+const ROUNDS: usize = 5;
+
+async fn seabus_run(subscribers: usize) -> f64 {
+    let bus = Medium::in_process("bus", &Node::new("bench"));
+    let publisher = bus.attach("pub");
+    let topic = Topic::new("nav.attitude").expect("valid topic");
+    let payload = Payload::from(common::ten_fields());
+    let mut tasks = Vec::new();
+    for i in 0..subscribers {
+        let mut port = bus
+            .attach_with(&format!("sub{i}"), N, 16)
+            .subscribed("nav.*")
+            .expect("valid pattern");
+        tasks.push(tokio::spawn(async move {
+            let mut n = 0;
+            while n < N {
+                if port.recv().await.is_none() {
+                    break;
+                }
+                n += 1;
+            }
+            n
+        }));
+    }
+    let start = Instant::now();
+    for _ in 0..N {
+        publisher.send(&topic, payload.clone()).await.expect("sent");
+    }
+    let mut received = 0;
+    for t in tasks {
+        received += t.await.expect("subscriber ends");
+    }
+    assert_eq!(received, N * subscribers, "no message lost");
+    N as f64 / start.elapsed().as_secs_f64()
+}
+
+async fn broadcast_run(subscribers: usize) -> f64 {
+    let (tx, _) = tokio::sync::broadcast::channel::<Message>(N);
+    let template = Message {
+        topic: Topic::new("nav.attitude").expect("valid topic"),
+        kind: Kind::Data,
+        provenance: Provenance {
+            origin: Origin::new("bench", "bus", 1),
+            seq: 0,
+            hops: 0,
+        },
+        stamp: Stamp::now(),
+        payload: Payload::from(common::ten_fields()),
+    };
+    let mut tasks = Vec::new();
+    for _ in 0..subscribers {
+        let mut rx = tx.subscribe();
+        tasks.push(tokio::spawn(async move {
+            let mut n = 0;
+            while n < N {
+                if rx.recv().await.is_err() {
+                    break;
+                }
+                n += 1;
+            }
+            n
+        }));
+    }
+    let start = Instant::now();
+    for _ in 0..N {
+        tx.send(template.clone()).expect("sent");
+    }
+    let mut received = 0;
+    for t in tasks {
+        received += t.await.expect("subscriber ends");
+    }
+    assert_eq!(received, N * subscribers, "no message lost");
+    N as f64 / start.elapsed().as_secs_f64()
+}
+
+fn main() {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    println!("in-process delivery, 10-field datamap, {N} messages, median of {ROUNDS} rounds:");
+    for subs in [1, 4] {
+        let mut ours = Vec::new();
+        let mut bare = Vec::new();
+        for _ in 0..ROUNDS {
+            ours.push(rt.block_on(seabus_run(subs)));
+            bare.push(rt.block_on(broadcast_run(subs)));
+        }
+        let (ours, bare) = (common::median(ours), common::median(bare));
+        println!(
+            "  1 -> {subs}: seabus {:>14}   broadcast {:>14}   ratio {:.2} (target: at least 0.5)",
+            common::rate(ours),
+            common::rate(bare),
+            ours / bare
+        );
+    }
+}
