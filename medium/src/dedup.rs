@@ -30,57 +30,57 @@ pub enum Seen {
 #[derive(Clone)]
 struct Window {
     highest: u64,
-    /// bit i of the window: `highest - i` was seen
+    /// ring of seen flags: bit `seq % WINDOW` for the sequence numbers in `(highest - WINDOW, highest]`
     bits: [u64; WORDS],
     last_use: u64,
 }
 
 impl Window {
     fn new(seq: u64, now: u64) -> Window {
-        let mut bits = [0u64; WORDS];
-        bits[0] = 1;
-        Window {
+        let mut w = Window {
             highest: seq,
-            bits,
+            bits: [0u64; WORDS],
             last_use: now,
-        }
+        };
+        w.set(seq);
+        w
+    }
+
+    fn slot(seq: u64) -> (usize, u64) {
+        let i = seq % WINDOW;
+        ((i / 64) as usize, 1 << (i % 64))
+    }
+
+    fn set(&mut self, seq: u64) {
+        let (w, b) = Window::slot(seq);
+        self.bits[w] |= b;
     }
 
     fn check(&mut self, seq: u64) -> Seen {
         if seq > self.highest {
-            self.shift(seq - self.highest);
+            let n = seq - self.highest;
+            if n >= WINDOW {
+                self.bits = [0; WORDS];
+            } else {
+                // forget the flags of the sequence numbers that now fall out of the window
+                for s in self.highest + 1..=seq {
+                    let (w, b) = Window::slot(s);
+                    self.bits[w] &= !b;
+                }
+            }
             self.highest = seq;
-            self.bits[0] |= 1;
+            self.set(seq);
             return Seen::New;
         }
-        let back = self.highest - seq;
-        if back >= WINDOW {
+        if self.highest - seq >= WINDOW {
             return Seen::Late;
         }
-        let (word, bit) = ((back / 64) as usize, back % 64);
-        if self.bits[word] & (1 << bit) != 0 {
+        let (w, b) = Window::slot(seq);
+        if self.bits[w] & b != 0 {
             Seen::Duplicate
         } else {
-            self.bits[word] |= 1 << bit;
+            self.bits[w] |= b;
             Seen::New
-        }
-    }
-
-    /// Moves the window forward by `n`: bit i becomes bit i + n.
-    fn shift(&mut self, n: u64) {
-        if n >= WINDOW {
-            self.bits = [0; WORDS];
-            return;
-        }
-        let (words, bits) = ((n / 64) as usize, (n % 64) as u32);
-        for i in (0..WORDS).rev() {
-            let src = i.checked_sub(words);
-            let hi = src.map_or(0, |s| self.bits[s] << bits);
-            let lo = match src.and_then(|s| s.checked_sub(1)) {
-                Some(s) if bits > 0 => self.bits[s] >> (64 - bits),
-                _ => 0,
-            };
-            self.bits[i] = hi | lo;
         }
     }
 }

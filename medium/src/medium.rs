@@ -14,7 +14,7 @@ use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queu
 use crate::topic::{Pattern, Topic, TopicError};
 use crate::url::{MediumUrl, UrlError};
 use bytes::Bytes;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
 use std::future::Future;
 use std::pin::Pin;
@@ -389,6 +389,7 @@ impl Medium {
             accept: None,
             dedup: Dedup::new(),
             counters: IfaceCounters::default(),
+            batch: VecDeque::new(),
         }
     }
 
@@ -560,6 +561,53 @@ impl Inner {
         }
     }
 
+    /// Puts a message into the queue of every matching local interface but `from`, without
+    /// waiting. Commands that met a full queue are handed back when a local interface sent them
+    /// (the sender will wait for room), and refused and counted when they came from the wire.
+    fn fan_out(&self, msg: Message, from: Option<u64>) -> Vec<(Arc<Queue>, Message)> {
+        let subs = self.snapshot();
+        let mut blocked = Vec::new();
+        let mut delivered = 0u64;
+        let mut put = |s: &Sub, m: Message| match s.queue.push(m) {
+            Pushed::Queued | Pushed::DroppedOldest => delivered += 1,
+            Pushed::Closed => {}
+            Pushed::Full(m) if from.is_some() => blocked.push((s.queue.clone(), m)),
+            Pushed::Full(m) => {
+                s.queue
+                    .counters
+                    .commands_refused
+                    .fetch_add(1, Ordering::Relaxed);
+                self.counters
+                    .commands_refused
+                    .fetch_add(1, Ordering::Relaxed);
+                tracing::error!(
+                    medium = %self.name,
+                    topic = %m.topic,
+                    origin = %m.provenance.origin,
+                    "command refused: a receiver's command queue is full"
+                );
+            }
+        };
+        // every matching interface but the last gets a copy (sharing the payload); the last gets
+        // the message itself
+        let mut previous: Option<&Sub> = None;
+        for s in subs.iter() {
+            if Some(s.id) == from || !s.wants(&msg.topic) {
+                continue;
+            }
+            if let Some(p) = previous.replace(s) {
+                put(p, msg.clone());
+            }
+        }
+        if let Some(last) = previous {
+            put(last, msg);
+        }
+        self.counters
+            .delivered
+            .fetch_add(delivered, Ordering::Relaxed);
+        blocked
+    }
+
     /// Hands a message to local interfaces (all but `from`) and the frame to the wire. A local
     /// sender (`from` set) waits for room in full command queues; the wire's reader never waits.
     pub(crate) async fn dispatch(
@@ -568,41 +616,11 @@ impl Inner {
         frame: Option<Bytes>,
         from: Option<u64>,
     ) -> Result<(), SendError> {
-        let subs = self.snapshot();
-        let mut delivered = 0u64;
-        for s in subs.iter() {
-            if Some(s.id) == from || !s.wants(&msg.topic) {
-                continue;
-            }
-            match s.queue.push(msg.clone()) {
-                Pushed::Queued | Pushed::DroppedOldest => delivered += 1,
-                Pushed::Closed => {}
-                Pushed::Full(m) => {
-                    if from.is_some() {
-                        if let Pushed::Queued = s.queue.push_wait(m).await {
-                            delivered += 1;
-                        }
-                    } else {
-                        s.queue
-                            .counters
-                            .commands_refused
-                            .fetch_add(1, Ordering::Relaxed);
-                        self.counters
-                            .commands_refused
-                            .fetch_add(1, Ordering::Relaxed);
-                        tracing::error!(
-                            medium = %self.name,
-                            topic = %msg.topic,
-                            origin = %msg.provenance.origin,
-                            "command refused: a receiver's command queue is full"
-                        );
-                    }
-                }
+        for (queue, m) in self.fan_out(msg, from) {
+            if let Pushed::Queued = queue.push_wait(m).await {
+                self.counters.delivered.fetch_add(1, Ordering::Relaxed);
             }
         }
-        self.counters
-            .delivered
-            .fetch_add(delivered, Ordering::Relaxed);
         if let (Some(frame), Some(t)) = (frame, self.transport.get()) {
             match t.transmit(frame).await {
                 Ok(()) => {
@@ -627,7 +645,7 @@ pub struct Ingress {
 impl Ingress {
     /// Delivers a message read from the wire to every matching local interface.
     /// Returns false once the medium is gone or closed, so the reader can stop.
-    pub async fn deliver(&self, msg: Message) -> bool {
+    pub fn deliver(&self, msg: Message) -> bool {
         let Some(inner) = self.inner.upgrade() else {
             return false;
         };
@@ -635,8 +653,8 @@ impl Ingress {
             return false;
         }
         inner.counters.received.fetch_add(1, Ordering::Relaxed);
-        // the wire's reader never waits, so this completes without yielding
-        let _ = inner.dispatch(msg, None, None).await;
+        // from the wire nothing waits: a full command queue refuses
+        inner.fan_out(msg, None);
         true
     }
 
@@ -770,6 +788,8 @@ pub struct Interface {
     accept: Option<Format>,
     dedup: Dedup,
     counters: IfaceCounters,
+    /// a batch taken from the queue, read before the queue is looked at again
+    batch: VecDeque<Message>,
 }
 
 /// Why [`Interface::try_recv`] returned nothing.
@@ -905,7 +925,7 @@ impl Interface {
     /// Takes the next message if one is waiting.
     pub fn try_recv(&mut self) -> Result<Message, TryRecvError> {
         loop {
-            match self.queue.pop() {
+            match self.queue.next(&mut self.batch) {
                 Some(m) => {
                     if let Some(m) = self.admit(m) {
                         return Ok(m);
@@ -920,7 +940,7 @@ impl Interface {
     /// Polls for the next message (for code that waits on several interfaces at once).
     pub fn poll_recv(&mut self, cx: &mut Context<'_>) -> Poll<Option<Message>> {
         loop {
-            match self.queue.poll_pop(cx) {
+            match self.queue.poll_next(cx, &mut self.batch) {
                 Poll::Ready(Some(m)) => {
                     if let Some(m) = self.admit(m) {
                         return Poll::Ready(Some(m));
@@ -971,7 +991,7 @@ impl Interface {
     pub fn stats(&self) -> InterfaceStats {
         InterfaceStats {
             received: self.counters.received,
-            pending: self.queue.len() as u64,
+            pending: (self.queue.len() + self.batch.len()) as u64,
             dropped_oldest: self.queue.counters.dropped_oldest.load(Ordering::Relaxed),
             commands_refused: self.queue.counters.commands_refused.load(Ordering::Relaxed),
             duplicates: self.counters.duplicates,

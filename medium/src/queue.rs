@@ -10,7 +10,7 @@ use crate::message::{Kind, Message};
 use atomic_waker::AtomicWaker;
 use std::collections::VecDeque;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::task::{Context, Poll};
 use tokio::sync::Notify;
 
@@ -39,13 +39,14 @@ struct State {
 /// Counters kept by a queue.
 #[derive(Default)]
 pub(crate) struct QueueCounters {
-    pub queued: AtomicU64,
     pub dropped_oldest: AtomicU64,
     pub commands_refused: AtomicU64,
 }
 
 pub(crate) struct Queue {
     state: Mutex<State>,
+    /// commands waiting, readable without the lock
+    commands: AtomicUsize,
     waker: AtomicWaker,
     space: Notify,
     closed: AtomicBool,
@@ -61,6 +62,7 @@ impl Queue {
                 data: VecDeque::with_capacity(data_cap.min(64)),
                 commands: VecDeque::new(),
             }),
+            commands: AtomicUsize::new(0),
             waker: AtomicWaker::new(),
             space: Notify::new(),
             closed: AtomicBool::new(false),
@@ -101,11 +103,11 @@ impl Queue {
                         return Pushed::Full(msg);
                     }
                     st.commands.push_back(msg);
+                    self.commands.store(st.commands.len(), Ordering::Release);
                     Pushed::Queued
                 }
             }
         };
-        self.counters.queued.fetch_add(1, Ordering::Relaxed);
         if let Pushed::DroppedOldest = result {
             self.counters.dropped_oldest.fetch_add(1, Ordering::Relaxed);
         }
@@ -129,18 +131,51 @@ impl Queue {
         }
     }
 
-    pub fn pop(&self) -> Option<Message> {
-        let mut st = self.lock();
-        if let Some(c) = st.commands.pop_front() {
-            drop(st);
-            self.space.notify_waiters();
-            return Some(c);
+    /// Takes the oldest waiting command, if any (cheap when there is none).
+    pub fn pop_command(&self) -> Option<Message> {
+        if self.commands.load(Ordering::Acquire) == 0 {
+            return None;
         }
-        st.data.pop_front()
+        let c = {
+            let mut st = self.lock();
+            let c = st.commands.pop_front();
+            self.commands.store(st.commands.len(), Ordering::Release);
+            c
+        };
+        if c.is_some() {
+            self.space.notify_waiters();
+        }
+        c
     }
 
-    pub fn poll_pop(&self, cx: &mut Context<'_>) -> Poll<Option<Message>> {
-        if let Some(m) = self.pop() {
+    /// Moves every waiting data message into `out` (which must be empty); true when any was moved.
+    /// Taking a batch under one lock keeps a busy receiver from contending with the sender.
+    fn drain_data(&self, out: &mut VecDeque<Message>) -> bool {
+        let mut st = self.lock();
+        std::mem::swap(&mut st.data, out);
+        !out.is_empty()
+    }
+
+    /// The next message without waiting: a command first, then `batch` (data already taken from
+    /// the queue), then a fresh batch of data.
+    pub fn next(&self, batch: &mut VecDeque<Message>) -> Option<Message> {
+        if let Some(c) = self.pop_command() {
+            return Some(c);
+        }
+        if batch.is_empty() && !self.drain_data(batch) {
+            return None;
+        }
+        batch.pop_front()
+    }
+
+    /// Like [`Queue::next`], registering the receiver's waker when nothing is waiting.
+    /// `Ready(None)` means the queue is closed and empty.
+    pub fn poll_next(
+        &self,
+        cx: &mut Context<'_>,
+        batch: &mut VecDeque<Message>,
+    ) -> Poll<Option<Message>> {
+        if let Some(m) = self.next(batch) {
             return Poll::Ready(Some(m));
         }
         if self.closed.load(Ordering::Acquire) {
@@ -148,7 +183,7 @@ impl Queue {
         }
         self.waker.register(cx.waker());
         // a push may have landed between the first look and the registration
-        match self.pop() {
+        match self.next(batch) {
             Some(m) => Poll::Ready(Some(m)),
             None if self.closed.load(Ordering::Acquire) => Poll::Ready(None),
             None => Poll::Pending,

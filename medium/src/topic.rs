@@ -130,12 +130,27 @@ enum Seg {
     Any,
 }
 
+/// How a pattern is matched: the common shapes without splitting the topic.
+#[derive(Clone, PartialEq, Eq)]
+enum Shape {
+    /// No wildcard.
+    Exact,
+    /// `**`.
+    All,
+    /// `a.b.**`: the prefix `a.b` itself, or anything under `a.b.`.
+    Under,
+    /// `a.b.*`: exactly one segment under `a.b.`.
+    Child,
+    /// Anything else, matched segment by segment.
+    General,
+}
+
 /// A topic pattern with `*` (one segment) and `**` (any number of segments) wildcards.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Pattern {
     text: Arc<str>,
     segs: Arc<[Seg]>,
-    exact: bool,
+    shape: Shape,
 }
 
 impl Pattern {
@@ -150,11 +165,20 @@ impl Pattern {
                 lit => Seg::Lit(lit.into()),
             })
             .collect();
-        let exact = segs.iter().all(|s| matches!(s, Seg::Lit(_)));
+        let literal_prefix = segs[..segs.len() - 1]
+            .iter()
+            .all(|s| matches!(s, Seg::Lit(_)));
+        let shape = match segs.last() {
+            _ if segs.iter().all(|s| matches!(s, Seg::Lit(_))) => Shape::Exact,
+            Some(Seg::Any) if segs.len() == 1 => Shape::All,
+            Some(Seg::Any) if literal_prefix => Shape::Under,
+            Some(Seg::One) if literal_prefix && segs.len() > 1 => Shape::Child,
+            _ => Shape::General,
+        };
         Ok(Pattern {
             text: Arc::from(text),
             segs: segs.into(),
-            exact,
+            shape,
         })
     }
 
@@ -178,14 +202,28 @@ impl Pattern {
 
     /// True when `topic` matches.
     pub fn matches(&self, topic: &str) -> bool {
-        if self.exact {
-            return *self.text == *topic;
+        match self.shape {
+            Shape::Exact => *self.text == *topic,
+            Shape::All => true,
+            Shape::Under => {
+                // `a.b.**`: the text without `.**` is the prefix
+                let prefix = &self.text[..self.text.len() - 3];
+                topic
+                    .strip_prefix(prefix)
+                    .is_some_and(|rest| rest.is_empty() || rest.starts_with('.'))
+            }
+            Shape::Child => {
+                // `a.b.*`: the text without `*` is the prefix, dot included
+                let prefix = &self.text[..self.text.len() - 1];
+                topic
+                    .strip_prefix(prefix)
+                    .is_some_and(|rest| !rest.is_empty() && !rest.contains('.'))
+            }
+            Shape::General => {
+                let parts = smallvec_lite::Parts::new(topic);
+                match_segs(&self.segs, parts.as_slice(), &mut None)
+            }
         }
-        if let [Seg::Any] = &*self.segs {
-            return true;
-        }
-        let parts: smallvec_lite::Parts<'_> = smallvec_lite::Parts::new(topic);
-        match_segs(&self.segs, parts.as_slice(), &mut None)
     }
 
     /// The segments each wildcard captured when `topic` matches (a `**` may capture none).

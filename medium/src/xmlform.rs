@@ -366,7 +366,18 @@ impl<'a> Parser<'a> {
             })?;
             let mut name = None;
             let mut base64 = false;
-            for attr in start.attributes().with_checks(false) {
+            // the form seabus writes, ` name="plain text"`, is read without the attribute parser
+            let raw = start.attributes_raw();
+            if let Some(plain) = raw
+                .strip_prefix(" name=\"")
+                .and_then(|r| r.strip_suffix('"'))
+                .filter(|v| !v.contains(['"', '&', '<', '\t', '\n', '\r']))
+            {
+                name = Some(plain.to_string());
+            }
+            let mut attrs = start.attributes();
+            attrs.with_checks(false);
+            for attr in attrs.take(if name.is_some() { 0 } else { usize::MAX }) {
                 let attr =
                     attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
                 // a value with no reference and no whitespace to normalise is used as written

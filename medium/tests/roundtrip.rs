@@ -1,11 +1,14 @@
-//! Property tests: every conversion between the three payload formats round-trips, and no decoder
-//! panics on any input.
+//! Property tests: every conversion between the three payload formats round-trips, no decoder
+//! panics on any input, topic matching agrees with segment-by-segment matching, and duplicate
+//! detection agrees with a plain model.
 
 use bytes::Bytes;
 use proptest::prelude::*;
+use seabus_medium::dedup::{Dedup, Seen, WINDOW};
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::udp::wire;
-use seabus_medium::{DataMap, Format, Payload, Topic, Value, binary, xmlform};
+use seabus_medium::{DataMap, Format, Pattern, Payload, Topic, Value, binary, xmlform};
+use std::collections::BTreeSet;
 
 fn scalar() -> impl Strategy<Value = Value> {
     prop_oneof![
@@ -110,5 +113,37 @@ proptest! {
         let mut framed = b"SB\x01".to_vec();
         framed.extend_from_slice(&bytes);
         let _ = wire::decode(&Bytes::from(framed), &mut wire::Origins::default());
+    }
+
+    #[test]
+    fn pattern_fast_paths_agree_with_segment_matching(
+        pat in proptest::collection::vec(prop_oneof!["a", "b", "c", "\\*", "\\*\\*"], 1..5),
+        topic in proptest::collection::vec(prop_oneof!["a", "b", "c", "ab"], 1..6),
+    ) {
+        let p = Pattern::new(&pat.join(".")).unwrap();
+        let t = topic.join(".");
+        // captures() always goes segment by segment
+        prop_assert_eq!(p.matches(&t), p.captures(&t).is_some(), "{} vs {}", p, t);
+    }
+
+    #[test]
+    fn duplicate_detection_agrees_with_a_model(seqs in proptest::collection::vec(1u64..3000, 1..400)) {
+        let mut d = Dedup::new();
+        let mut seen = BTreeSet::new();
+        let mut highest = 0u64;
+        for s in seqs {
+            let expected = if highest >= WINDOW && s <= highest - WINDOW {
+                Seen::Late
+            } else if seen.contains(&s) {
+                Seen::Duplicate
+            } else {
+                Seen::New
+            };
+            prop_assert_eq!(d.check_raw(7, s), expected, "seq {}", s);
+            if expected == Seen::New {
+                seen.insert(s);
+                highest = highest.max(s);
+            }
+        }
     }
 }

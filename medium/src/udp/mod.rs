@@ -369,7 +369,7 @@ async fn receive(socket: Arc<UdpSocket>, me: u64, ingress: Ingress) {
         match wire::decode(&datagram, &mut origins) {
             Ok((sender, _)) if sender == me => {}
             Ok((_, msg)) => {
-                if !ingress.deliver(msg).await {
+                if !ingress.deliver(msg) {
                     return;
                 }
             }
