@@ -1,0 +1,139 @@
+//! `seabus pub` and `seabus spy` against each other on a loopback multicast group: typed fields,
+//! counts, commands, formats, and the table view.
+
+mod common;
+use common::*;
+use std::process::Stdio;
+use std::time::Duration;
+
+fn start_spy(url: &str, extra: &[&str]) -> std::process::Child {
+    seabus()
+        .args(["spy", url, "--for", "2.5"])
+        .args(extra)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spy starts")
+}
+
+#[test]
+fn published_fields_arrive_typed_and_counted() {
+    let url = format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port());
+    let spy = start_spy(&url, &["--json"]);
+    std::thread::sleep(Duration::from_millis(400));
+    let out = seabus()
+        .args([
+            "pub",
+            &url,
+            "cmd.course",
+            "heading=90",
+            "depth=2.5",
+            "speed=1",
+            "label=\"7\"",
+            "armed=true",
+        ])
+        .args(["--count", "3", "--rate", "20", "--command"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let out = seabus()
+        .args(["pub", &url, "doc.xml", "a=1", "--format", "xml"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let spy = spy.wait_with_output().unwrap();
+    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&spy.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    let courses: Vec<_> = lines
+        .iter()
+        .filter(|m| m["topic"] == "cmd.course")
+        .collect();
+    assert_eq!(courses.len(), 3);
+    let p = &courses[0]["payload"];
+    assert_eq!(
+        (
+            p["heading"].as_i64(),
+            p["depth"].as_f64(),
+            p["armed"].as_bool()
+        ),
+        (Some(90), Some(2.5), Some(true))
+    );
+    assert_eq!(p["label"], "7");
+    assert_eq!(courses[0]["kind"], "command");
+    let seqs: Vec<u64> = courses.iter().map(|m| m["seq"].as_u64().unwrap()).collect();
+    assert_eq!(seqs, [1, 2, 3]);
+    let doc = lines
+        .iter()
+        .find(|m| m["topic"] == "doc.xml")
+        .expect("the XML message");
+    assert_eq!(doc["format"], "xml");
+    assert_eq!(doc["payload"], "<datamap><int name=\"a\">1</int></datamap>");
+}
+
+#[test]
+fn the_table_lists_topics_with_counts_and_origins() {
+    let url = format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port());
+    let spy = start_spy(&url, &[]);
+    std::thread::sleep(Duration::from_millis(400));
+    let out = seabus()
+        .args([
+            "pub",
+            &url,
+            "nav.depth",
+            "depth=4",
+            "--count",
+            "5",
+            "--rate",
+            "50",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let spy = spy.wait_with_output().unwrap();
+    let table = String::from_utf8_lossy(&spy.stdout);
+    let row = table
+        .lines()
+        .find(|l| l.starts_with("nav.depth"))
+        .unwrap_or_else(|| panic!("no row in {table}"));
+    let cols: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(cols[1], "5", "{row}");
+    assert!(
+        cols[3].starts_with("pub-") && cols[3].ends_with("/pub"),
+        "{row}"
+    );
+    assert!(row.ends_with("depth=4"), "{row}");
+}
+
+#[test]
+fn bad_arguments_are_refused_with_a_reason() {
+    for (args, reason) in [
+        (vec!["pub", "udp://239.255.1.1", "t", "a=1"], "needs a port"),
+        (
+            vec!["pub", "udp://239.255.1.1:5", "bad..topic", "a=1"],
+            "empty segment",
+        ),
+        (
+            vec!["pub", "udp://239.255.1.1:5", "t", "novalue"],
+            "is not key=value",
+        ),
+        (
+            vec!["pub", "udp://239.255.1.1:5", "t", "--format", "json"],
+            "is not a format",
+        ),
+        (
+            vec!["spy", "tcp://x:1", "--for", "0.1"],
+            "unknown medium scheme",
+        ),
+    ] {
+        let out = seabus().args(&args).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(reason), "{args:?}: {err}");
+    }
+}
