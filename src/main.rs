@@ -159,7 +159,10 @@ fn main() -> ExitCode {
                 duration,
                 json,
                 topics,
-            } => spy::spy(&url, duration.map(Duration::from_secs_f64), json, &topics).await,
+            } => match seconds(duration) {
+                Ok(d) => spy::spy(&url, d, json, &topics).await,
+                Err(code) => code,
+            },
             Command::Pub {
                 url,
                 topic,
@@ -209,7 +212,22 @@ async fn terminated() {
     }
 }
 
+/// `--for SECS` as a duration; a bad value is reported (exit code 2).
+fn seconds(value: Option<f64>) -> Result<Option<Duration>, ExitCode> {
+    match value {
+        None => Ok(None),
+        Some(v) => seabus_medium::parse::secs(v).map(Some).ok_or_else(|| {
+            eprintln!("seabus: --for {v}: expected a number of seconds from 0 to 1e9");
+            ExitCode::from(2)
+        }),
+    }
+}
+
 async fn run(spec: SystemSpec, duration: Option<f64>) -> ExitCode {
+    let duration = match seconds(duration) {
+        Ok(d) => d,
+        Err(code) => return code,
+    };
     let runtime = match Runtime::start(&spec, &registry(), Catalogue::built_in()).await {
         Ok(r) => r,
         Err(e) => return file_error(&e),
@@ -227,10 +245,10 @@ async fn run(spec: SystemSpec, duration: Option<f64>) -> ExitCode {
             .join(", ")
     );
     match duration {
-        Some(secs) => {
+        Some(d) => {
             tokio::select! {
                 _ = terminated() => {}
-                _ = tokio::time::sleep(Duration::from_secs_f64(secs.max(0.0))) => {}
+                _ = tokio::time::sleep(d) => {}
             }
         }
         None => terminated().await,
@@ -301,9 +319,11 @@ async fn publish(
     let Some(format) = Format::parse(format) else {
         return usage(format!("`{format}` is not a format: map, xml or bytes"));
     };
-    if !(rate.is_finite() && rate > 0.0) {
-        return usage(format!("rate {rate} must be above 0"));
-    }
+    let Some(period) = seabus_medium::parse::rate_period(rate) else {
+        return usage(format!(
+            "--rate {rate}: expected above 0 and at most a million per second"
+        ));
+    };
     let payload = match Payload::from(map).convert(format) {
         Ok(p) => p,
         Err(e) => return usage(e.to_string()),
@@ -315,7 +335,7 @@ async fn publish(
     };
     let port = medium.attach("pub");
     let kind = if command { Kind::Command } else { Kind::Data };
-    let mut ticker = tokio::time::interval(Duration::from_secs_f64(1.0 / rate));
+    let mut ticker = tokio::time::interval(period);
     for _ in 0..count {
         ticker.tick().await;
         if let Err(e) = port.publish(kind, topic, payload.clone()).await {

@@ -7,25 +7,28 @@ use std::process::ExitCode;
 use std::time::Duration;
 use tokio::time::Instant;
 
-/// One message as a JSON object: topic, kind, origin, seq, hops, stamp (seconds), format, payload.
-pub fn message_json(m: &Message) -> serde_json::Value {
+/// One message as a JSON object, keys in this order: topic, kind, origin, seq, hops, stamp
+/// (seconds), format, payload (a datamap's entries in their own order).
+pub fn message_json(m: &Message) -> String {
+    let text = |s: &str| serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into());
     let payload = match &m.payload {
-        Payload::Map(map) => serde_json::to_value(&**map).unwrap_or(serde_json::Value::Null),
-        Payload::Xml(x) => serde_json::Value::String(x.to_string()),
-        Payload::Bytes(b) => {
-            serde_json::to_value(seabus_medium::Value::Bytes(b.to_vec())).unwrap_or_default()
-        }
+        Payload::Map(map) => seabus_medium::json::to_json(map),
+        Payload::Xml(x) => text(x),
+        Payload::Bytes(b) => serde_json::to_string(&seabus_medium::Value::Bytes(b.to_vec()))
+            .unwrap_or_else(|_| "null".into()),
     };
-    serde_json::json!({
-        "topic": m.topic.as_str(),
-        "kind": m.kind.name(),
-        "origin": m.origin().to_string(),
-        "seq": m.seq(),
-        "hops": m.provenance.hops,
-        "stamp": m.stamp.as_secs_f64(),
-        "format": m.payload.format().name(),
-        "payload": payload,
-    })
+    let stamp = serde_json::to_string(&m.stamp.as_secs_f64()).unwrap_or_else(|_| "null".into());
+    format!(
+        "{{\"topic\":{},\"kind\":\"{}\",\"origin\":{},\"seq\":{},\"hops\":{},\"stamp\":{},\"format\":\"{}\",\"payload\":{}}}",
+        text(&m.topic),
+        m.kind.name(),
+        text(&m.origin().to_string()),
+        m.seq(),
+        m.provenance.hops,
+        stamp,
+        m.payload.format().name(),
+        payload
+    )
 }
 
 struct Row {

@@ -180,3 +180,61 @@ async fn a_cycle_of_faulty_media_delivers_each_message_exactly_once_everywhere()
     }
     runtime.shutdown().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn regression_parallel_bridges_never_wait_on_each_other() {
+    // three bridges side by side between a and b, commands flooding in from c: bridges forward
+    // without waiting (refusing and counting what does not fit), so none of them can block another
+    let text = r#"<seabus node="par">
+  <medium name="a" url="inproc://"/><medium name="b" url="inproc://"/><medium name="c" url="inproc://"/>
+  <bridge name="x" media="a b"><route topics="cmd.**" kind="command"/></bridge>
+  <bridge name="y" media="a b"><route topics="cmd.**" kind="command"/></bridge>
+  <bridge name="z" media="a b"><route topics="cmd.**" kind="command"/></bridge>
+  <bridge name="in" media="c a"><route from="c" topics="cmd.**"/></bridge>
+</seabus>"#;
+    let spec = SystemSpec::parse("par.xml", text).unwrap();
+    let mut reg = seabus_modules::registry();
+    seabus_bridges::register(&mut reg);
+    let runtime = Runtime::start(&spec, &reg, Catalogue::built_in())
+        .await
+        .unwrap();
+    let mut sink = runtime
+        .medium("b")
+        .unwrap()
+        .attach("sink")
+        .subscribed("cmd.**")
+        .unwrap();
+    let sender = runtime.medium("c").unwrap().attach("sender");
+    let total = 2000i64;
+    let send = tokio::spawn(async move {
+        for i in 0..total {
+            sender
+                .command("cmd.x", seabus_medium::DataMap::new().with("i", i))
+                .await
+                .unwrap();
+        }
+    });
+    let mut got = BTreeSet::new();
+    let mut twice = 0;
+    for m in drain(&mut sink, Duration::from_millis(1500)).await {
+        if !got.insert(m.payload.to_map().unwrap().get_i64("i").unwrap()) {
+            twice += 1;
+        }
+    }
+    tokio::time::timeout(Duration::from_secs(5), send)
+        .await
+        .expect("the sender is never held up for good")
+        .unwrap();
+    assert_eq!(twice, 0);
+    let refused: u64 = runtime
+        .media()
+        .map(|(_, m)| m.stats().commands_refused)
+        .sum();
+    let missing = total as u64 - got.len() as u64;
+    assert!(
+        missing <= refused,
+        "{missing} commands missing, {refused} refused and counted"
+    );
+    assert!(!got.is_empty());
+    runtime.shutdown().await;
+}

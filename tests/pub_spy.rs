@@ -46,7 +46,21 @@ fn published_fields_arrive_typed_and_counted() {
         .unwrap();
     assert!(out.status.success());
     let spy = spy.wait_with_output().unwrap();
-    let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&spy.stdout)
+    let text = String::from_utf8_lossy(&spy.stdout);
+    // keys in the documented order, the datamap's entries in the order they were given
+    let first = text
+        .lines()
+        .find(|l| l.contains("cmd.course"))
+        .expect("a course line");
+    assert!(
+        first.starts_with("{\"topic\":\"cmd.course\",\"kind\":\"command\",\"origin\":"),
+        "{first}"
+    );
+    assert!(
+        first.ends_with(r#""format":"map","payload":{"heading":90,"depth":2.5,"speed":1,"label":"7","armed":true}}"#),
+        "{first}"
+    );
+    let lines: Vec<serde_json::Value> = text
         .lines()
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();

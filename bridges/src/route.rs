@@ -35,6 +35,9 @@ pub const TYPE: BridgeType = BridgeType {
 
 const REPORT: TimerId = 1;
 
+/// Rate-limit entries (route, topic) kept before the expired ones are forgotten early.
+const MAX_RATE_ENTRIES: usize = 10_000;
+
 /// A route compiled for one direction.
 struct Leg {
     from: usize,
@@ -59,6 +62,7 @@ struct LegStats {
 #[derive(Default)]
 struct Counters {
     duplicates: u64,
+    late: u64,
     hop_limited: u64,
     returned: u64,
     unrouted: u64,
@@ -97,15 +101,20 @@ impl RouteBridge {
         for r in &spec.routes {
             for (from, to) in r.legs(&spec.media[0], &spec.media[1]) {
                 let (from, to) = (port_of(from), port_of(to));
-                decl = decl
-                    .consumes(TopicDecl::topic(r.topics.as_str()).on_port(from))
-                    .produces(TopicDecl::topic(r.out_pattern().as_str()).on_port(to));
+                // data travels on what the bridge consumes, commands on what it accepts
+                if r.kind != Some(Kind::Command) {
+                    decl = decl.consumes(TopicDecl::topic(r.topics.as_str()).on_port(from));
+                }
+                if r.kind != Some(Kind::Data) {
+                    decl = decl.accepts(TopicDecl::topic(r.topics.as_str()).on_port(from));
+                }
+                decl = decl.produces(TopicDecl::topic(r.out_pattern().as_str()).on_port(to));
                 legs.push(Leg {
                     from,
                     to,
                     topics: r.topics.clone(),
                     rename: r.rename.clone(),
-                    min_interval: r.rate.map(|hz| Duration::from_secs_f64(1.0 / hz)),
+                    min_interval: r.rate.and_then(seabus_medium::parse::rate_period),
                     format: r.format,
                     kind: r.kind,
                     fields: r.fields.clone(),
@@ -141,10 +150,15 @@ impl RouteBridge {
     fn route(&mut self, node: &str, port: usize, msg: Message) -> Verdict {
         match self.seen.check(&msg) {
             Seen::New => {}
-            Seen::Duplicate | Seen::Late => {
+            Seen::Duplicate => {
                 self.counters.duplicates += 1;
                 return Verdict::Drop("duplicate");
             }
+            // Taken later than a thousand newer ones from its origin (the two sides are read
+            // turn about, commands first): forwarded all the same. Each side already dropped the
+            // copies it received twice; a copy that crossed over both ways is dropped by the
+            // receivers' windows, and the hop limit bounds any path.
+            Seen::Late => self.counters.late += 1,
         }
         let Some(i) = self.legs.iter().position(|l| {
             l.from == port && l.topics.matches(&msg.topic) && l.kind.is_none_or(|k| k == msg.kind)
@@ -189,6 +203,13 @@ impl RouteBridge {
                 return Verdict::Drop("rate limit");
             }
             self.last_sent.insert(key, now);
+            if self.last_sent.len() > MAX_RATE_ENTRIES {
+                prune_rate_limits(&mut self.last_sent, &self.legs);
+                if self.last_sent.len() > MAX_RATE_ENTRIES {
+                    // a flood of distinct topics: start over rather than grow without bound
+                    self.last_sent.clear();
+                }
+            }
         }
         let payload = match convert(&msg.payload, &leg.fields, leg.format) {
             Ok(p) => p,
@@ -220,6 +241,7 @@ impl RouteBridge {
         let map = DataMap::new()
             .with("forwarded", forwarded as i64)
             .with("duplicates", c.duplicates as i64)
+            .with("late", c.late as i64)
             .with("hop_limited", c.hop_limited as i64)
             .with("returned", c.returned as i64)
             .with("rate_limited", rate_limited as i64)
@@ -252,6 +274,16 @@ impl RouteBridge {
         }
         map
     }
+}
+
+/// Forgets rate-limit entries whose interval has passed: they no longer hold anything back.
+fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[Leg]) {
+    let now = Instant::now();
+    last_sent.retain(|(i, _), last| {
+        legs[*i]
+            .min_interval
+            .is_some_and(|gap| now.duration_since(*last) < gap)
+    });
 }
 
 /// Applies field renames (which need a datamap) and the far side's format.
@@ -307,9 +339,20 @@ impl Module for RouteBridge {
         // both media hear about the bridge between them
         let map = self.report_map();
         for port in 0..ctx.ports() {
-            ctx.publish_on(port, Kind::Data, &self.report_topic, map.clone())
-                .await?;
+            // a report that cannot go out is counted, never a reason to stop forwarding
+            if let Err(e) = ctx
+                .publish_on(port, Kind::Data, &self.report_topic, map.clone())
+                .await
+            {
+                self.counters.errors += 1;
+                tracing::warn!(
+                    bridge = ctx.name(),
+                    "report not published on {}: {e}",
+                    self.media[port]
+                );
+            }
         }
+        prune_rate_limits(&mut self.last_sent, &self.legs);
         Ok(())
     }
 }

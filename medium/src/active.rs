@@ -100,9 +100,9 @@ impl TxWaker {
     }
 }
 
-/// An interface in active mode, running its handler on a task.
+/// An interface in active mode, running its handler on a task. Dropping it stops the task.
 pub struct ActiveInterface<H: Handler> {
-    task: JoinHandle<(Interface, H)>,
+    task: Option<JoinHandle<(Interface, H)>>,
     notify: Arc<Notify>,
     stop: Arc<Notify>,
     sent: Arc<AtomicU64>,
@@ -124,7 +124,7 @@ impl<H: Handler> ActiveInterface<H> {
             sent.clone(),
         ));
         ActiveInterface {
-            task,
+            task: Some(task),
             notify,
             stop,
             sent,
@@ -144,9 +144,17 @@ impl<H: Handler> ActiveInterface<H> {
     }
 
     /// Stops driving and gives back the interface and the handler.
-    pub async fn stop(self) -> Option<(Interface, H)> {
+    pub async fn stop(mut self) -> Option<(Interface, H)> {
         self.stop.notify_one();
-        self.task.await.ok()
+        self.task.take()?.await.ok()
+    }
+}
+
+impl<H: Handler> Drop for ActiveInterface<H> {
+    fn drop(&mut self) {
+        if let Some(task) = self.task.take() {
+            task.abort();
+        }
     }
 }
 
@@ -171,6 +179,8 @@ async fn drive<H: Handler>(
                 }
                 Err(e) => handler.on_send_error(e),
             }
+            // a handler that always has more to send must not starve the other tasks
+            tokio::task::consume_budget().await;
         }
         tokio::select! {
             biased;

@@ -87,7 +87,7 @@ pub fn encode(map: &DataMap) -> Vec<u8> {
 }
 
 /// Appends the compact binary form of `map` to `out`.
-pub fn encode_into(map: &DataMap, out: &mut Vec<u8>) {
+pub fn encode_into(map: &DataMap, out: &mut impl Out) {
     out.extend_from_slice(&MAGIC);
     out.push(VERSION);
     put_varint(out, map.len() as u64);
@@ -98,7 +98,34 @@ pub fn encode_into(map: &DataMap, out: &mut Vec<u8>) {
     }
 }
 
-fn encoded_len_hint(map: &DataMap) -> usize {
+/// Where encoded bytes go: a `Vec<u8>` or a `bytes::BytesMut`.
+pub trait Out {
+    /// Appends one byte.
+    fn push(&mut self, b: u8);
+    /// Appends bytes.
+    fn extend_from_slice(&mut self, b: &[u8]);
+}
+
+impl Out for Vec<u8> {
+    fn push(&mut self, b: u8) {
+        Vec::push(self, b)
+    }
+    fn extend_from_slice(&mut self, b: &[u8]) {
+        Vec::extend_from_slice(self, b)
+    }
+}
+
+impl Out for bytes::BytesMut {
+    fn push(&mut self, b: u8) {
+        bytes::BufMut::put_u8(self, b)
+    }
+    fn extend_from_slice(&mut self, b: &[u8]) {
+        bytes::BytesMut::extend_from_slice(self, b)
+    }
+}
+
+/// A guess at the encoded size, for reserving room.
+pub fn encoded_len_hint(map: &DataMap) -> usize {
     4 + map
         .iter()
         .map(|(k, v)| 2 + k.len() + value_len_hint(v))
@@ -116,7 +143,7 @@ fn value_len_hint(v: &Value) -> usize {
     }
 }
 
-fn put_value(out: &mut Vec<u8>, v: &Value) {
+fn put_value(out: &mut impl Out, v: &Value) {
     match v {
         Value::Bool(false) => out.push(TAG_FALSE),
         Value::Bool(true) => out.push(TAG_TRUE),
@@ -149,7 +176,7 @@ fn put_value(out: &mut Vec<u8>, v: &Value) {
 }
 
 /// Appends `v` as an unsigned LEB128 varint.
-pub fn put_varint(out: &mut Vec<u8>, mut v: u64) {
+pub fn put_varint(out: &mut impl Out, mut v: u64) {
     while v >= 0x80 {
         out.push((v as u8) | 0x80);
         v >>= 7;
@@ -163,11 +190,6 @@ fn zigzag(i: i64) -> u64 {
 
 fn unzigzag(u: u64) -> i64 {
     ((u >> 1) as i64) ^ -((u & 1) as i64)
-}
-
-/// True when `bytes` start like a binary datamap (magic and version).
-pub fn looks_like_datamap(bytes: &[u8]) -> bool {
-    bytes.len() >= 3 && bytes[..2] == MAGIC
 }
 
 /// Decodes a whole binary datamap; trailing bytes are an error.
@@ -298,7 +320,8 @@ impl Reader<'_> {
                     return Err(self.err(DecodeErrorKind::TooDeep));
                 }
                 let count = self.varint()?;
-                let mut items = Vec::with_capacity((count as usize).min(self.remaining()));
+                // every item takes at least one byte; reserve modestly, the list grows as it is read
+                let mut items = Vec::with_capacity((count as usize).min(self.remaining()).min(64));
                 for _ in 0..count {
                     items.push(self.value(depth + 1)?);
                 }

@@ -243,7 +243,8 @@ impl DataMap {
         Some(self.entries.remove(idx).1)
     }
 
-    /// Renames `from` to `to` in place, keeping the entry's position. Returns false when `from` is absent.
+    /// Renames `from` to `to` in place, keeping the entry's position; any entry already called `to`
+    /// is removed. Returns false when `from` is absent.
     pub fn rename(&mut self, from: &str, to: &str) -> bool {
         if from == to {
             return self.get(from).is_some();
@@ -251,15 +252,29 @@ impl DataMap {
         let Some(idx) = self.entries.iter().position(|(k, _)| k == from) else {
             return false;
         };
-        self.entries.retain(|(k, _)| k != to);
-        let idx = if idx < self.entries.len() && self.entries[idx].0 == from {
-            idx
-        } else {
-            // an entry named `to` sat before `from` and was removed
-            idx - 1
-        };
         self.entries[idx].0 = to.to_string();
+        let mut i = 0;
+        self.entries.retain(|(k, _)| {
+            let keep = i == idx || k != to;
+            i += 1;
+            keep
+        });
         true
+    }
+
+    /// How deeply lists nest in this map (0 when there are none).
+    pub fn depth(&self) -> usize {
+        fn depth(v: &Value) -> usize {
+            match v {
+                Value::List(items) => 1 + items.iter().map(depth).max().unwrap_or(0),
+                _ => 0,
+            }
+        }
+        self.entries
+            .iter()
+            .map(|(_, v)| depth(v))
+            .max()
+            .unwrap_or(0)
     }
 
     /// The entries in order.
@@ -330,6 +345,36 @@ mod tests {
         assert_eq!(keys, ["y", "x"]);
         assert_eq!(m.get_i64("x"), Some(3));
         assert!(!m.rename("nope", "q"));
+    }
+
+    #[test]
+    fn regression_rename_with_repeated_keys_from_the_wire() {
+        // decoded maps may repeat a key; renaming onto it must neither panic nor pick the wrong entry
+        let mut m = DataMap::new();
+        m.push_raw("heading".into(), Value::Int(1));
+        m.push_raw("heading".into(), Value::Int(2));
+        m.push_raw("hdg".into(), Value::Int(3));
+        assert!(m.rename("hdg", "heading"));
+        assert_eq!(
+            m.iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect::<Vec<_>>(),
+            [("heading".to_string(), Value::Int(3))]
+        );
+        let mut m = DataMap::new();
+        m.push_raw("b".into(), Value::Int(1));
+        m.push_raw("a".into(), Value::Int(2));
+        m.push_raw("a".into(), Value::Int(3));
+        assert!(m.rename("a", "b"));
+        assert_eq!(
+            m.iter()
+                .map(|(k, v)| (k.to_string(), v.clone()))
+                .collect::<Vec<_>>(),
+            [
+                ("b".to_string(), Value::Int(2)),
+                ("a".to_string(), Value::Int(3))
+            ]
+        );
     }
 
     #[test]

@@ -7,6 +7,7 @@
 
 use crate::medium::{Inner, SendError};
 use crate::message::Message;
+use crate::parse::parse_duration;
 use crate::url::{MediumUrl, UrlError};
 use bytes::Bytes;
 use std::cmp::Reverse;
@@ -98,33 +99,13 @@ impl FaultConfig {
     }
 }
 
-/// Parses `250ms`, `2s`, `0.5s`, `100us` or a bare number of milliseconds.
-pub fn parse_duration(text: &str) -> Option<Duration> {
-    let t = text.trim();
-    let (num, scale) = if let Some(n) = t.strip_suffix("ms") {
-        (n, 1e-3)
-    } else if let Some(n) = t.strip_suffix("us") {
-        (n, 1e-6)
-    } else if let Some(n) = t.strip_suffix('s') {
-        (n, 1.0)
-    } else if let Some(n) = t.strip_suffix("min") {
-        (n, 60.0)
-    } else {
-        (t, 1e-3)
-    };
-    let v: f64 = num.trim().parse().ok()?;
-    if !v.is_finite() || v < 0.0 || v * scale > 1e9 {
-        return None;
-    }
-    Some(Duration::from_secs_f64(v * scale))
-}
-
 struct Scheduled {
     due: Instant,
     order: u64,
     msg: Message,
     frame: Option<Bytes>,
     from: u64,
+    wait: bool,
 }
 
 impl PartialEq for Scheduled {
@@ -203,6 +184,7 @@ impl Faults {
         msg: Message,
         frame: Option<Bytes>,
         from: u64,
+        wait: bool,
     ) -> Result<(), SendError> {
         let delays = self.decide();
         if delays.is_empty() {
@@ -217,7 +199,9 @@ impl Faults {
         let mut result = Ok(());
         for d in delays {
             if d.is_zero() {
-                let r = inner.dispatch(msg.clone(), frame.clone(), Some(from)).await;
+                let r = inner
+                    .dispatch(msg.clone(), frame.clone(), Some(from), wait)
+                    .await;
                 if result.is_ok() {
                     result = r;
                 }
@@ -231,6 +215,7 @@ impl Faults {
                         msg: msg.clone(),
                         frame: frame.clone(),
                         from,
+                        wait,
                     },
                 );
             }
@@ -242,7 +227,9 @@ impl Faults {
         let mut later = self.later.lock().unwrap_or_else(|p| p.into_inner());
         let tx = later.get_or_insert_with(|| {
             let (tx, rx) = mpsc::unbounded_channel();
-            tokio::spawn(run_later(Arc::downgrade(inner), rx));
+            let task = tokio::spawn(run_later(Arc::downgrade(inner), rx));
+            // closing the medium stops what is still held back
+            inner.own_task(task.abort_handle());
             tx
         });
         let _ = tx.send(item);
@@ -269,7 +256,7 @@ async fn run_later(inner: Weak<Inner>, mut rx: mpsc::UnboundedReceiver<Scheduled
                 while heap.peek().is_some_and(|Reverse(s)| s.due <= now) {
                     let Some(Reverse(s)) = heap.pop() else { break };
                     let Some(inner) = inner.upgrade() else { return };
-                    if let Err(e) = inner.dispatch(s.msg, s.frame, Some(s.from)).await {
+                    if let Err(e) = inner.dispatch(s.msg, s.frame, Some(s.from), s.wait).await {
                         tracing::debug!("delayed message not sent: {e}");
                     }
                 }
@@ -327,14 +314,5 @@ mod tests {
         assert!((220..380).contains(&lost), "lost {lost} of 1000 at p=0.3");
         let dup = da.iter().filter(|d| d.len() == 2).count();
         assert!((90..200).contains(&dup), "duplicated {dup}");
-    }
-
-    #[test]
-    fn durations_parse() {
-        assert_eq!(parse_duration("5ms"), Some(Duration::from_millis(5)));
-        assert_eq!(parse_duration("0.5s"), Some(Duration::from_millis(500)));
-        assert_eq!(parse_duration("250"), Some(Duration::from_millis(250)));
-        assert_eq!(parse_duration("-1s"), None);
-        assert_eq!(parse_duration("x"), None);
     }
 }

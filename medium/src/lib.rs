@@ -25,6 +25,7 @@ pub mod fault;
 pub mod json;
 pub mod medium;
 pub mod message;
+pub mod parse;
 pub mod payload;
 pub mod queue;
 pub mod topic;

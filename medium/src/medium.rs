@@ -6,7 +6,6 @@
 //! the wire come back in through an [`Ingress`] and fan out the same way. Each medium kind only
 //! implements its transport: its wire format and its I/O tasks.
 
-use crate::dedup::{Dedup, Seen};
 use crate::fault::{FaultConfig, Faults};
 use crate::message::{Kind, Message, Origin, Provenance, Stamp};
 use crate::payload::{ConvertError, Format, Payload};
@@ -146,17 +145,24 @@ pub trait Transport: Send + Sync + 'static {
     fn encode(&self, msg: &Message) -> Result<Bytes, SendError>;
     /// Puts an encoded frame on the wire.
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>>;
+    /// Releases the wire (sockets, devices) when the medium is closed.
+    fn close(&self) {}
 }
+
+/// A subscription: a topic pattern, for one kind of message or (`None`) both.
+pub type Subscription = (Pattern, Option<Kind>);
 
 struct Sub {
     id: u64,
-    patterns: Arc<[Pattern]>,
+    patterns: Arc<[Subscription]>,
     queue: Arc<Queue>,
 }
 
 impl Sub {
-    fn wants(&self, topic: &str) -> bool {
-        self.patterns.iter().any(|p| p.matches(topic))
+    fn wants(&self, msg: &Message) -> bool {
+        self.patterns
+            .iter()
+            .any(|(p, k)| k.is_none_or(|k| k == msg.kind) && p.matches(&msg.topic))
     }
 }
 
@@ -370,9 +376,6 @@ impl Medium {
     ) -> Interface {
         let id = self.inner.next_id.fetch_add(1, Ordering::Relaxed);
         let queue = Arc::new(Queue::new(data_capacity, command_capacity));
-        if self.inner.closed.load(Ordering::Acquire) {
-            queue.close();
-        }
         self.inner.update_subs(|subs| {
             subs.push(Sub {
                 id,
@@ -380,6 +383,10 @@ impl Medium {
                 queue: queue.clone(),
             })
         });
+        // checked after joining the list, so that a close running meanwhile cannot miss it
+        if self.inner.closed.load(Ordering::Acquire) {
+            queue.close();
+        }
         Interface {
             medium: self.clone(),
             id,
@@ -387,7 +394,6 @@ impl Medium {
             queue,
             patterns: Vec::new(),
             accept: None,
-            dedup: Dedup::new(),
             counters: IfaceCounters::default(),
             batch: VecDeque::new(),
         }
@@ -442,6 +448,9 @@ impl Medium {
             .drain(..)
         {
             t.abort();
+        }
+        if let Some(t) = self.inner.transport.get() {
+            t.close();
         }
         for s in self.inner.snapshot().iter() {
             s.queue.close();
@@ -537,6 +546,16 @@ impl Inner {
         *guard = Arc::from(subs);
     }
 
+    /// Registers a task so that closing the medium stops it (at once when already closed).
+    pub(crate) fn own_task(&self, handle: AbortHandle) {
+        let mut tasks = self.tasks.lock().unwrap_or_else(|p| p.into_inner());
+        if self.closed.load(Ordering::Acquire) {
+            handle.abort();
+        } else {
+            tasks.push(handle);
+        }
+    }
+
     fn next_seq(&self) -> u64 {
         self.seq.fetch_add(1, Ordering::Relaxed) + 1
     }
@@ -546,7 +565,8 @@ impl Inner {
     }
 
     /// Sends a message from a local interface (`from`), through the fault stage when there is one.
-    async fn send(self: &Arc<Self>, msg: Message, from: u64) -> Result<(), SendError> {
+    /// With `wait`, a full command queue holds the sender back; without, the command is refused.
+    async fn send(self: &Arc<Self>, msg: Message, from: u64, wait: bool) -> Result<(), SendError> {
         if self.closed.load(Ordering::Acquire) {
             return Err(self.closed_error());
         }
@@ -556,22 +576,22 @@ impl Inner {
         };
         self.counters.published.fetch_add(1, Ordering::Relaxed);
         match &self.faults {
-            Some(f) => f.apply(self, msg, frame, from).await,
-            None => self.dispatch(msg, frame, Some(from)).await,
+            Some(f) => f.apply(self, msg, frame, from, wait).await,
+            None => self.dispatch(msg, frame, Some(from), wait).await,
         }
     }
 
     /// Puts a message into the queue of every matching local interface but `from`, without
-    /// waiting. Commands that met a full queue are handed back when a local interface sent them
-    /// (the sender will wait for room), and refused and counted when they came from the wire.
-    fn fan_out(&self, msg: Message, from: Option<u64>) -> Vec<(Arc<Queue>, Message)> {
+    /// waiting. Commands that met a full queue are handed back when the sender may `wait` for
+    /// room, and refused and counted otherwise (forwarded, or read from the wire).
+    fn fan_out(&self, msg: Message, from: Option<u64>, wait: bool) -> Vec<(Arc<Queue>, Message)> {
         let subs = self.snapshot();
         let mut blocked = Vec::new();
         let mut delivered = 0u64;
         let mut put = |s: &Sub, m: Message| match s.queue.push(m) {
             Pushed::Queued | Pushed::DroppedOldest => delivered += 1,
-            Pushed::Closed => {}
-            Pushed::Full(m) if from.is_some() => blocked.push((s.queue.clone(), m)),
+            Pushed::Closed | Pushed::Duplicate => {}
+            Pushed::Full(m) if wait => blocked.push((s.queue.clone(), m)),
             Pushed::Full(m) => {
                 s.queue
                     .counters
@@ -592,7 +612,7 @@ impl Inner {
         // the message itself
         let mut previous: Option<&Sub> = None;
         for s in subs.iter() {
-            if Some(s.id) == from || !s.wants(&msg.topic) {
+            if Some(s.id) == from || !s.wants(&msg) {
                 continue;
             }
             if let Some(p) = previous.replace(s) {
@@ -615,8 +635,12 @@ impl Inner {
         msg: Message,
         frame: Option<Bytes>,
         from: Option<u64>,
+        wait: bool,
     ) -> Result<(), SendError> {
-        for (queue, m) in self.fan_out(msg, from) {
+        if self.closed.load(Ordering::Acquire) {
+            return Err(self.closed_error());
+        }
+        for (queue, m) in self.fan_out(msg, from, wait) {
             if let Pushed::Queued = queue.push_wait(m).await {
                 self.counters.delivered.fetch_add(1, Ordering::Relaxed);
             }
@@ -654,7 +678,7 @@ impl Ingress {
         }
         inner.counters.received.fetch_add(1, Ordering::Relaxed);
         // from the wire nothing waits: a full command queue refuses
-        inner.fan_out(msg, None);
+        inner.fan_out(msg, None, false);
         true
     }
 
@@ -696,20 +720,9 @@ impl Ingress {
     /// Registers an I/O task so that closing the medium stops it.
     pub fn own_task(&self, handle: AbortHandle) {
         match self.inner.upgrade() {
-            Some(inner) => inner
-                .tasks
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .push(handle),
+            Some(inner) => inner.own_task(handle),
             None => handle.abort(),
         }
-    }
-
-    /// True while the medium exists and is open.
-    pub fn is_open(&self) -> bool {
-        self.inner
-            .upgrade()
-            .is_some_and(|i| !i.closed.load(Ordering::Acquire))
     }
 }
 
@@ -752,8 +765,6 @@ impl IntoTopic for &String {
 #[derive(Default)]
 struct IfaceCounters {
     received: u64,
-    duplicates: u64,
-    late: u64,
     conversion_errors: u64,
 }
 
@@ -784,9 +795,8 @@ pub struct Interface {
     id: u64,
     label: Arc<str>,
     queue: Arc<Queue>,
-    patterns: Vec<Pattern>,
+    patterns: Vec<Subscription>,
     accept: Option<Format>,
-    dedup: Dedup,
     counters: IfaceCounters,
     /// a batch taken from the queue, read before the queue is looked at again
     batch: VecDeque<Message>,
@@ -832,9 +842,14 @@ impl Interface {
 
     /// Adds a subscription. Messages matching any subscription are received, data and commands alike.
     pub fn subscribe(&mut self, pattern: &str) -> Result<(), TopicError> {
-        let p = Pattern::new(pattern)?;
-        if !self.patterns.contains(&p) {
-            self.patterns.push(p);
+        self.subscribe_kind(pattern, None)
+    }
+
+    /// Adds a subscription to one kind of message (`None`: both).
+    pub fn subscribe_kind(&mut self, pattern: &str, kind: Option<Kind>) -> Result<(), TopicError> {
+        let sub = (Pattern::new(pattern)?, kind);
+        if !self.patterns.contains(&sub) {
+            self.patterns.push(sub);
             self.publish_patterns();
         }
         Ok(())
@@ -846,10 +861,10 @@ impl Interface {
         Ok(self)
     }
 
-    /// Removes a subscription; returns false when there was no such subscription.
+    /// Removes the subscriptions to `pattern`; returns false when there was none.
     pub fn unsubscribe(&mut self, pattern: &str) -> bool {
         let before = self.patterns.len();
-        self.patterns.retain(|p| p.as_str() != pattern);
+        self.patterns.retain(|(p, _)| p.as_str() != pattern);
         let removed = self.patterns.len() != before;
         if removed {
             self.publish_patterns();
@@ -858,12 +873,12 @@ impl Interface {
     }
 
     /// The current subscriptions.
-    pub fn subscriptions(&self) -> &[Pattern] {
+    pub fn subscriptions(&self) -> &[Subscription] {
         &self.patterns
     }
 
     fn publish_patterns(&self) {
-        let patterns: Arc<[Pattern]> = Arc::from(self.patterns.clone());
+        let patterns: Arc<[Subscription]> = Arc::from(self.patterns.clone());
         let id = self.id;
         self.medium.inner.update_subs(|subs| {
             if let Some(s) = subs.iter_mut().find(|s| s.id == id) {
@@ -909,12 +924,14 @@ impl Interface {
             stamp: Stamp::now(),
             payload: payload.into(),
         };
-        inner.send(msg, self.id).await
+        inner.send(msg, self.id, true).await
     }
 
-    /// Sends a message that already has a provenance (a bridge forwarding it), keeping it.
+    /// Sends a message that already has a provenance (a bridge forwarding it), keeping it. A
+    /// forwarded command never waits for room: like one read from the wire, it is refused and
+    /// counted when a receiver's command queue is full (so bridges can never wait on each other).
     pub async fn forward(&self, msg: Message) -> Result<(), SendError> {
-        self.medium.inner.send(msg, self.id).await
+        self.medium.inner.send(msg, self.id, false).await
     }
 
     /// Waits for the next message; `None` once the medium is closed and the queue drained.
@@ -951,19 +968,8 @@ impl Interface {
         }
     }
 
-    /// Drops duplicates and converts to the accepted format; `None` when the message is dropped.
+    /// Converts to the accepted format; `None` when the message cannot be taken in it.
     fn admit(&mut self, mut m: Message) -> Option<Message> {
-        match self.dedup.check(&m) {
-            Seen::New => {}
-            Seen::Duplicate => {
-                self.counters.duplicates += 1;
-                return None;
-            }
-            Seen::Late => {
-                self.counters.late += 1;
-                return None;
-            }
-        }
         if let Some(f) = self.accept
             && m.payload.format() != f
         {
@@ -994,8 +1000,8 @@ impl Interface {
             pending: (self.queue.len() + self.batch.len()) as u64,
             dropped_oldest: self.queue.counters.dropped_oldest.load(Ordering::Relaxed),
             commands_refused: self.queue.counters.commands_refused.load(Ordering::Relaxed),
-            duplicates: self.counters.duplicates,
-            late: self.counters.late,
+            duplicates: self.queue.counters.duplicates.load(Ordering::Relaxed),
+            late: self.queue.counters.late.load(Ordering::Relaxed),
             conversion_errors: self.counters.conversion_errors,
         }
     }

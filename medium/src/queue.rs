@@ -3,9 +3,14 @@
 //! Each interface has two bounded queues. Data messages go to the data queue; when it is full the
 //! oldest data message is dropped and counted, so a slow receiver sees the newest data and never
 //! holds up the medium. Commands go to the command queue; when it is full the command is refused
-//! (the medium then holds a local sender back until there is room, or counts and logs a command that
-//! arrived from the wire). Commands are taken before data.
+//! (the medium then holds a local publisher back until there is room, or counts and logs a command
+//! that was forwarded or read from the wire). Commands are taken before data.
+//!
+//! Duplicates are dropped as messages arrive, in arrival order, by the queue's per-origin window
+//! ([`crate::dedup`]), so a duplicate never takes a slot. The receiver takes data in batches (one
+//! lock per batch); what it holds in hand counts against the capacity like what still waits.
 
+use crate::dedup::{Dedup, Seen};
 use crate::message::{Kind, Message};
 use atomic_waker::AtomicWaker;
 use std::collections::VecDeque;
@@ -25,6 +30,8 @@ pub(crate) enum Pushed {
     Queued,
     /// Queued, after dropping the oldest data message.
     DroppedOldest,
+    /// Not queued: seen before (or older than the duplicate window).
+    Duplicate,
     /// Not queued: the command queue is full. The message is handed back.
     Full(Message),
     /// Not queued: the receiver is gone.
@@ -34,6 +41,8 @@ pub(crate) enum Pushed {
 struct State {
     data: VecDeque<Message>,
     commands: VecDeque<Message>,
+    seen: Dedup,
+    closed: bool,
 }
 
 /// Counters kept by a queue.
@@ -41,12 +50,16 @@ struct State {
 pub(crate) struct QueueCounters {
     pub dropped_oldest: AtomicU64,
     pub commands_refused: AtomicU64,
+    pub duplicates: AtomicU64,
+    pub late: AtomicU64,
 }
 
 pub(crate) struct Queue {
     state: Mutex<State>,
     /// commands waiting, readable without the lock
     commands: AtomicUsize,
+    /// data messages waiting, readable without the lock
+    data_len: AtomicUsize,
     waker: AtomicWaker,
     space: Notify,
     closed: AtomicBool,
@@ -61,8 +74,11 @@ impl Queue {
             state: Mutex::new(State {
                 data: VecDeque::with_capacity(data_cap.min(64)),
                 commands: VecDeque::new(),
+                seen: Dedup::new(),
+                closed: false,
             }),
             commands: AtomicUsize::new(0),
+            data_len: AtomicUsize::new(0),
             waker: AtomicWaker::new(),
             space: Notify::new(),
             closed: AtomicBool::new(false),
@@ -77,14 +93,29 @@ impl Queue {
         self.state.lock().unwrap_or_else(|p| p.into_inner())
     }
 
+    fn count_seen(&self, seen: Seen) {
+        match seen {
+            Seen::Duplicate => self.counters.duplicates.fetch_add(1, Ordering::Relaxed),
+            Seen::Late => self.counters.late.fetch_add(1, Ordering::Relaxed),
+            Seen::New => 0,
+        };
+    }
+
     pub fn push(&self, msg: Message) -> Pushed {
-        if self.closed.load(Ordering::Relaxed) {
-            return Pushed::Closed;
-        }
+        let (origin, seq) = (msg.provenance.origin.id, msg.provenance.seq);
         let result = {
             let mut st = self.lock();
+            if st.closed {
+                return Pushed::Closed;
+            }
             match msg.kind {
                 Kind::Data => {
+                    let seen = st.seen.check_raw(origin, seq);
+                    if seen != Seen::New {
+                        drop(st);
+                        self.count_seen(seen);
+                        return Pushed::Duplicate;
+                    }
                     let dropped = if st.data.len() >= self.data_cap {
                         st.data.pop_front();
                         true
@@ -92,6 +123,7 @@ impl Queue {
                         false
                     };
                     st.data.push_back(msg);
+                    self.data_len.store(st.data.len(), Ordering::Relaxed);
                     if dropped {
                         Pushed::DroppedOldest
                     } else {
@@ -100,7 +132,20 @@ impl Queue {
                 }
                 Kind::Command => {
                     if st.commands.len() >= self.cmd_cap {
+                        // a duplicate is dropped even when there is no room; anything else waits
+                        let seen = st.seen.peek_raw(origin, seq);
+                        drop(st);
+                        if seen != Seen::New {
+                            self.count_seen(seen);
+                            return Pushed::Duplicate;
+                        }
                         return Pushed::Full(msg);
+                    }
+                    let seen = st.seen.check_raw(origin, seq);
+                    if seen != Seen::New {
+                        drop(st);
+                        self.count_seen(seen);
+                        return Pushed::Duplicate;
                     }
                     st.commands.push_back(msg);
                     self.commands.store(st.commands.len(), Ordering::Release);
@@ -132,7 +177,7 @@ impl Queue {
     }
 
     /// Takes the oldest waiting command, if any (cheap when there is none).
-    pub fn pop_command(&self) -> Option<Message> {
+    fn pop_command(&self) -> Option<Message> {
         if self.commands.load(Ordering::Acquire) == 0 {
             return None;
         }
@@ -149,21 +194,31 @@ impl Queue {
     }
 
     /// Moves every waiting data message into `out` (which must be empty); true when any was moved.
-    /// Taking a batch under one lock keeps a busy receiver from contending with the sender.
     fn drain_data(&self, out: &mut VecDeque<Message>) -> bool {
         let mut st = self.lock();
         std::mem::swap(&mut st.data, out);
+        self.data_len.store(0, Ordering::Relaxed);
         !out.is_empty()
     }
 
     /// The next message without waiting: a command first, then `batch` (data already taken from
-    /// the queue), then a fresh batch of data.
+    /// the queue), then a fresh batch of data. Data in hand and data waiting together stay within
+    /// the capacity: the oldest in hand are dropped (and counted) first.
     pub fn next(&self, batch: &mut VecDeque<Message>) -> Option<Message> {
         if let Some(c) = self.pop_command() {
             return Some(c);
         }
         if batch.is_empty() && !self.drain_data(batch) {
             return None;
+        }
+        let waiting = self.data_len.load(Ordering::Relaxed);
+        let excess = (batch.len() + waiting).saturating_sub(self.data_cap);
+        let excess = excess.min(batch.len().saturating_sub(1));
+        if excess > 0 {
+            batch.drain(..excess);
+            self.counters
+                .dropped_oldest
+                .fetch_add(excess as u64, Ordering::Relaxed);
         }
         batch.pop_front()
     }
@@ -179,17 +234,19 @@ impl Queue {
             return Poll::Ready(Some(m));
         }
         if self.closed.load(Ordering::Acquire) {
-            return Poll::Ready(None);
+            // a push that began before the close has finished by now (it held the lock)
+            return Poll::Ready(self.next(batch));
         }
         self.waker.register(cx.waker());
         // a push may have landed between the first look and the registration
         match self.next(batch) {
             Some(m) => Poll::Ready(Some(m)),
-            None if self.closed.load(Ordering::Acquire) => Poll::Ready(None),
+            None if self.closed.load(Ordering::Acquire) => Poll::Ready(self.next(batch)),
             None => Poll::Pending,
         }
     }
 
+    /// Messages waiting (not counting what the receiver holds in hand).
     pub fn len(&self) -> usize {
         let st = self.lock();
         st.data.len() + st.commands.len()
@@ -197,6 +254,7 @@ impl Queue {
 
     /// Marks the queue closed: pushes are refused, the receiver drains what is left then sees the end.
     pub fn close(&self) {
+        self.lock().closed = true;
         self.closed.store(true, Ordering::Release);
         self.waker.wake();
         self.space.notify_waiters();

@@ -221,7 +221,7 @@ impl Pattern {
             }
             Shape::General => {
                 let parts = smallvec_lite::Parts::new(topic);
-                match_segs(&self.segs, parts.as_slice(), &mut None)
+                match_segs(&self.segs, parts.as_slice())
             }
         }
     }
@@ -229,12 +229,7 @@ impl Pattern {
     /// The segments each wildcard captured when `topic` matches (a `**` may capture none).
     pub fn captures<'t>(&self, topic: &'t str) -> Option<Vec<Vec<&'t str>>> {
         let parts: Vec<&str> = topic.split('.').collect();
-        let mut caps = Some(Vec::new());
-        if match_segs(&self.segs, &parts, &mut caps) {
-            caps
-        } else {
-            None
-        }
+        capture_segs(&self.segs, &parts)
     }
 
     /// Fills this pattern's wildcards, in order, with captured segments.
@@ -266,51 +261,53 @@ impl Pattern {
     }
 }
 
-fn match_segs<'t>(segs: &[Seg], parts: &[&'t str], caps: &mut Option<Vec<Vec<&'t str>>>) -> bool {
-    match segs.split_first() {
-        None => parts.is_empty(),
-        Some((Seg::Lit(l), rest)) => {
-            matches!(parts.first(), Some(p) if **p == **l) && match_segs(rest, &parts[1..], caps)
-        }
-        Some((Seg::One, rest)) => {
-            let Some(first) = parts.first() else {
-                return false;
+/// `can[i * (m + 1) + j]`: `segs[i..]` matches `parts[j..]`. Quadratic in the worst case, never
+/// exponential, whatever the pattern and topic.
+fn match_table(segs: &[Seg], parts: &[&str]) -> Vec<bool> {
+    let (n, m) = (segs.len(), parts.len());
+    let w = m + 1;
+    let mut can = vec![false; (n + 1) * w];
+    can[n * w + m] = true;
+    for i in (0..n).rev() {
+        for j in (0..=m).rev() {
+            can[i * w + j] = match &segs[i] {
+                Seg::Lit(l) => j < m && *parts[j] == **l && can[(i + 1) * w + j + 1],
+                Seg::One => j < m && can[(i + 1) * w + j + 1],
+                Seg::Any => can[(i + 1) * w + j] || (j < m && can[i * w + j + 1]),
             };
-            let mark = caps.as_ref().map(Vec::len);
-            if let Some(c) = caps.as_mut() {
-                c.push(vec![*first]);
-            }
-            if match_segs(rest, &parts[1..], caps) {
-                return true;
-            }
-            if let (Some(c), Some(m)) = (caps.as_mut(), mark) {
-                c.truncate(m);
-            }
-            false
-        }
-        Some((Seg::Any, rest)) => {
-            // a trailing `**` needs no search
-            if rest.is_empty() {
-                if let Some(c) = caps.as_mut() {
-                    c.push(parts.to_vec());
-                }
-                return true;
-            }
-            for take in 0..=parts.len() {
-                let mark = caps.as_ref().map(Vec::len);
-                if let Some(c) = caps.as_mut() {
-                    c.push(parts[..take].to_vec());
-                }
-                if match_segs(rest, &parts[take..], caps) {
-                    return true;
-                }
-                if let (Some(c), Some(m)) = (caps.as_mut(), mark) {
-                    c.truncate(m);
-                }
-            }
-            false
         }
     }
+    can
+}
+
+fn match_segs(segs: &[Seg], parts: &[&str]) -> bool {
+    match_table(segs, parts)[0]
+}
+
+/// The segments each wildcard takes when `segs` matches `parts`; a `**` takes as few as it can.
+fn capture_segs<'t>(segs: &[Seg], parts: &[&'t str]) -> Option<Vec<Vec<&'t str>>> {
+    let can = match_table(segs, parts);
+    let w = parts.len() + 1;
+    if !can[0] {
+        return None;
+    }
+    let mut caps = Vec::new();
+    let mut j = 0;
+    for (i, seg) in segs.iter().enumerate() {
+        match seg {
+            Seg::Lit(_) => j += 1,
+            Seg::One => {
+                caps.push(vec![parts[j]]);
+                j += 1;
+            }
+            Seg::Any => {
+                let take = (0..=parts.len() - j).find(|k| can[(i + 1) * w + j + k])?;
+                caps.push(parts[j..j + take].to_vec());
+                j += take;
+            }
+        }
+    }
+    Some(caps)
 }
 
 fn overlap(a: &[Seg], b: &[Seg], i: usize, j: usize, memo: &mut Vec<Vec<Option<bool>>>) -> bool {
@@ -445,6 +442,16 @@ mod tests {
         let caps = p("nav.**").captures("nav").unwrap();
         assert_eq!(p("auv1.nav.**").fill(&caps).unwrap(), "auv1.nav");
         assert!(p("x.*").fill(&[]).is_none());
+    }
+
+    #[test]
+    fn adversarial_patterns_match_in_polynomial_time() {
+        let p = Pattern::new("**.**.**.**.**.**.**.z").unwrap();
+        let topic = vec!["a"; 120].join(".");
+        // segment-by-segment backtracking would not finish this
+        assert!(!p.matches(&topic));
+        assert!(p.captures(&topic).is_none());
+        assert!(p.matches(&format!("{topic}.z")));
     }
 
     #[test]

@@ -163,11 +163,11 @@ impl MediumUrl {
     pub fn take_flag(&mut self, key: &str) -> Result<Option<bool>, UrlError> {
         match self.take(key) {
             None => Ok(None),
-            Some(v) => match v.as_str() {
-                "" | "1" | "true" | "yes" | "on" => Ok(Some(true)),
-                "0" | "false" | "no" | "off" => Ok(Some(false)),
-                _ => Err(self.error(format!("option `{key}={v}`: expected true or false"))),
-            },
+            // a flag given without a value (`?broadcast`) is set
+            Some(v) if v.is_empty() => Ok(Some(true)),
+            Some(v) => crate::parse::parse_bool(&v)
+                .map(Some)
+                .ok_or_else(|| self.error(format!("option `{key}={v}`: expected true or false"))),
         }
     }
 

@@ -10,6 +10,9 @@ use std::str::FromStr;
 use std::sync::Arc;
 use thiserror::Error;
 
+/// Deepest element nesting a file may have.
+pub const MAX_DEPTH: usize = 256;
+
 /// A place in a file: 1-based line and column (in characters).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Pos {
@@ -117,11 +120,9 @@ impl Element {
     pub fn flag(&self, name: &str) -> Result<Option<bool>, FileError> {
         match self.attr(name) {
             None => Ok(None),
-            Some(a) => match a.value.trim() {
-                "true" | "yes" | "1" | "on" => Ok(Some(true)),
-                "false" | "no" | "0" | "off" => Ok(Some(false)),
-                v => Err(a.error(format!("`{v}` is not true or false"))),
-            },
+            Some(a) => crate::parse::parse_bool(&a.value)
+                .map(Some)
+                .ok_or_else(|| a.error(format!("`{}` is not true or false", a.value.trim()))),
         }
     }
 
@@ -223,18 +224,22 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
             p.error(format!("XML syntax error: {e}"))
         })?;
         match event {
-            Event::Start(e) | Event::Empty(e) if root.is_some() => {
-                let _ = e;
+            Event::Start(_) | Event::Empty(_) if root.is_some() => {
                 return Err(lines
                     .pos(&file, at)
                     .error("a second root element; a file has one root"));
             }
+            Event::Start(_) if stack.len() >= MAX_DEPTH => {
+                return Err(lines
+                    .pos(&file, at)
+                    .error(format!("elements nested deeper than {MAX_DEPTH}")));
+            }
             Event::Start(e) => {
-                let el = element(&e, at, text, &lines, &file)?;
+                let el = element(&e, at, &lines, &file)?;
                 stack.push(el);
             }
             Event::Empty(e) => {
-                let el = element(&e, at, text, &lines, &file)?;
+                let el = element(&e, at, &lines, &file)?;
                 match stack.last_mut() {
                     Some(parent) => parent.children.push(el),
                     None => root = Some(el),
@@ -313,7 +318,6 @@ pub fn parse_file(path: &std::path::Path) -> Result<Element, FileError> {
 fn element(
     e: &BytesStart<'_>,
     at: usize,
-    text: &str,
     lines: &Lines<'_>,
     file: &Arc<str>,
 ) -> Result<Element, FileError> {
@@ -364,7 +368,6 @@ fn element(
             pos: lines.pos(file, attr_at),
         });
     }
-    let _ = text;
     Ok(Element {
         name,
         attrs,
@@ -425,6 +428,19 @@ mod tests {
         );
         let e = root.only_children(&["param"]).unwrap_err();
         assert!(e.message.contains("unexpected element <p>"), "{e}");
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_crash() {
+        let text = "<a>".repeat(30_000);
+        let e = parse("f.xml", &text).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "f.xml:1:{}: elements nested deeper than {MAX_DEPTH}",
+                3 * MAX_DEPTH + 1
+            )
+        );
     }
 
     #[test]

@@ -198,11 +198,11 @@ fn escape_attr(out: &mut String, s: &str) {
 pub fn from_xml(text: &str) -> Result<DataMap, XmlFormError> {
     let mut p = Parser::new(text);
     // prolog: declaration, comments, processing instructions, whitespace
-    let (root, empty) = loop {
+    let (root, empty, root_at) = loop {
         let at = p.pos();
         match p.next()? {
-            Event::Start(e) => break (e, false),
-            Event::Empty(e) => break (e, true),
+            Event::Start(e) => break (e, false, at),
+            Event::Empty(e) => break (e, true, at),
             Event::Decl(_) | Event::Comment(_) | Event::PI(_) | Event::DocType(_) => {}
             Event::Text(t) if is_blank(&t) => {}
             Event::Eof => return Err(p.err(at, XmlFormErrorKind::Incomplete)),
@@ -211,7 +211,7 @@ pub fn from_xml(text: &str) -> Result<DataMap, XmlFormError> {
     };
     if root.name().as_ref() != "datamap" {
         return Err(p.err(
-            0,
+            root_at,
             XmlFormErrorKind::NotADataMap(root.name().as_ref().to_string()),
         ));
     }
@@ -274,6 +274,7 @@ impl Tag {
 
 struct Parser<'a> {
     reader: Reader<&'a [u8]>,
+    len: usize,
 }
 
 impl<'a> Parser<'a> {
@@ -281,7 +282,10 @@ impl<'a> Parser<'a> {
         let mut reader = Reader::from_str(text);
         // end tags are matched here, against the element each one closes
         reader.config_mut().check_end_names = false;
-        Parser { reader }
+        Parser {
+            reader,
+            len: text.len(),
+        }
     }
 
     fn pos(&self) -> usize {
@@ -295,7 +299,8 @@ impl<'a> Parser<'a> {
     fn next(&mut self) -> Result<Event<'a>, XmlFormError> {
         self.reader.read_event().map_err(|e| {
             let offset = self.reader.error_position() as usize;
-            use quick_xml::errors::SyntaxError as S;
+            use quick_xml::errors::{IllFormedError as I, SyntaxError as S};
+            let at_end = offset + 3 >= self.len;
             let kind = match &e {
                 quick_xml::Error::Syntax(
                     S::UnclosedTag
@@ -303,8 +308,17 @@ impl<'a> Parser<'a> {
                     | S::UnclosedCData
                     | S::UnclosedDoctype
                     | S::UnclosedPI
-                    | S::UnclosedXmlDecl,
-                ) => XmlFormErrorKind::Incomplete,
+                    | S::UnclosedXmlDecl
+                    | S::UnclosedSingleQuotedAttributeValue
+                    | S::UnclosedDoubleQuotedAttributeValue,
+                )
+                | quick_xml::Error::IllFormed(I::UnclosedReference | I::MissingEndTag(_)) => {
+                    XmlFormErrorKind::Incomplete
+                }
+                // `<!` with nothing after it yet
+                quick_xml::Error::Syntax(S::InvalidBangMarkup) if at_end => {
+                    XmlFormErrorKind::Incomplete
+                }
                 _ => XmlFormErrorKind::Syntax(e.to_string()),
             };
             XmlFormError { offset, kind }
@@ -616,8 +630,11 @@ mod tests {
 
     #[test]
     fn errors_are_typed_and_placed() {
-        let e = from_xml("<other/>").unwrap_err();
-        assert_eq!(e.kind, XmlFormErrorKind::NotADataMap("other".into()));
+        let e = from_xml("<?xml version=\"1.0\"?>\n<other/>").unwrap_err();
+        assert_eq!(
+            (e.offset, e.kind),
+            (22, XmlFormErrorKind::NotADataMap("other".into()))
+        );
         let e = from_xml("<datamap><int>1</int></datamap>").unwrap_err();
         assert_eq!(
             (e.offset, e.kind),
@@ -639,11 +656,13 @@ mod tests {
     }
 
     #[test]
-    fn truncated_documents_are_incomplete() {
-        let xml = to_xml(&sample());
-        for cut in [0, 5, 12, 30, xml.len() - 3] {
-            let e = from_xml(&xml[..cut]).unwrap_err();
-            assert!(e.is_incomplete(), "cut {cut}: {e}");
+    fn every_truncation_is_incomplete() {
+        let hand = "<?xml version=\"1.0\"?><!-- c --><datamap><string name=\"a&amp;b\">x &lt; y<![CDATA[z]]></string></datamap>";
+        for xml in [to_xml(&sample()), hand.to_string()] {
+            for cut in (0..xml.len()).filter(|c| xml.is_char_boundary(*c)) {
+                let e = from_xml(&xml[..cut]).unwrap_err();
+                assert!(e.is_incomplete(), "cut {cut} of {xml}: {e}");
+            }
         }
     }
 

@@ -408,7 +408,7 @@ async fn udp_counts_and_drops_malformed_datagrams_and_keeps_going() {
     let raw = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
     let dest = format!("127.0.0.1:{port}");
     raw.send_to(b"hello, not seabus", &dest).unwrap();
-    raw.send_to(b"SB\x07", &dest).unwrap();
+    raw.send_to(b"SB\x01", &dest).unwrap();
     let mut wrong_version = vec![b'S', b'B', 9];
     wrong_version.resize(40, 0);
     raw.send_to(&wrong_version, &dest).unwrap();
@@ -489,4 +489,102 @@ async fn subscriptions_follow_patterns_and_can_change() {
     assert_eq!(rx.try_recv().unwrap().topic.as_str(), "cmd.course");
     assert!(rx.try_recv().is_err());
     assert!(tx.send("bad..topic", DataMap::new()).await.is_err());
+}
+
+#[tokio::test]
+async fn regression_a_command_overtaking_queued_data_loses_none_of_it() {
+    // duplicates are judged in arrival order, so a command taken first cannot make older data "late"
+    let bus = Medium::in_process("bus", &Node::new("n"));
+    let tx = bus.attach("tx");
+    let mut rx = bus.attach_with("rx", 4096, 8).subscribed("**").unwrap();
+    for i in 0..1000i64 {
+        tx.send("d", DataMap::new().with("i", i)).await.unwrap();
+    }
+    assert_eq!(rx.recv().await.unwrap().kind, Kind::Data);
+    for i in 1000..2000i64 {
+        tx.send("d", DataMap::new().with("i", i)).await.unwrap();
+    }
+    tx.command("c", DataMap::new()).await.unwrap();
+    let mut data = 1;
+    let mut commands = 0;
+    while let Ok(m) = rx.try_recv() {
+        match m.kind {
+            Kind::Data => data += 1,
+            Kind::Command => commands += 1,
+        }
+    }
+    assert_eq!((data, commands), (2000, 1));
+    let st = rx.stats();
+    assert_eq!((st.late, st.duplicates, st.dropped_oldest), (0, 0, 0));
+}
+
+#[tokio::test]
+async fn data_in_hand_counts_against_the_capacity() {
+    let bus = Medium::in_process("bus", &Node::new("n"));
+    let tx = bus.attach("tx");
+    let mut rx = bus.attach_with("rx", 16, 8).subscribed("d").unwrap();
+    for i in 0..16i64 {
+        tx.send("d", DataMap::new().with("i", i)).await.unwrap();
+    }
+    // taking one takes the rest in hand as a batch
+    assert_eq!(
+        rx.recv()
+            .await
+            .unwrap()
+            .payload
+            .as_map()
+            .unwrap()
+            .get_i64("i"),
+        Some(0)
+    );
+    for i in 16..32i64 {
+        tx.send("d", DataMap::new().with("i", i)).await.unwrap();
+    }
+    let rest: Vec<i64> = std::iter::from_fn(|| rx.try_recv().ok())
+        .map(|m| m.payload.as_map().unwrap().get_i64("i").unwrap())
+        .collect();
+    assert!(
+        rest.len() <= 17,
+        "held {} messages with a capacity of 16",
+        rest.len()
+    );
+    assert_eq!(rest.last(), Some(&31), "the newest data is kept");
+    assert_eq!(rx.stats().dropped_oldest as usize, 31 - rest.len());
+}
+
+#[tokio::test]
+async fn closing_a_udp_medium_frees_its_port() {
+    let url = format!("udp://127.0.0.1:{}", free_port());
+    let first = Medium::open("net", &url, &Node::new("n")).unwrap();
+    let _still_attached = first.attach("x");
+    first.close();
+    tokio::task::yield_now().await;
+    let again = Medium::open("net", &url, &Node::new("n"));
+    assert!(again.is_ok(), "{:?}", again.err());
+}
+
+#[tokio::test]
+async fn dropping_an_active_interface_stops_it() {
+    let bus = Medium::in_process("bus", &Node::new("n"));
+    let mut rx = bus.attach("rx").subscribed("tick").unwrap();
+    let active = ActiveInterface::spawn(
+        bus.attach("tx"),
+        handler(
+            |_| {},
+            || Some(Outgoing::data(Topic::new("tick").unwrap(), DataMap::new())),
+        ),
+        None,
+    );
+    // it sends without pause, yet other tasks still run
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    assert!(active.sent() > 0);
+    drop(active);
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    while rx.try_recv().is_ok() {}
+    tokio::time::sleep(Duration::from_millis(20)).await;
+    assert_eq!(
+        rx.try_recv().unwrap_err(),
+        TryRecvError::Empty,
+        "nothing is sent after the drop"
+    );
 }

@@ -281,6 +281,13 @@ impl Catalogue {
         self.datasets.get(name)
     }
 
+    /// The topic dataset `name` is published on by default, or `fallback` when the catalogue
+    /// has no such dataset.
+    pub fn topic_of(&self, name: &str, fallback: &str) -> String {
+        self.get(name)
+            .map_or_else(|| fallback.to_string(), |d| d.topic.clone())
+    }
+
     /// Every dataset, by name.
     pub fn iter(&self) -> impl Iterator<Item = &Dataset> {
         self.datasets.values()

@@ -13,9 +13,11 @@
 //!   down on request.
 //! - [`datasets`] — the standard datasets of `configs/datasets.xml` and validation against them.
 //! - [`params`] — module parameters with their places in the file.
+//! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.
 //! - [`support`] — supporting modules (`generator`, `convert`, `square`).
 
 pub mod datasets;
+pub mod geo;
 pub mod module;
 pub mod params;
 pub mod registry;

@@ -117,9 +117,9 @@ pub struct Declaration {
     pub kind: ModuleKind,
     /// Data it publishes.
     pub produces: Vec<TopicDecl>,
-    /// Data it reads (patterns); the runtime subscribes to them.
+    /// Data it reads (patterns); the runtime subscribes to data messages on them.
     pub consumes: Vec<TopicDecl>,
-    /// Commands it accepts (patterns); the runtime subscribes to them.
+    /// Commands it accepts (patterns); the runtime subscribes to command messages on them.
     pub accepts: Vec<TopicDecl>,
     /// The format each port hands to the module (`None`: as sent).
     pub formats: Vec<Option<Format>>,

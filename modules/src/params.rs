@@ -4,7 +4,7 @@
 //! A parameter is written either as an attribute of `<module>` (`topic="nav.depth"`) or as a child
 //! `<param name="topic" value="nav.depth"/>`.
 
-use seabus_medium::fault::parse_duration;
+use seabus_medium::parse::{parse_bool, parse_duration};
 use seabus_medium::xml::{FileError, Pos};
 use seabus_medium::{Pattern, Topic};
 use std::str::FromStr;
@@ -160,6 +160,24 @@ impl Params {
         Ok(v)
     }
 
+    /// A float parameter that must be above zero, or `default`.
+    pub fn positive_or(&self, name: &str, default: f64) -> Result<f64, FileError> {
+        let v = self.float_or(name, default)?;
+        match self.get(name) {
+            Some(p) if v <= 0.0 => Err(p.error("must be above zero")),
+            _ => Ok(v),
+        }
+    }
+
+    /// A float parameter that must not be negative, or `default`.
+    pub fn non_negative_or(&self, name: &str, default: f64) -> Result<f64, FileError> {
+        let v = self.float_or(name, default)?;
+        match self.get(name) {
+            Some(p) if v < 0.0 => Err(p.error("must not be negative")),
+            _ => Ok(v),
+        }
+    }
+
     /// A topic parameter, or `default`.
     pub fn topic_or(&self, name: &str, default: &str) -> Result<Topic, FileError> {
         match self.get(name) {
@@ -195,11 +213,8 @@ impl Params {
     pub fn flag_or(&self, name: &str, default: bool) -> Result<bool, FileError> {
         match self.get(name) {
             None => Ok(default),
-            Some(p) => match p.value.trim() {
-                "true" | "yes" | "1" | "on" => Ok(true),
-                "false" | "no" | "0" | "off" => Ok(false),
-                v => Err(p.error(format!("`{v}` is not true or false"))),
-            },
+            Some(p) => parse_bool(&p.value)
+                .ok_or_else(|| p.error(format!("`{}` is not true or false", p.value.trim()))),
         }
     }
 
@@ -214,19 +229,6 @@ impl Params {
             ))),
         }
     }
-}
-
-/// Parses a rate: `10` or `10Hz` (per second), or a period such as `500ms` or `2s`.
-pub fn parse_rate(text: &str) -> Option<Duration> {
-    let t = text.trim();
-    let hz = t
-        .strip_suffix("Hz")
-        .or_else(|| t.strip_suffix("hz"))
-        .unwrap_or(t);
-    if let Ok(f) = hz.trim().parse::<f64>() {
-        return (f.is_finite() && f > 0.0 && f <= 1e6).then(|| Duration::from_secs_f64(1.0 / f));
-    }
-    parse_duration(t).filter(|d| !d.is_zero())
 }
 
 #[cfg(test)]
@@ -253,14 +255,5 @@ mod tests {
         assert!(p.topic_or("t", "x").is_err());
         assert!(p.duration_or("d", Duration::ZERO).is_err());
         assert_eq!(p.parse_or("missing", 3, "n").unwrap(), 3);
-    }
-
-    #[test]
-    fn rates_read_as_hertz_or_periods() {
-        assert_eq!(parse_rate("10"), Some(Duration::from_millis(100)));
-        assert_eq!(parse_rate("2Hz"), Some(Duration::from_millis(500)));
-        assert_eq!(parse_rate("250ms"), Some(Duration::from_millis(250)));
-        assert_eq!(parse_rate("0"), None);
-        assert_eq!(parse_rate("fast"), None);
     }
 }

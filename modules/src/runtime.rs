@@ -12,7 +12,7 @@ use crate::module::{Context, Event, Module, ModuleError, TICK};
 use crate::registry::{Built, Registry};
 use crate::system::{SystemSpec, check};
 use seabus_medium::xml::{FileError, Pos};
-use seabus_medium::{DataMap, Interface, Medium, Node};
+use seabus_medium::{DataMap, Interface, Kind, Medium, Node};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -266,19 +266,22 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
         }
         shared.report(&unit, State::Starting, restarts, None).await;
         let started = Instant::now();
-        let outcome = match instance(&unit, &shared) {
-            Err(e) => Err(e),
-            Ok((module, ctx)) => {
+        // building, starting and running all happen on the module's own task, so that a panic
+        // anywhere in them is a failure like any other
+        let task = tokio::spawn({
+            let (unit, shared, shutdown) = (unit.clone(), shared.clone(), shutdown.clone());
+            async move {
+                let (module, ctx) = instance(&unit, &shared)?;
                 shared.report(&unit, State::Running, restarts, None).await;
-                let mut task = tokio::spawn(run(module, ctx, shutdown.clone()));
-                match (&mut task).await {
-                    Ok(r) => r.map_err(|e| e.to_string()),
-                    Err(e) if e.is_panic() => {
-                        Err(format!("panicked: {}", panic_text(e.into_panic())))
-                    }
-                    Err(_) => Err("cancelled".to_string()),
-                }
+                run(module, ctx, shutdown).await.map_err(|e| e.to_string())
             }
+        });
+        // when the supervisor is cut off at shutdown, the module goes with it
+        let _guard = AbortOnDrop(task.abort_handle());
+        let outcome = match task.await {
+            Ok(r) => r,
+            Err(e) if e.is_panic() => Err(format!("panicked: {}", panic_text(e.into_panic()))),
+            Err(_) => Err("cancelled".to_string()),
         };
         match outcome {
             Ok(()) => {
@@ -310,8 +313,17 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
     shared.report(&unit, State::Stopped, restarts, None).await;
 }
 
-/// Builds a fresh module instance and its context: one port per medium, subscribed to what the
-/// module consumes and accepts, in the format it declared.
+/// Aborts a task when dropped.
+struct AbortOnDrop(tokio::task::AbortHandle);
+
+impl Drop for AbortOnDrop {
+    fn drop(&mut self) {
+        self.0.abort();
+    }
+}
+
+/// Builds a fresh module instance and its context: one port per medium, subscribed to the data
+/// the module consumes and the commands it accepts, in the format it declared.
 fn instance(unit: &Unit, shared: &Shared) -> Result<(Box<dyn Module>, Context), String> {
     let built = (unit.build)().map_err(|e| e.to_string())?;
     let mut ports = Vec::with_capacity(unit.media.len());
@@ -322,9 +334,13 @@ fn instance(unit: &Unit, shared: &Shared) -> Result<(Box<dyn Module>, Context), 
             .ok_or_else(|| format!("no medium called `{name}`"))?;
         let mut port = medium.attach(&unit.name);
         port.set_accept(built.decl.format_of(i));
-        for t in built.decl.consumes.iter().chain(&built.decl.accepts) {
-            if t.port == i {
-                port.subscribe(&t.topic)
+        let wanted = [
+            (&built.decl.consumes, Kind::Data),
+            (&built.decl.accepts, Kind::Command),
+        ];
+        for (decls, kind) in wanted {
+            for t in decls.iter().filter(|t| t.port == i) {
+                port.subscribe_kind(&t.topic, Some(kind))
                     .map_err(|e| format!("subscription `{}`: {e}", t.topic))?;
             }
         }

@@ -17,8 +17,9 @@
 //! Every error names file, line and column.
 
 use crate::datasets::Catalogue;
-use crate::params::{Param, Params, parse_rate};
+use crate::params::{Param, Params};
 use crate::registry::{ModuleConfig, Registry};
+use seabus_medium::parse::parse_rate;
 use seabus_medium::xml::{self, Element, FileError, Pos};
 use seabus_medium::{Format, Kind, Medium, Pattern};
 use std::collections::BTreeMap;
@@ -119,8 +120,17 @@ pub struct SystemSpec {
 
 const TOP_TAGS: [&str; 3] = ["medium", "module", "bridge"];
 
+/// Longest name of a node, medium, module or bridge, in bytes.
+pub const MAX_NAME: usize = 64;
+
 fn check_name(attr: &xml::Attr) -> Result<String, FileError> {
     let v = attr.value.trim();
+    if v.len() > MAX_NAME {
+        return Err(attr.error(format!(
+            "a name is at most {MAX_NAME} characters, this one has {}",
+            v.len()
+        )));
+    }
     if v.is_empty()
         || !v
             .chars()
@@ -364,8 +374,10 @@ fn bridge_spec(
             None => None,
             Some(a) => {
                 let hz: f64 = a.parse("a rate in messages per second")?;
-                if !(hz.is_finite() && hz > 0.0) {
-                    return Err(a.error("the rate must be above 0"));
+                if seabus_medium::parse::rate_period(hz).is_none() {
+                    return Err(
+                        a.error("the rate must be above 0 and at most a million per second")
+                    );
                 }
                 Some(hz)
             }
@@ -453,7 +465,19 @@ struct Leg<'a> {
     bridge: &'a str,
     inp: &'a Pattern,
     out: &'a Pattern,
+    kind: Option<Kind>,
     pos: &'a Pos,
+}
+
+impl Leg<'_> {
+    /// True when what leaves `self` can be taken by `next`: topics and kinds overlap.
+    fn feeds(&self, next: &Leg<'_>) -> bool {
+        let kinds = match (self.kind, next.kind) {
+            (Some(a), Some(b)) => a == b,
+            _ => true,
+        };
+        kinds && self.out.overlaps(next.inp)
+    }
 }
 
 /// Finds route cycles: closed paths of routes through two or more bridges along which some topic can
@@ -473,6 +497,7 @@ pub fn route_cycles(spec: &SystemSpec) -> Vec<Cycle> {
                         bridge: &b.name,
                         inp: &r.topics,
                         out: r.out_pattern(),
+                        kind: r.kind,
                         pos: &r.pos,
                     })
             })
@@ -497,7 +522,7 @@ fn walk(
     let last = &legs[*path.last().expect("path is never empty")];
     let first = &legs[path[0]];
     // closing the loop: back at the start medium, topic still matching the first leg
-    if path.len() >= 2 && last.to == first.from && last.out.overlaps(first.inp) {
+    if path.len() >= 2 && last.to == first.from && last.feeds(first) {
         let bridges: Vec<&str> = path.iter().map(|&i| legs[i].bridge).collect();
         let distinct = bridges
             .iter()
@@ -524,7 +549,7 @@ fn walk(
         return;
     }
     for (i, next) in legs.iter().enumerate() {
-        if path.contains(&i) || next.from != last.to || !last.out.overlaps(next.inp) {
+        if path.contains(&i) || next.from != last.to || !last.feeds(next) {
             continue;
         }
         // a bridge never forwards straight back to the medium it just took a message from
@@ -775,6 +800,10 @@ mod tests {
  <bridge name="ca" media="c a"><route from="c" topics="remote.**" rename="cmd.**"/></bridge>
 </seabus>"#;
         assert!(cycles_of(renamed).is_empty(), "cmd.** never matches nav.**");
+        let kinds = r#"<seabus><medium name="a" url="inproc://"/><medium name="b" url="inproc://"/>
+ <bridge name="x" media="a b"><route from="a" topics="**" kind="data"/></bridge>
+ <bridge name="y" media="a b"><route from="b" topics="**" kind="command"/></bridge></seabus>"#;
+        assert!(cycles_of(kinds).is_empty(), "data never becomes a command");
         let renamed_back = renamed.replace("rename=\"cmd.**\"", "rename=\"nav.**\"");
         assert_eq!(cycles_of(&renamed_back).len(), 1);
     }

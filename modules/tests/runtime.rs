@@ -238,3 +238,81 @@ async fn shutdown_cuts_off_a_hanging_module_within_its_grace() {
     let took = begun.elapsed();
     assert!(took < Duration::from_secs(2), "shutdown took {took:?}");
 }
+
+/// A module type whose builder panics on its first call.
+fn panicking_build_unit(log: &Arc<Log>) -> Unit {
+    let calls = Arc::new(AtomicU64::new(0));
+    let log = log.clone();
+    Unit {
+        name: "fragile".into(),
+        type_name: "fragile".into(),
+        media: vec!["bus".into()],
+        tick: None,
+        build: Arc::new(move || {
+            if calls.fetch_add(1, Ordering::SeqCst) == 0 {
+                panic!("cannot build");
+            }
+            Ok(Built {
+                decl: Declaration::new(ModuleKind::Supporting),
+                module: Box::new(Probe {
+                    log: log.clone(),
+                    fail_first: 0,
+                    instance: 1,
+                    panic: false,
+                    hang: false,
+                }),
+            })
+        }),
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn regression_a_panic_while_building_is_a_failure_like_any_other() {
+    let log = Arc::new(Log::default());
+    let (rt, _bus) = start(vec![panicking_build_unit(&log)]);
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let st = &rt.status()[0];
+    assert_eq!((st.state, st.restarts), (State::Running, 1), "{st:?}");
+    assert_eq!(log.starts.lock().unwrap().len(), 1);
+    rt.shutdown().await;
+}
+
+/// A module whose `stop` takes far longer than the shutdown grace.
+struct SlowStop(Arc<AtomicU64>);
+
+#[async_trait]
+impl Module for SlowStop {
+    async fn stop(&mut self, _ctx: &mut Context) {
+        tokio::time::sleep(Duration::from_secs(3)).await;
+        self.0.store(1, Ordering::SeqCst);
+    }
+}
+
+#[tokio::test(start_paused = true)]
+async fn regression_a_module_cut_off_at_shutdown_does_not_run_on() {
+    let finished = Arc::new(AtomicU64::new(0));
+    let flag = finished.clone();
+    let unit = Unit {
+        name: "slow".into(),
+        type_name: "slow".into(),
+        media: vec!["bus".into()],
+        tick: None,
+        build: Arc::new(move || {
+            Ok(Built {
+                decl: Declaration::new(ModuleKind::Supporting),
+                module: Box::new(SlowStop(flag.clone())),
+            })
+        }),
+    };
+    let (rt, _bus) = start(vec![unit]);
+    tokio::time::sleep(Duration::from_millis(10)).await;
+    let begun = Instant::now();
+    rt.shutdown().await;
+    assert!(begun.elapsed() < Duration::from_secs(2));
+    tokio::time::sleep(Duration::from_secs(5)).await;
+    assert_eq!(
+        finished.load(Ordering::SeqCst),
+        0,
+        "its stop was cut off with it"
+    );
+}

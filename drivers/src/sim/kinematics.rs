@@ -1,8 +1,7 @@
 //! A simple vehicle model: first-order heading, depth and speed responses with rate limits, dead
 //! reckoning on a flat earth, and a battery drained by hotel load and propulsion.
 
-/// Metres per degree of latitude.
-pub const METRES_PER_DEG: f64 = 111_320.0;
+use seabus_modules::geo::{moved, wrap180};
 
 /// What the vehicle is asked to hold.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -139,9 +138,7 @@ impl Vehicle {
         let h = self.heading.to_radians();
         let north = self.speed * h.cos() * dt;
         let east = self.speed * h.sin() * dt;
-        self.lat = (self.lat + north / METRES_PER_DEG).clamp(-90.0, 90.0);
-        let cos_lat = self.lat.to_radians().cos().max(1e-6);
-        self.lon = wrap180(self.lon + east / (METRES_PER_DEG * cos_lat));
+        (self.lat, self.lon) = moved(self.lat, self.lon, north, east);
         self.energy = (self.energy - self.power() * dt / 3600.0).max(0.0);
     }
 }
@@ -151,15 +148,10 @@ fn approach(from: f64, to: f64, max: f64) -> f64 {
     (to - from).clamp(-max, max)
 }
 
-/// An angle in (-180, 180].
-pub fn wrap180(a: f64) -> f64 {
-    let r = a.rem_euclid(360.0);
-    if r > 180.0 { r - 360.0 } else { r }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use seabus_modules::geo::METRES_PER_DEG;
 
     fn run(v: &mut Vehicle, secs: f64, sp: Option<Setpoint>) {
         let limits = Limits::default();
@@ -214,12 +206,5 @@ mod tests {
         assert_eq!(v.speed, 0.0);
         assert_eq!(v.depth, 0.0);
         assert_eq!(v.heading, 90.0);
-    }
-
-    #[test]
-    fn angles_wrap() {
-        assert_eq!(wrap180(190.0), -170.0);
-        assert_eq!(wrap180(-190.0), 170.0);
-        assert_eq!(wrap180(180.0), 180.0);
     }
 }

@@ -66,16 +66,13 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         return Err(p.required("lat")?.error("must be within ±90"));
     }
     let limits = Limits {
-        turn_rate: p.float_or("turn_rate", 10.0)?,
-        dive_rate: p.float_or("dive_rate", 0.3)?,
-        accel: p.float_or("accel", 0.2)?,
-        max_speed: p.float_or("max_speed", 2.5)?,
-        max_depth: p.float_or("max_depth", 100.0)?,
+        turn_rate: p.positive_or("turn_rate", 10.0)?,
+        dive_rate: p.positive_or("dive_rate", 0.3)?,
+        accel: p.positive_or("accel", 0.2)?,
+        max_speed: p.positive_or("max_speed", 2.5)?,
+        max_depth: p.positive_or("max_depth", 100.0)?,
     };
-    let topic = |dataset: &str, fallback: &str| {
-        cat.get(dataset)
-            .map_or(fallback.to_string(), |d| d.topic.clone())
-    };
+    let topic = |dataset: &str, fallback: &str| cat.topic_of(dataset, fallback);
     let topics = Topics {
         attitude: topic("attitude", "nav.attitude"),
         position: topic("position", "nav.position"),
@@ -104,10 +101,10 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
                 lat,
                 lon,
                 p.float_or("heading", 0.0)?,
-                p.float_or("battery", 600.0)?,
+                p.positive_or("battery", 600.0)?,
             ),
             limits,
-            water_depth: p.float_or("water_depth", 40.0)?,
+            water_depth: p.non_negative_or("water_depth", 40.0)?,
             default_timeout: p.duration_or("timeout", Duration::from_secs(5))?,
             course: None,
             last_step: None,
@@ -251,7 +248,7 @@ impl Module for Sim {
                 .get_f64("timeout")
                 .filter(|t| t.is_finite() && *t > 0.0)
                 .map_or(self.default_timeout, |t| {
-                    Duration::from_secs_f64(t.min(3600.0))
+                    seabus_medium::parse::secs(t.min(3600.0)).unwrap_or(self.default_timeout)
                 });
             self.course = Some((sp, Instant::now() + timeout));
             self.commands += 1;

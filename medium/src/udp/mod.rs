@@ -269,7 +269,8 @@ fn socket(cfg: &UdpConfig) -> std::io::Result<(std::net::UdpSocket, usize)> {
 /// The UDP transport.
 pub struct UdpTransport {
     name: Arc<str>,
-    socket: Arc<UdpSocket>,
+    /// `None` once the medium is closed
+    socket: std::sync::Mutex<Option<Arc<UdpSocket>>>,
     sender: u64,
     dests: Vec<SocketAddr>,
     max: usize,
@@ -295,7 +296,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let sender = fastrand::u64(1..);
     let transport = Arc::new(UdpTransport {
         name: o.name.clone(),
-        socket: socket.clone(),
+        socket: std::sync::Mutex::new(Some(socket.clone())),
         sender,
         dests: cfg
             .destinations()
@@ -310,9 +311,11 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
 }
 
 impl UdpTransport {
-    /// The address the socket is bound to.
-    pub fn local_addr(&self) -> std::io::Result<SocketAddr> {
-        self.socket.local_addr()
+    fn socket(&self) -> Option<Arc<UdpSocket>> {
+        self.socket
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
     }
 }
 
@@ -334,8 +337,11 @@ impl Transport for UdpTransport {
 
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
         Box::pin(async move {
+            let socket = self
+                .socket()
+                .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
             for dest in &self.dests {
-                self.socket
+                socket
                     .send_to(&frame, dest)
                     .await
                     .map_err(|e| SendError::Io {
@@ -345,6 +351,11 @@ impl Transport for UdpTransport {
             }
             Ok(())
         })
+    }
+
+    fn close(&self) {
+        // the receive task, which holds the other reference, is stopped by the medium
+        self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 }
 

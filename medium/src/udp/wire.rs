@@ -104,7 +104,10 @@ pub fn encode(msg: &Message, sender: u64) -> Result<Bytes, &'static str> {
     let payload_hint = match &msg.payload {
         Payload::Bytes(b) => b.len(),
         Payload::Xml(x) => x.len(),
-        Payload::Map(m) => m.len() * 16 + 8,
+        Payload::Map(m) if m.depth() > binary::MAX_DEPTH => {
+            return Err("datamap lists nest deeper than receivers read");
+        }
+        Payload::Map(m) => binary::encoded_len_hint(m),
     };
     let mut buf =
         BytesMut::with_capacity(FIXED + node.len() + medium.len() + topic.len() + payload_hint);
@@ -129,11 +132,7 @@ pub fn encode(msg: &Message, sender: u64) -> Result<Bytes, &'static str> {
     match &msg.payload {
         Payload::Bytes(b) => buf.put_slice(b),
         Payload::Xml(x) => buf.put_slice(x.as_bytes()),
-        Payload::Map(m) => {
-            let mut v = Vec::new();
-            binary::encode_into(m, &mut v);
-            buf.put_slice(&v);
-        }
+        Payload::Map(m) => binary::encode_into(m, &mut buf),
     }
     Ok(buf.freeze())
 }
@@ -174,17 +173,17 @@ fn le<const N: usize>(b: &[u8], at: usize) -> [u8; N] {
 /// Reads and checks a datagram's header. Never panics.
 pub fn header(d: &[u8]) -> Result<Header<'_>, WireError> {
     let err = |offset, kind| WireError { offset, kind };
-    if d.len() < 2 {
-        return Err(err(d.len(), WireErrorKind::Truncated));
+    // what is there is checked before what is missing: a short datagram that is not seabus's is
+    // "bad magic", one of another version "bad version"
+    if let Some(i) = d.iter().take(2).zip(MAGIC).position(|(a, b)| *a != b) {
+        return Err(err(i, WireErrorKind::BadMagic));
     }
-    if d[..2] != MAGIC {
-        return Err(err(0, WireErrorKind::BadMagic));
+    match d.get(2) {
+        Some(&v) if v != VERSION => return Err(err(2, WireErrorKind::Version(v))),
+        _ => {}
     }
     if d.len() < FIXED {
         return Err(err(d.len(), WireErrorKind::Truncated));
-    }
-    if d[2] != VERSION {
-        return Err(err(2, WireErrorKind::Version(d[2])));
     }
     let flags = d[3];
     let format = (flags >> 1) & 0b11;
@@ -296,7 +295,7 @@ pub fn decode(datagram: &Bytes, origins: &mut Origins) -> Result<(u64, Message),
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::datamap::DataMap;
+    use crate::datamap::{DataMap, Value};
 
     fn msg(payload: Payload) -> Message {
         Message {
@@ -323,6 +322,16 @@ mod tests {
         expected.extend_from_slice(&1_700_000_000_000_000_000i64.to_le_bytes());
         expected.extend_from_slice(b"auvbusnav.depthhi");
         assert_eq!(&d[..], &expected[..]);
+    }
+
+    #[test]
+    fn lists_too_deep_for_receivers_are_refused_at_send() {
+        let mut v = Value::Int(1);
+        for _ in 0..=binary::MAX_DEPTH {
+            v = Value::List(vec![v]);
+        }
+        let m = msg(Payload::from(DataMap::new().with("deep", v)));
+        assert!(encode(&m, 1).is_err());
     }
 
     #[test]
@@ -372,6 +381,12 @@ mod tests {
         let mut origins = Origins::default();
         let e = decode(&Bytes::from_static(b"XX\x01"), &mut origins).unwrap_err();
         assert_eq!((e.offset, e.kind.reason()), (0, "bad-magic"));
+        let e = decode(&Bytes::from_static(b"X"), &mut origins).unwrap_err();
+        assert_eq!((e.offset, e.kind.reason()), (0, "bad-magic"));
+        let e = decode(&Bytes::from_static(b"SB\x07"), &mut origins).unwrap_err();
+        assert_eq!((e.offset, e.kind.reason()), (2, "bad-version"));
+        let e = decode(&Bytes::from_static(b"SB"), &mut origins).unwrap_err();
+        assert_eq!((e.offset, e.kind.reason()), (2, "truncated"));
         let m = msg(Payload::from(b"".as_slice()));
         let mut d = encode(&m, 1).unwrap().to_vec();
         d[2] = 9;

@@ -46,51 +46,50 @@ impl Conversion {
             Some((e, t)) => (e.trim(), Some(t.trim())),
             None => (text, None),
         };
-        let name_end = expr
-            .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_' || c == '.'))
-            .unwrap_or(expr.len());
-        let source = &expr[..name_end];
+        let is_name = |c: char| c.is_ascii_alphanumeric() || c == '_' || c == '.';
+        let source: String = expr.chars().take_while(|c| is_name(*c)).collect();
         if source.is_empty() {
             return Err(format!("`{text}` does not start with a field name"));
         }
         let mut ops = Vec::new();
-        let mut rest = expr[name_end..].trim_start();
-        while let Some(op) = rest.chars().next() {
-            let after = rest[1..].trim_start();
-            let num_end = after
-                .char_indices()
-                .skip(1)
-                .find(|(_, c)| matches!(c, '*' | '/' | '+' | '-') || c.is_whitespace())
-                .map_or(after.len(), |(i, _)| i);
-            // an exponent's sign belongs to the number (1e-3)
-            let num_end = if after[..num_end].ends_with(['e', 'E']) {
-                after[num_end + 1..]
-                    .find(|c: char| matches!(c, '*' | '/' | '+' | '-') || c.is_whitespace())
-                    .map_or(after.len(), |i| i + num_end + 1)
-            } else {
-                num_end
-            };
-            let num: f64 = after[..num_end]
+        let mut rest = expr[source.len()..].chars().peekable();
+        loop {
+            while rest.next_if(|c| c.is_whitespace()).is_some() {}
+            let Some(op) = rest.next() else { break };
+            if !matches!(op, '*' | '/' | '+' | '-') {
+                return Err(format!("`{op}` in `{text}`: expected *, /, + or -"));
+            }
+            while rest.next_if(|c| c.is_whitespace()).is_some() {}
+            // a number: digits, a point, an exponent whose sign belongs to it (1e-3)
+            let mut num = String::new();
+            while let Some(c) = rest.next_if(|c| c.is_ascii_digit() || matches!(c, '.' | 'e' | 'E'))
+            {
+                num.push(c);
+                if matches!(c, 'e' | 'E')
+                    && let Some(sign) = rest.next_if(|c| matches!(c, '+' | '-'))
+                {
+                    num.push(sign);
+                }
+            }
+            let n: f64 = num
                 .parse()
                 .ok()
                 .filter(|n: &f64| n.is_finite())
-                .ok_or_else(|| format!("`{}` in `{text}` is not a number", &after[..num_end]))?;
+                .ok_or_else(|| format!("`{num}` after `{op}` in `{text}` is not a number"))?;
             ops.push(match op {
-                '*' => Op::Mul(num),
-                '/' if num == 0.0 => return Err(format!("division by zero in `{text}`")),
-                '/' => Op::Mul(1.0 / num),
-                '+' => Op::Add(num),
-                '-' => Op::Add(-num),
-                other => return Err(format!("`{other}` in `{text}`: expected *, /, + or -")),
+                '*' => Op::Mul(n),
+                '/' if n == 0.0 => return Err(format!("division by zero in `{text}`")),
+                '/' => Op::Mul(1.0 / n),
+                '+' => Op::Add(n),
+                _ => Op::Add(-n),
             });
-            rest = after[num_end..].trim_start();
         }
-        let target = target.unwrap_or(source);
+        let target = target.unwrap_or(&source);
         if target.is_empty() || target.contains(char::is_whitespace) {
             return Err(format!("`{target}` is not a field name"));
         }
         Ok(Conversion {
-            source: source.to_string(),
+            source: source.clone(),
             ops,
             target: target.to_string(),
         })
@@ -220,7 +219,15 @@ mod tests {
     #[test]
     fn bad_conversions_say_why() {
         assert!(Conversion::parse("*2").unwrap_err().contains("field name"));
-        assert!(Conversion::parse("x*two").unwrap_err().contains("`two`"));
+        assert!(
+            Conversion::parse("x*two")
+                .unwrap_err()
+                .contains("is not a number")
+        );
+        // found in review: these used to slice past the end or inside a character
+        assert!(Conversion::parse("x*1e").is_err());
+        assert!(Conversion::parse("x*2e").is_err());
+        assert!(Conversion::parse("x×2").unwrap_err().contains("expected *"));
         assert!(
             Conversion::parse("x/0")
                 .unwrap_err()

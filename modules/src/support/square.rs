@@ -7,6 +7,7 @@
 //! course command's validity, 5).
 
 use crate::datasets::Catalogue;
+use crate::geo::distance;
 use crate::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
 };
@@ -24,16 +25,6 @@ pub const TYPE: ModuleType = ModuleType {
     build,
 };
 
-/// Metres per degree of latitude.
-pub const METRES_PER_DEG: f64 = 111_320.0;
-
-/// Distance in metres between two positions (equirectangular: fine over a few kilometres).
-pub fn distance(lat1: f64, lon1: f64, lat2: f64, lon2: f64) -> f64 {
-    let north = (lat2 - lat1) * METRES_PER_DEG;
-    let east = (lon2 - lon1) * METRES_PER_DEG * ((lat1 + lat2) / 2.0).to_radians().cos();
-    north.hypot(east)
-}
-
 struct Square {
     side: f64,
     speed: f64,
@@ -44,40 +35,40 @@ struct Square {
     leg_start: Option<(f64, f64)>,
     legs: i64,
     tick: Option<Duration>,
+    course_topic: String,
 }
 
 fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
     let p = &cfg.params;
-    let side = p.float_or("side", 100.0)?;
-    if side <= 0.0 {
-        return Err(p.required("side")?.error("must be above zero"));
-    }
+    let side = p.positive_or("side", 100.0)?;
+    let speed = p.non_negative_or("speed", 1.5)?;
+    let depth = p.float_or("depth", 0.0)?;
+    let timeout = p.positive_or("timeout", 5.0)?;
     let turn = match p.str("turn").map(str::trim) {
         None | Some("right") => 90.0,
         Some("left") => -90.0,
         Some(_) => return Err(p.required("turn")?.error("expected right or left")),
     };
-    let course = cat
-        .get("course-command")
-        .map_or("cmd.course", |d| d.topic.as_str());
-    let position = cat
-        .get("position")
-        .map_or("nav.position", |d| d.topic.as_str());
+    let course_topic = cat.topic_of("course-command", "cmd.course");
     let decl = Declaration::new(ModuleKind::Supporting)
-        .consumes(TopicDecl::dataset(position, "position"))
-        .produces(TopicDecl::dataset(course, "course-command"));
+        .consumes(TopicDecl::dataset(
+            cat.topic_of("position", "nav.position"),
+            "position",
+        ))
+        .produces(TopicDecl::dataset(&course_topic, "course-command"));
     Ok(Built {
         decl,
         module: Box::new(Square {
             side,
-            speed: p.float_or("speed", 1.5)?,
-            depth: p.float_or("depth", 0.0)?,
+            speed,
+            depth,
             heading: p.float_or("heading", 0.0)?.rem_euclid(360.0),
             turn,
-            timeout: p.float_or("timeout", 5.0)?,
+            timeout,
             leg_start: None,
             legs: 0,
             tick: cfg.tick,
+            course_topic,
         }),
     })
 }
@@ -125,7 +116,7 @@ impl Module for Square {
                     heading = self.heading,
                     "next leg"
                 );
-                ctx.command_dataset("course-command", "cmd.course", self.command())
+                ctx.command_dataset("course-command", &self.course_topic, self.command())
                     .await?;
             }
             Some(_) => {}
@@ -134,19 +125,7 @@ impl Module for Square {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
-        ctx.command_dataset("course-command", "cmd.course", self.command())
+        ctx.command_dataset("course-command", &self.course_topic, self.command())
             .await
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn distance_is_metres() {
-        assert!((distance(0.0, 0.0, 0.001, 0.0) - 111.32).abs() < 1e-6);
-        let d = distance(60.0, 10.0, 60.0, 10.002);
-        assert!((d - 111.32).abs() < 0.5, "{d}");
     }
 }
