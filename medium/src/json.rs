@@ -154,8 +154,9 @@ impl<'de> Visitor<'de> for MapVisitor {
 
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<DataMap, A::Error> {
         let mut out = DataMap::with_capacity(map.size_hint().unwrap_or(0).min(256));
+        // entries are kept as written, a repeated key included, as the other forms do
         while let Some((k, v)) = map.next_entry::<String, Value>()? {
-            out.insert(k, v);
+            out.push_raw(k, v);
         }
         Ok(out)
     }

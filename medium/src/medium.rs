@@ -97,14 +97,6 @@ pub enum SendError {
         /// What the operating system said.
         reason: String,
     },
-    /// The medium's link is down.
-    #[error("medium `{medium}` link is down: {reason}")]
-    LinkDown {
-        /// The medium's name.
-        medium: String,
-        /// Why.
-        reason: String,
-    },
     /// The medium was closed.
     #[error("medium `{0}` is closed")]
     Closed(String),
@@ -276,11 +268,15 @@ impl Builder {
 impl Medium {
     /// An in-process medium: the default bus. Messages are shared between interfaces, never copied.
     pub fn in_process(name: &str, node: &Node) -> Medium {
+        Medium::local(name, node, None)
+    }
+
+    fn local(name: &str, node: &Node, faults: Option<FaultConfig>) -> Medium {
         Builder {
             name: Arc::from(name),
             url: "inproc://".to_string(),
             node: node.clone(),
-            faults: None,
+            faults,
         }
         .build(|_| Ok(None))
         .expect("an in-process medium has nothing that can fail")
@@ -332,14 +328,7 @@ impl Medium {
 
     /// Adds the fault stage (loss, duplication, reordering, delay) to a medium being built in code.
     pub fn in_process_with_faults(name: &str, node: &Node, faults: FaultConfig) -> Medium {
-        Builder {
-            name: Arc::from(name),
-            url: "inproc://".to_string(),
-            node: node.clone(),
-            faults: Some(faults),
-        }
-        .build(|_| Ok(None))
-        .expect("an in-process medium has nothing that can fail")
+        Medium::local(name, node, Some(faults))
     }
 
     /// The medium's name in its system.
