@@ -316,3 +316,22 @@ async fn regression_a_module_cut_off_at_shutdown_does_not_run_on() {
         "its stop was cut off with it"
     );
 }
+
+#[tokio::test]
+async fn consumed_topics_take_data_only() {
+    // a module consuming `probe.in` is not handed commands on it (nor would a module accepting
+    // commands be handed data)
+    let log = Arc::new(Log::default());
+    let (rt, bus) = start(vec![unit(&log, None, 0, false, false)]);
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let tx = bus.attach("tx");
+    tx.command("probe.in", DataMap::new()).await.unwrap();
+    tx.send("probe.in", DataMap::new()).await.unwrap();
+    let waited = Instant::now();
+    while log.messages.load(Ordering::SeqCst) == 0 && waited.elapsed() < Duration::from_secs(5) {
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    assert_eq!(log.messages.load(Ordering::SeqCst), 1);
+    rt.shutdown().await;
+}
