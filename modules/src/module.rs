@@ -123,6 +123,8 @@ pub struct Declaration {
     pub accepts: Vec<TopicDecl>,
     /// The format each port hands to the module (`None`: as sent).
     pub formats: Vec<Option<Format>>,
+    /// Period of timer [`TICK`] when the system file gives no `tick`.
+    pub tick: Option<Duration>,
 }
 
 impl Declaration {
@@ -134,7 +136,14 @@ impl Declaration {
             consumes: Vec::new(),
             accepts: Vec::new(),
             formats: Vec::new(),
+            tick: None,
         }
+    }
+
+    /// Sets the period of timer [`TICK`] used when the system file gives no `tick`.
+    pub fn default_tick(mut self, period: Duration) -> Self {
+        self.tick = Some(period);
+        self
     }
 
     /// Adds a produced topic.

@@ -352,7 +352,7 @@ fn instance(unit: &Unit, shared: &Shared) -> Result<(Box<dyn Module>, Context), 
         ports,
         shared.catalogue.clone(),
     );
-    if let Some(t) = unit.tick {
+    if let Some(t) = unit.tick.or(built.decl.tick) {
         ctx.every(TICK, t);
     }
     Ok((built.module, ctx))

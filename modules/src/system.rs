@@ -480,8 +480,9 @@ impl Leg<'_> {
     }
 }
 
-/// Finds route cycles: closed paths of routes through two or more bridges along which some topic can
-/// travel all the way round. (A single bridge routing both ways is no cycle: a bridge never sends a
+/// Finds route cycles: closed paths of routes through two or more bridges in which each leg passes
+/// topics (after renames) and kinds on to the next. Legs are compared pairwise, so a path where no
+/// single topic fits every leg may still be reported: the check errs on the side of warning. (A single bridge routing both ways is no cycle: a bridge never sends a
 /// message back where it came from.)
 pub fn route_cycles(spec: &SystemSpec) -> Vec<Cycle> {
     let legs: Vec<Leg<'_>> = spec

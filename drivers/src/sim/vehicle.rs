@@ -17,7 +17,7 @@ use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Message};
 use seabus_modules::Catalogue;
 use seabus_modules::module::{
-    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
+    Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
 };
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
 use std::time::Duration;
@@ -53,7 +53,6 @@ struct Sim {
     default_timeout: Duration,
     course: Option<(Setpoint, Instant)>,
     last_step: Option<Instant>,
-    tick: Option<Duration>,
     topics: Topics,
     commands: u64,
 }
@@ -93,7 +92,8 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         .produces(TopicDecl::dataset(&topics.battery, "battery"))
         .produces(TopicDecl::dataset(&topics.state, "vehicle-state"))
         .accepts(TopicDecl::dataset(&topics.course, "course-command"))
-        .accepts(TopicDecl::dataset(&topics.mission, "mission-command"));
+        .accepts(TopicDecl::dataset(&topics.mission, "mission-command"))
+        .default_tick(Duration::from_millis(100));
     Ok(Built {
         decl,
         module: Box::new(Sim {
@@ -108,7 +108,6 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             default_timeout: p.duration_or("timeout", Duration::from_secs(5))?,
             course: None,
             last_step: None,
-            tick: cfg.tick,
             topics,
             commands: 0,
         }),
@@ -217,9 +216,6 @@ impl Sim {
 #[async_trait]
 impl Module for Sim {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
-        if self.tick.is_none() {
-            ctx.every(TICK, Duration::from_millis(100));
-        }
         ctx.every(SLOW, Duration::from_secs(1));
         self.last_step = Some(Instant::now());
         Ok(())

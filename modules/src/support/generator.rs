@@ -5,9 +5,7 @@
 //! `count` (stop publishing after this many; default: never).
 
 use crate::datasets::Catalogue;
-use crate::module::{
-    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
-};
+use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl};
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
@@ -30,7 +28,6 @@ struct Generator {
     period: Duration,
     count: Option<u64>,
     sent: u64,
-    tick: Option<Duration>,
 }
 
 fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -57,12 +54,14 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             |x| x.error("must be above zero"),
         ));
     }
-    let decl = Declaration::new(ModuleKind::Supporting).produces(
-        TopicDecl::topic(topic.as_str())
-            .field("counter", "")
-            .field("sine", "")
-            .field("time", "s"),
-    );
+    let decl = Declaration::new(ModuleKind::Supporting)
+        .produces(
+            TopicDecl::topic(topic.as_str())
+                .field("counter", "")
+                .field("sine", "")
+                .field("time", "s"),
+        )
+        .default_tick(Duration::from_secs(1));
     Ok(Built {
         decl,
         module: Box::new(Generator {
@@ -73,20 +72,12 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             period,
             count: p.parse("count", "a whole number")?,
             sent: 0,
-            tick: cfg.tick,
         }),
     })
 }
 
 #[async_trait]
 impl Module for Generator {
-    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
-        if self.tick.is_none() {
-            ctx.every(TICK, Duration::from_secs(1));
-        }
-        Ok(())
-    }
-
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
         if self.count.is_some_and(|c| self.sent >= c) {
             return Ok(());

@@ -8,9 +8,7 @@
 
 use crate::datasets::Catalogue;
 use crate::geo::distance;
-use crate::module::{
-    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
-};
+use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl};
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
@@ -34,7 +32,6 @@ struct Square {
     timeout: f64,
     leg_start: Option<(f64, f64)>,
     legs: i64,
-    tick: Option<Duration>,
     course_topic: String,
 }
 
@@ -55,7 +52,8 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             cat.topic_of("position", "nav.position"),
             "position",
         ))
-        .produces(TopicDecl::dataset(&course_topic, "course-command"));
+        .produces(TopicDecl::dataset(&course_topic, "course-command"))
+        .default_tick(Duration::from_secs(1));
     Ok(Built {
         decl,
         module: Box::new(Square {
@@ -67,7 +65,6 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             timeout,
             leg_start: None,
             legs: 0,
-            tick: cfg.tick,
             course_topic,
         }),
     })
@@ -85,13 +82,6 @@ impl Square {
 
 #[async_trait]
 impl Module for Square {
-    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
-        if self.tick.is_none() {
-            ctx.every(TICK, Duration::from_secs(1));
-        }
-        Ok(())
-    }
-
     async fn on_message(
         &mut self,
         ctx: &mut Context,
