@@ -12,7 +12,8 @@
 //!   module's handlers from an interface (active mode). Every interface has bounded queues
 //!   ([`queue`]: data drops oldest, commands hold the sender back) and drops duplicates by provenance
 //!   ([`dedup`]).
-//! - Media: in-process (no transport) and [`udp`]. Any medium opens from a URL ([`url`],
+//! - Media: in-process (no transport), [`udp`], and [`serial`] (serial devices and pseudo-terminals,
+//!   with NMEA, line, COBS or SLIP framing). Any medium opens from a URL ([`url`],
 //!   [`Medium::open`]) and can carry a fault stage ([`fault`]) for tests.
 //! - [`xml`] — a small positioned XML tree for the files users write (every error names file, line
 //!   and column).
@@ -28,6 +29,7 @@ pub mod message;
 pub mod parse;
 pub mod payload;
 pub mod queue;
+pub mod serial;
 pub mod topic;
 pub mod udp;
 pub mod url;

@@ -97,6 +97,14 @@ pub enum SendError {
         /// What the operating system said.
         reason: String,
     },
+    /// The medium's link is down (a device unplugged); the medium keeps trying to restore it.
+    #[error("medium `{medium}` link is down: {reason}")]
+    LinkDown {
+        /// The medium's name.
+        medium: String,
+        /// Why.
+        reason: String,
+    },
     /// The medium was closed.
     #[error("medium `{0}` is closed")]
     Closed(String),
@@ -477,6 +485,16 @@ const SCHEMES: &[Scheme] = &[
         check: |url| crate::udp::UdpConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::udp::open(o)? as Arc<dyn Transport>)),
     },
+    Scheme {
+        name: "serial",
+        check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::serial::open_serial(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
+        name: "pty",
+        check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::serial::open_pty(o)? as Arc<dyn Transport>)),
+    },
 ];
 
 /// The URL schemes [`Medium::open`] knows.
@@ -669,6 +687,33 @@ impl Ingress {
         // from the wire nothing waits: a full command queue refuses
         inner.fan_out(msg, None, false);
         true
+    }
+
+    /// Delivers a message that starts on this medium (a frame from a wire without headers, such
+    /// as a serial line): it gets this medium's origin and next sequence number.
+    pub fn originate(&self, topic: Topic, payload: Payload) -> bool {
+        let Some(inner) = self.inner.upgrade() else {
+            return false;
+        };
+        let msg = Message {
+            topic,
+            kind: Kind::Data,
+            provenance: Provenance {
+                origin: inner.origin.clone(),
+                seq: inner.next_seq(),
+                hops: 0,
+            },
+            stamp: Stamp::now(),
+            payload,
+        };
+        self.deliver(msg)
+    }
+
+    /// True while the medium exists and is open.
+    pub fn is_open(&self) -> bool {
+        self.inner
+            .upgrade()
+            .is_some_and(|i| !i.closed.load(Ordering::Acquire))
     }
 
     /// Counts an input rejected from the wire and logs it (the first few of each reason, then

@@ -1,0 +1,682 @@
+//! Framing for byte streams: NMEA 0183 sentences, plain lines, COBS and SLIP frames.
+//!
+//! A [`Framer`] is fed bytes as they arrive, in chunks of any size, and hands out whole frames or
+//! rejections, each rejection with a reason from a fixed set so that it can be counted. It never
+//! panics and never holds more than its maximum frame length.
+//!
+//! NMEA framing: a sentence starts at `$` or `!` and ends at LF (a CR before it is dropped). Bytes
+//! outside a sentence are garbage. A new `$`/`!` before the end means the previous sentence was cut
+//! short. A sentence holds printable ASCII only, at most `max` bytes. Its checksum (`*hh`, the XOR of
+//! the bytes between the start character and `*`) is checked by policy; a sentence accepted without
+//! one gets its checksum added, so that every sentence handed out carries a correct `*hh`.
+
+use std::fmt;
+
+/// How a stream is cut into frames.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Framing {
+    /// NMEA 0183 sentences.
+    Nmea,
+    /// Lines ending in LF (CR LF accepted).
+    Lines,
+    /// COBS frames, each ended by a zero byte.
+    Cobs,
+    /// SLIP frames (RFC 1055).
+    Slip,
+}
+
+impl Framing {
+    /// Reads a framing name: `nmea`, `lines`, `cobs`, `slip`.
+    pub fn parse(s: &str) -> Option<Framing> {
+        Some(match s {
+            "nmea" => Framing::Nmea,
+            "lines" | "line" => Framing::Lines,
+            "cobs" => Framing::Cobs,
+            "slip" => Framing::Slip,
+            _ => return None,
+        })
+    }
+}
+
+/// What to do with NMEA checksums.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChecksumPolicy {
+    /// A sentence must carry a correct checksum.
+    Require,
+    /// A sentence without a checksum is accepted (its checksum is added); a wrong one is rejected.
+    AllowMissing,
+    /// Checksums are not checked (they are corrected on the way in).
+    Ignore,
+}
+
+impl ChecksumPolicy {
+    /// Reads a policy name: `require`, `allow-missing`, `ignore`.
+    pub fn parse(s: &str) -> Option<ChecksumPolicy> {
+        Some(match s {
+            "require" => ChecksumPolicy::Require,
+            "allow-missing" => ChecksumPolicy::AllowMissing,
+            "ignore" => ChecksumPolicy::Ignore,
+            _ => return None,
+        })
+    }
+}
+
+/// Why bytes were not made into a frame.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reject {
+    /// Bytes outside any sentence.
+    Garbage,
+    /// A frame longer than the maximum.
+    TooLong,
+    /// A sentence cut short by the start of another.
+    Truncated,
+    /// A checksum that does not match.
+    BadChecksum,
+    /// No checksum, where one is required.
+    NoChecksum,
+    /// A byte that may not appear in a sentence.
+    BadChar,
+    /// A frame with nothing in it.
+    Empty,
+    /// A COBS or SLIP frame that does not decode.
+    BadEncoding,
+}
+
+impl Reject {
+    /// A short, stable name for counting.
+    pub fn reason(self) -> &'static str {
+        match self {
+            Reject::Garbage => "garbage",
+            Reject::TooLong => "too-long",
+            Reject::Truncated => "truncated",
+            Reject::BadChecksum => "bad-checksum",
+            Reject::NoChecksum => "no-checksum",
+            Reject::BadChar => "bad-char",
+            Reject::Empty => "empty",
+            Reject::BadEncoding => "bad-encoding",
+        }
+    }
+}
+
+impl fmt::Display for Reject {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.reason())
+    }
+}
+
+/// The XOR checksum of an NMEA sentence body (the bytes between `$`/`!` and `*`).
+pub fn nmea_checksum(body: &[u8]) -> u8 {
+    body.iter().fold(0, |acc, b| acc ^ b)
+}
+
+/// Builds a sentence from its body (`GPGGA,…`, without `$` and checksum): `$body*hh`.
+pub fn nmea_sentence(start: u8, body: &str) -> String {
+    format!(
+        "{}{body}*{:02X}",
+        start as char,
+        nmea_checksum(body.as_bytes())
+    )
+}
+
+fn hex(b: u8) -> Option<u8> {
+    match b {
+        b'0'..=b'9' => Some(b - b'0'),
+        b'A'..=b'F' => Some(b - b'A' + 10),
+        b'a'..=b'f' => Some(b - b'a' + 10),
+        _ => None,
+    }
+}
+
+/// Checks one complete NMEA sentence (`$…` without line ending) against `policy`; returns the
+/// sentence with a correct checksum.
+pub fn check_nmea(line: &[u8], policy: ChecksumPolicy) -> Result<Vec<u8>, Reject> {
+    if line.len() < 2 || !matches!(line[0], b'$' | b'!') {
+        return Err(Reject::Empty);
+    }
+    if line.iter().any(|b| !(0x20..=0x7e).contains(b)) {
+        return Err(Reject::BadChar);
+    }
+    // a checksum is `*` followed by exactly two hex digits at the end
+    let star = line.len().checked_sub(3).filter(|&i| line[i] == b'*');
+    match star {
+        Some(i) => {
+            let body = &line[1..i];
+            if body.is_empty() {
+                return Err(Reject::Empty);
+            }
+            let given = match (hex(line[i + 1]), hex(line[i + 2])) {
+                (Some(h), Some(l)) => Some((h << 4) | l),
+                _ => None,
+            };
+            let actual = nmea_checksum(body);
+            match (given, policy) {
+                (Some(g), _) if g == actual => Ok(line.to_vec()),
+                (_, ChecksumPolicy::Ignore) => {
+                    let mut out = line[..i + 1].to_vec();
+                    out.extend_from_slice(format!("{actual:02X}").as_bytes());
+                    Ok(out)
+                }
+                _ => Err(Reject::BadChecksum),
+            }
+        }
+        None => {
+            if line[1..].contains(&b'*') && policy != ChecksumPolicy::Ignore {
+                return Err(Reject::BadChecksum);
+            }
+            if policy == ChecksumPolicy::Require {
+                return Err(Reject::NoChecksum);
+            }
+            let body = &line[1..];
+            let body = match body.iter().position(|b| *b == b'*') {
+                Some(i) => &body[..i],
+                None => body,
+            };
+            if body.is_empty() {
+                return Err(Reject::Empty);
+            }
+            let mut out = Vec::with_capacity(body.len() + 4);
+            out.push(line[0]);
+            out.extend_from_slice(body);
+            out.extend_from_slice(format!("*{:02X}", nmea_checksum(body)).as_bytes());
+            Ok(out)
+        }
+    }
+}
+
+/// A rejection and where in the stream it happened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Rejected {
+    /// Why.
+    pub reason: Reject,
+    /// Bytes read from the stream before the byte that settled it.
+    pub offset: u64,
+}
+
+/// What a framer hands out.
+pub type Output = Result<Vec<u8>, Rejected>;
+
+#[derive(Debug)]
+enum State {
+    /// Between frames (NMEA: outside a sentence).
+    Idle,
+    /// Inside a frame.
+    In,
+    /// Skipping an over-long frame until its end.
+    Skipping,
+    /// NMEA: in a run of garbage, already reported.
+    Garbage,
+    /// SLIP: after an escape byte.
+    Escaped,
+}
+
+/// A streaming framer.
+#[derive(Debug)]
+pub struct Framer {
+    framing: Framing,
+    policy: ChecksumPolicy,
+    max: usize,
+    buf: Vec<u8>,
+    state: State,
+    offset: u64,
+}
+
+const SLIP_END: u8 = 0xC0;
+const SLIP_ESC: u8 = 0xDB;
+const SLIP_ESC_END: u8 = 0xDC;
+const SLIP_ESC_ESC: u8 = 0xDD;
+
+impl Framer {
+    /// A framer cutting frames of at most `max` bytes.
+    pub fn new(framing: Framing, policy: ChecksumPolicy, max: usize) -> Framer {
+        Framer {
+            framing,
+            policy,
+            max: max.max(8),
+            buf: Vec::with_capacity(128),
+            state: State::Idle,
+            offset: 0,
+        }
+    }
+
+    /// Feeds bytes; `out` gets each frame or rejection, in order.
+    pub fn push(&mut self, bytes: &[u8], out: &mut impl FnMut(Output)) {
+        for &b in bytes {
+            let offset = self.offset;
+            let mut emit =
+                |r: Result<Vec<u8>, Reject>| out(r.map_err(|reason| Rejected { reason, offset }));
+            match self.framing {
+                Framing::Nmea => self.nmea(b, &mut emit),
+                Framing::Lines => self.line(b, &mut emit),
+                Framing::Cobs => self.cobs(b, &mut emit),
+                Framing::Slip => self.slip(b, &mut emit),
+            }
+            self.offset += 1;
+        }
+    }
+
+    /// Bytes held for an unfinished frame.
+    pub fn pending(&self) -> usize {
+        self.buf.len()
+    }
+
+    fn start(&mut self, b: u8) {
+        self.buf.clear();
+        self.buf.push(b);
+        self.state = State::In;
+    }
+
+    fn take(&mut self) -> Vec<u8> {
+        self.state = State::Idle;
+        std::mem::take(&mut self.buf)
+    }
+
+    fn nmea(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
+        let starts = matches!(b, b'$' | b'!');
+        match self.state {
+            State::Idle | State::Garbage if starts => self.start(b),
+            State::Idle => {
+                if !matches!(b, b'\r' | b'\n') {
+                    self.state = State::Garbage;
+                    out(Err(Reject::Garbage));
+                }
+            }
+            State::Garbage => {
+                if b == b'\n' {
+                    self.state = State::Idle;
+                }
+            }
+            State::Skipping => {
+                if starts {
+                    self.start(b);
+                } else if b == b'\n' {
+                    self.state = State::Idle;
+                }
+            }
+            State::In | State::Escaped => {
+                if starts {
+                    out(Err(Reject::Truncated));
+                    self.start(b);
+                } else if b == b'\n' {
+                    let mut line = self.take();
+                    if line.last() == Some(&b'\r') {
+                        line.pop();
+                    }
+                    out(check_nmea(&line, self.policy));
+                } else if self.buf.len() >= self.max {
+                    self.buf.clear();
+                    self.state = State::Skipping;
+                    out(Err(Reject::TooLong));
+                } else {
+                    self.buf.push(b);
+                }
+            }
+        }
+    }
+
+    fn line(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
+        match self.state {
+            State::Skipping => {
+                if b == b'\n' {
+                    self.state = State::Idle;
+                }
+            }
+            _ if b == b'\n' => {
+                let mut line = self.take();
+                if line.last() == Some(&b'\r') {
+                    line.pop();
+                }
+                if !line.is_empty() {
+                    out(Ok(line));
+                }
+            }
+            _ if self.buf.len() >= self.max => {
+                self.buf.clear();
+                self.state = State::Skipping;
+                out(Err(Reject::TooLong));
+            }
+            _ => {
+                self.buf.push(b);
+                self.state = State::In;
+            }
+        }
+    }
+
+    fn cobs(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
+        match self.state {
+            State::Skipping => {
+                if b == 0 {
+                    self.state = State::Idle;
+                }
+            }
+            _ if b == 0 => {
+                let raw = self.take();
+                if raw.is_empty() {
+                    return;
+                }
+                out(cobs_decode(&raw).ok_or(Reject::BadEncoding));
+            }
+            _ if self.buf.len() >= self.max => {
+                self.buf.clear();
+                self.state = State::Skipping;
+                out(Err(Reject::TooLong));
+            }
+            _ => {
+                self.buf.push(b);
+                self.state = State::In;
+            }
+        }
+    }
+
+    fn slip(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
+        match self.state {
+            State::Skipping => {
+                if b == SLIP_END {
+                    self.state = State::Idle;
+                }
+            }
+            State::Escaped => match b {
+                SLIP_ESC_END | SLIP_ESC_ESC => {
+                    self.buf.push(if b == SLIP_ESC_END {
+                        SLIP_END
+                    } else {
+                        SLIP_ESC
+                    });
+                    self.state = State::In;
+                }
+                SLIP_END => {
+                    self.buf.clear();
+                    self.state = State::Idle;
+                    out(Err(Reject::BadEncoding));
+                }
+                _ => {
+                    self.buf.clear();
+                    self.state = State::Skipping;
+                    out(Err(Reject::BadEncoding));
+                }
+            },
+            _ if b == SLIP_END => {
+                let frame = self.take();
+                if !frame.is_empty() {
+                    out(Ok(frame));
+                }
+            }
+            _ if self.buf.len() >= self.max => {
+                self.buf.clear();
+                self.state = State::Skipping;
+                out(Err(Reject::TooLong));
+            }
+            _ if b == SLIP_ESC => self.state = State::Escaped,
+            _ => {
+                self.buf.push(b);
+                self.state = State::In;
+            }
+        }
+    }
+}
+
+/// Encodes a frame for the wire: NMEA sentences get a checksum when they lack one and CR LF;
+/// lines get LF; COBS frames are stuffed and end in a zero; SLIP frames are escaped and wrapped in
+/// END bytes.
+pub fn encode(framing: Framing, frame: &[u8]) -> Result<Vec<u8>, &'static str> {
+    match framing {
+        Framing::Nmea => {
+            let mut s = check_nmea(frame, ChecksumPolicy::AllowMissing).map_err(|r| match r {
+                Reject::BadChar => "an NMEA sentence holds printable ASCII only",
+                Reject::BadChecksum => "the sentence's checksum is wrong",
+                _ => "an NMEA sentence starts with `$` or `!` and has a body",
+            })?;
+            s.extend_from_slice(b"\r\n");
+            Ok(s)
+        }
+        Framing::Lines => {
+            if frame.contains(&b'\n') {
+                return Err("a line cannot hold a line feed");
+            }
+            let mut s = frame.to_vec();
+            s.push(b'\n');
+            Ok(s)
+        }
+        Framing::Cobs => {
+            let mut s = cobs_encode(frame);
+            s.push(0);
+            Ok(s)
+        }
+        Framing::Slip => {
+            let mut s = Vec::with_capacity(frame.len() + 2);
+            s.push(SLIP_END);
+            for &b in frame {
+                match b {
+                    SLIP_END => s.extend_from_slice(&[SLIP_ESC, SLIP_ESC_END]),
+                    SLIP_ESC => s.extend_from_slice(&[SLIP_ESC, SLIP_ESC_ESC]),
+                    _ => s.push(b),
+                }
+            }
+            s.push(SLIP_END);
+            Ok(s)
+        }
+    }
+}
+
+/// COBS-encodes `data` (without the trailing zero).
+pub fn cobs_encode(data: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(data.len() + data.len() / 254 + 2);
+    let mut code_at = 0;
+    out.push(0);
+    let mut code = 1u8;
+    for &b in data {
+        if b == 0 {
+            out[code_at] = code;
+            code_at = out.len();
+            out.push(0);
+            code = 1;
+        } else {
+            out.push(b);
+            code += 1;
+            if code == 0xFF {
+                out[code_at] = code;
+                code_at = out.len();
+                out.push(0);
+                code = 1;
+            }
+        }
+    }
+    out[code_at] = code;
+    out
+}
+
+/// Decodes a COBS frame (without its trailing zero); `None` when it is malformed.
+pub fn cobs_decode(data: &[u8]) -> Option<Vec<u8>> {
+    let mut out = Vec::with_capacity(data.len());
+    let mut i = 0;
+    while i < data.len() {
+        let code = data[i] as usize;
+        if code == 0 || i + code > data.len() {
+            return None;
+        }
+        out.extend_from_slice(&data[i + 1..i + code]);
+        i += code;
+        if code < 0xFF && i < data.len() {
+            out.push(0);
+        }
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    type Got = Result<Vec<u8>, Reject>;
+
+    fn frames(framing: Framing, policy: ChecksumPolicy, input: &[u8]) -> Vec<Got> {
+        let mut f = Framer::new(framing, policy, 100);
+        let mut got = Vec::new();
+        f.push(input, &mut |o| got.push(o.map_err(|r| r.reason)));
+        got
+    }
+
+    fn ok(s: &str) -> Got {
+        Ok(s.as_bytes().to_vec())
+    }
+
+    #[test]
+    fn checksums_are_computed_not_copied() {
+        // body "GPGGA,1" XORs to this value, worked out byte by byte
+        let body = b"GPGGA,1";
+        let x = body.iter().fold(0u8, |a, b| a ^ b);
+        assert_eq!(nmea_checksum(body), x);
+        assert_eq!(nmea_sentence(b'$', "GPGGA,1"), format!("$GPGGA,1*{x:02X}"));
+        // the example from goby's comments
+        assert_eq!(
+            nmea_sentence(b'$', "C82.8P-3.89R-2.63T20.3D3.2"),
+            "$C82.8P-3.89R-2.63T20.3D3.2*78"
+        );
+    }
+
+    #[test]
+    fn sentences_end_at_lf_with_or_without_cr() {
+        let a = nmea_sentence(b'$', "GPHDT,1.0,T");
+        let b = nmea_sentence(b'!', "AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0");
+        let input = format!("{a}\r\n{b}\n");
+        assert_eq!(
+            frames(Framing::Nmea, ChecksumPolicy::Require, input.as_bytes()),
+            [ok(&a), ok(&b)]
+        );
+    }
+
+    #[test]
+    fn garbage_truncation_and_bad_checksums_are_rejected_and_the_next_sentence_survives() {
+        let good = nmea_sentence(b'$', "GPHDT,2.0,T");
+        let bad = "$GPHDT,2.0,T*00";
+        let input =
+            format!("\x00\x7fjunk\r\n$GPGGA,cut{good}\r\n{bad}\r\n$GPHDT,3.0,T\r\n{good}\r\n");
+        let got = frames(Framing::Nmea, ChecksumPolicy::Require, input.as_bytes());
+        assert_eq!(
+            got,
+            [
+                Err(Reject::Garbage),
+                Err(Reject::Truncated),
+                ok(&good),
+                Err(Reject::BadChecksum),
+                Err(Reject::NoChecksum),
+                ok(&good)
+            ]
+        );
+        // allowing a missing checksum adds it
+        let got = frames(
+            Framing::Nmea,
+            ChecksumPolicy::AllowMissing,
+            b"$GPHDT,3.0,T\r\n",
+        );
+        assert_eq!(got, [ok(&nmea_sentence(b'$', "GPHDT,3.0,T"))]);
+        let got = frames(Framing::Nmea, ChecksumPolicy::AllowMissing, bad.as_bytes());
+        assert!(got.is_empty(), "no line end yet");
+        let got = frames(
+            Framing::Nmea,
+            ChecksumPolicy::Ignore,
+            format!("{bad}\n").as_bytes(),
+        );
+        assert_eq!(got, [ok(&good)]);
+    }
+
+    #[test]
+    fn long_lines_without_a_newline_are_dropped_and_bounded() {
+        let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, 82);
+        let mut got = Vec::new();
+        let long = vec![b'A'; 10_000];
+        f.push(b"$", &mut |o| got.push(o));
+        f.push(&long, &mut |o| got.push(o));
+        assert!(f.pending() <= 82);
+        let good = nmea_sentence(b'$', "GPHDT,4.0,T");
+        f.push(format!("{good}\r\n").as_bytes(), &mut |o| got.push(o));
+        assert_eq!(
+            got,
+            [
+                Err(Rejected {
+                    reason: Reject::TooLong,
+                    offset: 82
+                }),
+                Ok(good.into_bytes())
+            ]
+        );
+    }
+
+    #[test]
+    fn any_chunking_gives_the_same_frames() {
+        let a = nmea_sentence(b'$', "GPHDT,5.0,T");
+        let input = format!("xx{a}\r\n$GPGGA{a}\r\n");
+        let whole = frames(Framing::Nmea, ChecksumPolicy::Require, input.as_bytes());
+        for chunk in 1..8 {
+            let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, 100);
+            let mut got = Vec::new();
+            for piece in input.as_bytes().chunks(chunk) {
+                f.push(piece, &mut |o| got.push(o.map_err(|r| r.reason)));
+            }
+            assert_eq!(got, whole, "chunks of {chunk}");
+        }
+    }
+
+    #[test]
+    fn non_printable_bytes_inside_a_sentence_are_rejected() {
+        let got = frames(
+            Framing::Nmea,
+            ChecksumPolicy::Ignore,
+            b"$GP\x01HDT,1*00\r\n",
+        );
+        assert_eq!(got, [Err(Reject::BadChar)]);
+    }
+
+    #[test]
+    fn lines_cobs_and_slip_round_trip() {
+        for framing in [Framing::Lines, Framing::Cobs, Framing::Slip] {
+            let payloads: Vec<Vec<u8>> = if framing == Framing::Lines {
+                vec![b"hello".to_vec(), b"a\rb".to_vec(), vec![0xff, 0x00, 0x41]]
+            } else {
+                vec![
+                    vec![0, 0, 1],
+                    vec![SLIP_END, SLIP_ESC, 7],
+                    (0..=255).collect(),
+                    vec![1; 600],
+                ]
+            };
+            let mut wire = Vec::new();
+            for p in &payloads {
+                wire.extend(encode(framing, p).unwrap());
+            }
+            let mut f = Framer::new(framing, ChecksumPolicy::Require, 2048);
+            let mut got = Vec::new();
+            f.push(&wire, &mut |o| got.push(o.unwrap()));
+            assert_eq!(got, payloads, "{framing:?}");
+        }
+    }
+
+    #[test]
+    fn cobs_vectors() {
+        assert_eq!(cobs_encode(&[0]), [1, 1]);
+        assert_eq!(
+            cobs_encode(&[0x11, 0x22, 0x00, 0x33]),
+            [3, 0x11, 0x22, 2, 0x33]
+        );
+        assert_eq!(
+            cobs_decode(&[3, 0x11, 0x22, 2, 0x33]).unwrap(),
+            [0x11, 0x22, 0x00, 0x33]
+        );
+        assert_eq!(cobs_decode(&[5, 1]), None);
+        assert_eq!(cobs_decode(&[0]), None);
+        let long: Vec<u8> = vec![7; 254];
+        let enc = cobs_encode(&long);
+        assert_eq!(enc[0], 0xFF);
+        assert_eq!(cobs_decode(&enc).unwrap(), long);
+    }
+
+    #[test]
+    fn encoding_refuses_what_the_framing_cannot_carry() {
+        assert!(encode(Framing::Nmea, b"GPGGA,1").is_err());
+        assert!(encode(Framing::Nmea, b"$GP\x01").is_err());
+        assert_eq!(
+            encode(Framing::Nmea, b"$OSD,G,C,S,P,,,,").unwrap(),
+            format!("{}\r\n", nmea_sentence(b'$', "OSD,G,C,S,P,,,,")).into_bytes()
+        );
+        assert!(encode(Framing::Lines, b"a\nb").is_err());
+    }
+}

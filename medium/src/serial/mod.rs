@@ -1,0 +1,506 @@
+//! Serial media: a serial device (`serial://`) or a pseudo-terminal that seabus creates (`pty://`),
+//! with NMEA, line, COBS or SLIP framing.
+//!
+//! ```text
+//! serial:///dev/ttyUSB0?baud=19200&framing=nmea     a device; NMEA sentences
+//! serial:///dev/ttyACM0?baud=115200&framing=lines&topic=ctd.raw
+//! pty:///tmp/frontseat?framing=nmea                 a new pseudo-terminal, its other end linked at
+//!                                                   /tmp/frontseat for any program to open
+//! ```
+//! Options: `baud` (default 9600), `data_bits` (5–8), `parity` (`none`, `even`, `odd`),
+//! `stop_bits` (1, 2), `framing` (`nmea`, `lines`, `cobs`, `slip`; default `nmea`), `checksum`
+//! (`require`, `allow-missing`, `ignore`; NMEA only, default `require`), `max` (longest frame in
+//! bytes; 256 for NMEA, 4096 otherwise), `topic` (the topic of received frames; for NMEA the prefix
+//! of `PREFIX.ADDRESS`, default `nmea`, so that `$GPGGA,…` arrives on `nmea.GPGGA`; otherwise
+//! default `serial.line` or `serial.frame`), `reopen` (wait between attempts to reopen a lost
+//! device, default 500ms).
+//!
+//! Received frames are byte payloads that originate at the medium (it numbers them). What is sent
+//! must be bytes or XML text; NMEA sentences without a checksum get one. When the device goes away
+//! the link goes down, sends fail at once with [`SendError::LinkDown`], and the medium keeps trying
+//! to reopen it; nothing else waits meanwhile.
+
+pub mod framing;
+
+use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::Message;
+use crate::payload::Payload;
+use crate::topic::Topic;
+use crate::url::{MediumUrl, UrlError};
+use bytes::Bytes;
+use framing::{ChecksumPolicy, Framer, Framing};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::sync::mpsc;
+use tokio_serial::{DataBits, Parity, SerialPortBuilderExt, SerialStream, StopBits};
+
+const OPTIONS: [&str; 10] = [
+    "baud",
+    "data_bits",
+    "parity",
+    "stop_bits",
+    "framing",
+    "checksum",
+    "max",
+    "topic",
+    "reopen",
+    "flow",
+];
+
+/// Frames waiting to be written; a sender waits when the line is this far behind.
+const WRITE_QUEUE: usize = 64;
+
+/// A serial medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SerialConfig {
+    /// The device (or, for `pty://`, where the pseudo-terminal is linked).
+    pub path: PathBuf,
+    /// Line speed.
+    pub baud: u32,
+    /// Data bits.
+    pub data_bits: DataBits,
+    /// Parity.
+    pub parity: Parity,
+    /// Stop bits.
+    pub stop_bits: StopBits,
+    /// How the stream is cut into frames.
+    pub framing: Framing,
+    /// NMEA checksum policy.
+    pub checksum: ChecksumPolicy,
+    /// Longest frame.
+    pub max: usize,
+    /// Topic (or, for NMEA, topic prefix) of received frames.
+    pub topic: String,
+    /// Wait between attempts to reopen the device.
+    pub reopen: Duration,
+}
+
+impl SerialConfig {
+    /// Reads the settings from a `serial://` or `pty://` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<SerialConfig, UrlError> {
+        if !url.host.is_empty() || url.path.len() < 2 {
+            return Err(url.error(format!(
+                "expected {}:///path/to/device (three slashes, an absolute path)",
+                url.scheme
+            )));
+        }
+        let framing = match url.take("framing") {
+            None => Framing::Nmea,
+            Some(f) => Framing::parse(&f).ok_or_else(|| {
+                url.error(format!(
+                    "option `framing={f}`: expected nmea, lines, cobs or slip"
+                ))
+            })?,
+        };
+        let checksum = match url.take("checksum") {
+            None => ChecksumPolicy::Require,
+            Some(c) => ChecksumPolicy::parse(&c).ok_or_else(|| {
+                url.error(format!(
+                    "option `checksum={c}`: expected require, allow-missing or ignore"
+                ))
+            })?,
+        };
+        let baud: u32 = url
+            .take_parsed("baud", "a line speed such as 19200")?
+            .unwrap_or(9600);
+        if baud == 0 {
+            return Err(url.error("option `baud=0`: expected a line speed such as 19200"));
+        }
+        let data_bits = match url.take_parsed::<u8>("data_bits", "5, 6, 7 or 8")? {
+            None | Some(8) => DataBits::Eight,
+            Some(7) => DataBits::Seven,
+            Some(6) => DataBits::Six,
+            Some(5) => DataBits::Five,
+            Some(n) => {
+                return Err(url.error(format!("option `data_bits={n}`: expected 5, 6, 7 or 8")));
+            }
+        };
+        let parity = match url.take("parity").as_deref() {
+            None | Some("none") => Parity::None,
+            Some("even") => Parity::Even,
+            Some("odd") => Parity::Odd,
+            Some(p) => {
+                return Err(url.error(format!("option `parity={p}`: expected none, even or odd")));
+            }
+        };
+        let stop_bits = match url.take_parsed::<u8>("stop_bits", "1 or 2")? {
+            None | Some(1) => StopBits::One,
+            Some(2) => StopBits::Two,
+            Some(n) => return Err(url.error(format!("option `stop_bits={n}`: expected 1 or 2"))),
+        };
+        match url.take("flow").as_deref() {
+            None | Some("none") => {}
+            Some(f) => {
+                return Err(url.error(format!("option `flow={f}`: only `none` is supported")));
+            }
+        }
+        let default_max = if framing == Framing::Nmea { 256 } else { 4096 };
+        let max: usize = url
+            .take_parsed("max", "a size in bytes")?
+            .unwrap_or(default_max);
+        if !(8..=1 << 20).contains(&max) {
+            return Err(url.error(format!("option `max={max}`: expected 8 to 1048576 bytes")));
+        }
+        let topic = url.take("topic").unwrap_or_else(|| {
+            match framing {
+                Framing::Nmea => "nmea",
+                Framing::Lines => "serial.line",
+                Framing::Cobs | Framing::Slip => "serial.frame",
+            }
+            .to_string()
+        });
+        Topic::new(&topic).map_err(|e| url.error(format!("option `topic={topic}`: {e}")))?;
+        let reopen = match url.take("reopen") {
+            None => Duration::from_millis(500),
+            Some(r) => crate::parse::parse_duration(&r)
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    url.error(format!(
+                        "option `reopen={r}`: expected a duration such as 500ms"
+                    ))
+                })?,
+        };
+        url.finish(&OPTIONS)?;
+        Ok(SerialConfig {
+            path: PathBuf::from(&url.path),
+            baud,
+            data_bits,
+            parity,
+            stop_bits,
+            framing,
+            checksum,
+            max,
+            topic,
+            reopen,
+        })
+    }
+
+    /// The topic a received frame arrives on: for NMEA, the prefix and the sentence's address
+    /// (its leading letters: `$GPGGA,…` → `nmea.GPGGA`, `$C82.8P…` → `nmea.C`).
+    pub fn topic_of(&self, frame: &[u8]) -> Option<Topic> {
+        if self.framing != Framing::Nmea {
+            return Topic::new(&self.topic).ok();
+        }
+        let letters = frame
+            .iter()
+            .skip(1)
+            .take_while(|b| b.is_ascii_alphabetic())
+            .count();
+        if letters == 0 {
+            return None;
+        }
+        let address = std::str::from_utf8(&frame[1..1 + letters]).ok()?;
+        Topic::new(&format!("{}.{address}", self.topic)).ok()
+    }
+}
+
+/// What the transport writes, and whether the line is up.
+struct Shared {
+    name: Arc<str>,
+    framing: Framing,
+    up: AtomicBool,
+    path: String,
+}
+
+/// The transport of both serial schemes.
+pub struct SerialTransport {
+    shared: Arc<Shared>,
+    writer: mpsc::Sender<Vec<u8>>,
+    /// for `pty://`: the link to remove when the medium closes
+    link: std::sync::Mutex<Option<PathBuf>>,
+}
+
+impl Transport for SerialTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let raw: &[u8] = match &msg.payload {
+            Payload::Bytes(b) => b,
+            Payload::Xml(x) => x.as_bytes(),
+            Payload::Map(_) => {
+                return Err(SendError::Io {
+                    medium: self.shared.name.to_string(),
+                    reason: "a serial line carries bytes or text, not a datamap".into(),
+                });
+            }
+        };
+        framing::encode(self.shared.framing, raw)
+            .map(Bytes::from)
+            .map_err(|reason| SendError::Io {
+                medium: self.shared.name.to_string(),
+                reason: reason.into(),
+            })
+    }
+
+    fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            if !self.shared.up.load(Ordering::Acquire) {
+                return Err(SendError::LinkDown {
+                    medium: self.shared.name.to_string(),
+                    reason: format!("{} is not open", self.shared.path),
+                });
+            }
+            self.writer
+                .send(frame.to_vec())
+                .await
+                .map_err(|_| SendError::Closed(self.shared.name.to_string()))
+        })
+    }
+
+    fn close(&self) {
+        self.shared.up.store(false, Ordering::Release);
+        if let Some(link) = self.link.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            let _ = std::fs::remove_file(link);
+        }
+    }
+}
+
+impl Drop for SerialTransport {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
+/// Opens a `serial://` medium: a task keeps the device open, reopening it when it goes away.
+pub(crate) fn open_serial(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
+    let cfg = SerialConfig::from_url(&mut o.url)?;
+    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
+    let shared = Arc::new(Shared {
+        name: o.name.clone(),
+        framing: cfg.framing,
+        up: AtomicBool::new(false),
+        path: cfg.path.display().to_string(),
+    });
+    o.ingress
+        .set_link(LinkState::Down(format!("{} not opened yet", shared.path)));
+    let task = tokio::spawn(keep_open(cfg, shared.clone(), rx, o.ingress.clone()));
+    o.ingress.own_task(task.abort_handle());
+    Ok(Arc::new(SerialTransport {
+        shared,
+        writer,
+        link: std::sync::Mutex::new(None),
+    }))
+}
+
+fn open_device(cfg: &SerialConfig) -> Result<SerialStream, String> {
+    let path = cfg.path.to_string_lossy();
+    tokio_serial::new(path.as_ref(), cfg.baud)
+        .data_bits(cfg.data_bits)
+        .parity(cfg.parity)
+        .stop_bits(cfg.stop_bits)
+        .open_native_async()
+        .map_err(|e| format!("cannot open {path}: {e}"))
+}
+
+async fn keep_open(
+    cfg: SerialConfig,
+    shared: Arc<Shared>,
+    mut rx: mpsc::Receiver<Vec<u8>>,
+    ingress: Ingress,
+) {
+    let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
+    loop {
+        let reason = match open_device(&cfg) {
+            Ok(port) => {
+                shared.up.store(true, Ordering::Release);
+                ingress.set_link(LinkState::Up);
+                let reason = pump(port, &cfg, &mut framer, &mut rx, &ingress).await;
+                shared.up.store(false, Ordering::Release);
+                reason
+            }
+            Err(e) => e,
+        };
+        if !ingress.is_open() {
+            return;
+        }
+        ingress.set_link(LinkState::Down(reason));
+        // what waited to be written belongs to the lost link
+        while rx.try_recv().is_ok() {}
+        framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
+        tokio::time::sleep(cfg.reopen).await;
+    }
+}
+
+/// Reads frames into the medium and writes queued frames out, until the stream fails; returns why.
+async fn pump<P: AsyncRead + AsyncWrite>(
+    port: P,
+    cfg: &SerialConfig,
+    framer: &mut Framer,
+    rx: &mut mpsc::Receiver<Vec<u8>>,
+    ingress: &Ingress,
+) -> String {
+    let (mut reader, mut writer) = tokio::io::split(port);
+    let mut buf = vec![0u8; 4096];
+    let path = cfg.path.display();
+    loop {
+        tokio::select! {
+            n = reader.read(&mut buf) => match n {
+                Ok(0) => return format!("{path}: end of stream"),
+                Ok(n) => {
+                    framer.push(&buf[..n], &mut |out| match out {
+                        Ok(frame) => match cfg.topic_of(&frame) {
+                            Some(topic) => {
+                                ingress.originate(topic, Payload::from(frame));
+                            }
+                            None => ingress.reject("no-address", format_args!("{path}: a sentence without an address")),
+                        },
+                        Err(r) => ingress.reject(r.reason.reason(), format_args!("{path} at byte {}", r.offset)),
+                    });
+                }
+                Err(e) => return format!("{path}: {e}"),
+            },
+            frame = rx.recv() => match frame {
+                Some(frame) => {
+                    if let Err(e) = writer.write_all(&frame).await {
+                        return format!("{path}: {e}");
+                    }
+                }
+                None => return format!("{path}: closed"),
+            },
+        }
+    }
+}
+
+/// Opens a `pty://` medium: a new pseudo-terminal whose other end is linked at the URL's path.
+pub(crate) fn open_pty(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
+    let cfg = SerialConfig::from_url(&mut o.url)?;
+    let io_err = |context: String| {
+        let url = o.url.to_string();
+        move |source| OpenError::Io {
+            url,
+            context,
+            source,
+        }
+    };
+    let (master, slave) = SerialStream::pair()
+        .map_err(|e| std::io::Error::other(e.to_string()))
+        .map_err(io_err("creating a pseudo-terminal".into()))?;
+    let slave_path = tokio_serial::SerialPort::name(&slave)
+        .ok_or_else(|| std::io::Error::other("the pseudo-terminal has no name"))
+        .map_err(io_err("naming the pseudo-terminal".into()))?;
+    // the other end stays open here too, so that the terminal lives while nobody has it open; it
+    // is held by a plain file, without the lock a serial port takes, so that any program can open it
+    let held = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&slave_path)
+        .map_err(io_err(format!("opening {slave_path}")))?;
+    drop(slave);
+    link(&cfg.path, Path::new(&slave_path))
+        .map_err(io_err(format!("linking {}", cfg.path.display())))?;
+    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
+    let shared = Arc::new(Shared {
+        name: o.name.clone(),
+        framing: cfg.framing,
+        up: AtomicBool::new(true),
+        path: cfg.path.display().to_string(),
+    });
+    let link_path = cfg.path.clone();
+    let task = tokio::spawn({
+        let ingress = o.ingress.clone();
+        let shared = shared.clone();
+        async move {
+            let _held = held;
+            let mut rx = rx;
+            let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
+            let reason = pump(master, &cfg, &mut framer, &mut rx, &ingress).await;
+            shared.up.store(false, Ordering::Release);
+            ingress.set_link(LinkState::Down(reason));
+        }
+    });
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    Ok(Arc::new(SerialTransport {
+        shared,
+        writer,
+        link: std::sync::Mutex::new(Some(link_path)),
+    }))
+}
+
+/// Links `at` to `target`, replacing an earlier link but never a file or directory.
+fn link(at: &Path, target: &Path) -> std::io::Result<()> {
+    match std::fs::symlink_metadata(at) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::remove_file(at)?,
+        Ok(_) => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                "something other than a link is there; seabus only replaces its own links",
+            ));
+        }
+        Err(_) => {}
+    }
+    std::os::unix::fs::symlink(target, at)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(url: &str) -> Result<SerialConfig, UrlError> {
+        SerialConfig::from_url(&mut MediumUrl::parse(url).unwrap())
+    }
+
+    #[test]
+    fn options_are_read_and_checked() {
+        let c =
+            cfg("serial:///dev/ttyUSB0?baud=19200&framing=nmea&checksum=allow-missing").unwrap();
+        assert_eq!(
+            (
+                c.path.to_str().unwrap(),
+                c.baud,
+                c.framing,
+                c.checksum,
+                c.max
+            ),
+            (
+                "/dev/ttyUSB0",
+                19200,
+                Framing::Nmea,
+                ChecksumPolicy::AllowMissing,
+                256
+            )
+        );
+        let c =
+            cfg("serial:///dev/ttyS1?framing=lines&topic=ctd.raw&parity=even&stop_bits=2").unwrap();
+        assert_eq!(
+            (c.topic.as_str(), c.parity, c.stop_bits),
+            ("ctd.raw", Parity::Even, StopBits::Two)
+        );
+        assert!(
+            cfg("serial://dev/ttyUSB0")
+                .unwrap_err()
+                .reason
+                .contains("three slashes")
+        );
+        assert!(
+            cfg("serial:///dev/x?framing=xml")
+                .unwrap_err()
+                .reason
+                .contains("nmea, lines, cobs or slip")
+        );
+        assert!(cfg("serial:///dev/x?baud=fast").is_err());
+        assert!(cfg("serial:///dev/x?parity=mark").is_err());
+        assert!(cfg("serial:///dev/x?topic=a..b").is_err());
+        assert!(
+            cfg("serial:///dev/x?bauds=9600")
+                .unwrap_err()
+                .reason
+                .contains("unknown option `bauds`")
+        );
+    }
+
+    #[test]
+    fn nmea_topics_come_from_the_address() {
+        let c = cfg("serial:///dev/x").unwrap();
+        let t = |s: &str| c.topic_of(s.as_bytes()).map(|t| t.to_string());
+        assert_eq!(t("$GPGGA,1*00").as_deref(), Some("nmea.GPGGA"));
+        assert_eq!(
+            t("$C82.8P-3.89R-2.63T20.3D3.2*78").as_deref(),
+            Some("nmea.C")
+        );
+        assert_eq!(t("!AIVDM,1*00").as_deref(), Some("nmea.AIVDM"));
+        assert_eq!(t("$OMSTART,0*00").as_deref(), Some("nmea.OMSTART"));
+        assert_eq!(t("$,1*00"), None);
+    }
+}
