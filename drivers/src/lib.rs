@@ -1,15 +1,26 @@
 //! seabus-drivers: device drivers, which marshal a device's data into standard datasets and its
 //! commands back to the device, and the simulators that stand in for devices.
 //!
+//! - [`iver`] — the Iver2/Iver3 frontseat: Remote Helm protocol, backseat driver, simulated frontseat.
+//! - [`nmea`] — NMEA 0183 sentences and the GPS, heading and echo-sounder drivers built on them.
+//! - [`units`] — unit conversions of device protocols.
 //! - [`sim`] — a simulated vehicle: [`sim::kinematics`] (heading, depth, speed dynamics and dead
 //!   reckoning) and the `vehicle-sim` module that follows course commands and publishes navigation,
 //!   battery and state datasets.
 
+pub mod iver;
+pub mod nmea;
 pub mod sim;
+pub mod units;
 
 use seabus_modules::Registry;
 
 /// Registers the driver and simulator module types.
 pub fn register(reg: &mut Registry) {
-    reg.add_module(sim::vehicle::TYPE);
+    reg.add_module(sim::vehicle::TYPE)
+        .add_module(nmea::sensors::GPS)
+        .add_module(nmea::sensors::HEADING)
+        .add_module(nmea::sensors::SOUNDER)
+        .add_module(iver::driver::TYPE)
+        .add_module(iver::sim::TYPE);
 }

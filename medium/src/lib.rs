@@ -30,6 +30,7 @@ pub mod parse;
 pub mod payload;
 pub mod queue;
 pub mod serial;
+pub mod tally;
 pub mod topic;
 pub mod udp;
 pub mod url;

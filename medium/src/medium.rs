@@ -10,6 +10,7 @@ use crate::fault::{FaultConfig, Faults};
 use crate::message::{Kind, Message, Origin, Provenance, Stamp};
 use crate::payload::{ConvertError, Format, Payload};
 use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queue};
+use crate::tally::Tally;
 use crate::topic::{Pattern, Topic, TopicError};
 use crate::url::{MediumUrl, UrlError};
 use bytes::Bytes;
@@ -187,7 +188,7 @@ pub(crate) struct Inner {
     transport: OnceLock<Arc<dyn Transport>>,
     faults: Option<Faults>,
     counters: Counters,
-    rejected: Mutex<BTreeMap<String, u64>>,
+    rejected: Tally,
     link: watch::Sender<LinkState>,
     tasks: Mutex<Vec<AbortHandle>>,
     closed: AtomicBool,
@@ -260,7 +261,7 @@ impl Builder {
             transport: OnceLock::new(),
             faults: self.faults.map(Faults::new),
             counters: Counters::default(),
-            rejected: Mutex::new(BTreeMap::new()),
+            rejected: Tally::new(),
             link,
             tasks: Mutex::new(Vec::new()),
             closed: AtomicBool::new(false),
@@ -415,12 +416,7 @@ impl Medium {
             fault_lost: f.0,
             fault_duplicated: f.1,
             fault_delayed: f.2,
-            rejected: self
-                .inner
-                .rejected
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .clone(),
+            rejected: self.inner.rejected.counts(),
         }
     }
 
@@ -719,17 +715,8 @@ impl Ingress {
     /// Counts an input rejected from the wire and logs it (the first few of each reason, then
     /// every power of two).
     pub fn reject(&self, reason: &str, detail: impl fmt::Display) {
-        let Some(inner) = self.inner.upgrade() else {
-            return;
-        };
-        let n = {
-            let mut map = inner.rejected.lock().unwrap_or_else(|p| p.into_inner());
-            let n = map.entry(reason.to_string()).or_insert(0);
-            *n += 1;
-            *n
-        };
-        if n <= 5 || n.is_power_of_two() {
-            tracing::warn!(medium = %inner.name, reason, count = n, "rejected input: {detail}");
+        if let Some(inner) = self.inner.upgrade() {
+            inner.rejected.record(&inner.name, reason, detail);
         }
     }
 

@@ -1,0 +1,917 @@
+//! `iver2`: the Iver2/Iver3 frontseat driver (Remote Helm), placed on the serial line to the
+//! frontseat and on a bus: `media="frontseat bus"`.
+//!
+//! It asks for data with `$OSD` (`request`, default `G C S P`, every `request_every`, default
+//! 500ms) and publishes what comes back as standard datasets on the bus: attitude and depth from
+//! `$C`, position, velocity, altitude and vehicle state from `$OSI`, battery from `$OPI` (or from the
+//! `$OSI` battery field when power is not requested), the frontseat's GPS from `$GPRMC` on
+//! `gps_topic`, and DVL velocities on `dvl_topic`.
+//!
+//! Commands it accepts on the bus:
+//! - `cmd.course` (heading, depth, speed) → `$OMS`, repeated every `repeat` (1s) while the course
+//!   stays valid — for the command's `timeout` or `hold` (3s) — so that the frontseat's keep-alive
+//!   (`oms_timeout`, 5s, sent in each `$OMS`) never lapses while commands flow, and does lapse when
+//!   they stop;
+//! - `cmd.actuator` (thrust %, rudder and elevator degrees) → `$OMP` (`fin_scale` counts per
+//!   degree, default 4, and `motor_scale` counts per percent, default 1.27, around 0x80);
+//! - `cmd.mission`: `start` (with `name`) → `$OMSTART`, `stop` → `$OMSTOP`, `goto` (with
+//!   `waypoint`) → `$OJW`;
+//! - `cmd.iver.waypoint` (lat, lon, depth, speed, clear; or action `stop`) → `$OMW`;
+//! - `cmd.iver.position` (lat, lon, speed) → `$OPOS`; `cmd.iver.dvl` (x, y, timeout) → `$ODVL`.
+//!
+//! Every command it sends is published on `cmd.status` as `pending`, then `acknowledged`, `refused`
+//! (with the text of the `$ACK` error number) or `timed-out` (`ack_timeout`, 3s); a command the
+//! frontseat cannot take now is `refused` at once with the reason.
+//!
+//! The frontseat's state: `offline` while the serial link is down or no data came for
+//! `data_timeout` (10s); otherwise from the `$OSI` mode through the mode map — `accepting` (default
+//! `N M m A W`), `in-control` (`P`), `idle` (`S` and anything unknown). Course, actuator and waypoint
+//! commands are only sent while it is accepting or in control; a mission can be started while idle.
+//! `version` is the Remote Helm major version (default 5): below 5, `$OMS` and `$OMW` depths are in
+//! feet.
+
+use super::protocol::{self, Command, DataRequest, DepthUnits, FromFront, Waypoint};
+use crate::nmea::sentence::{Sentence, parse};
+use crate::units::{FOOT, KNOT};
+use async_trait::async_trait;
+use seabus_medium::tally::Tally;
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Format, Kind, LinkState, Message, Payload};
+use seabus_modules::Catalogue;
+use seabus_modules::module::{
+    Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
+};
+use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
+use std::collections::VecDeque;
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// The `iver2` module type.
+pub const TYPE: ModuleType = ModuleType {
+    name: "iver2",
+    kind: ModuleKind::Driver,
+    summary: "Iver2/Iver3 frontseat over Remote Helm (serial NMEA)",
+    build,
+};
+
+const REQUEST: TimerId = 1;
+
+/// Who controls the vehicle, as the frontseat's mode says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// No link, or no data.
+    Offline,
+    /// The frontseat takes no backseat commands.
+    Idle,
+    /// The frontseat takes backseat commands.
+    Accepting,
+    /// The backseat is driving.
+    InControl,
+}
+
+impl Control {
+    /// The name in the vehicle-state dataset.
+    pub fn name(self) -> &'static str {
+        match self {
+            Control::Offline => "offline",
+            Control::Idle => "idle",
+            Control::Accepting => "accepting",
+            Control::InControl => "in-control",
+        }
+    }
+
+    fn commandable(self) -> bool {
+        matches!(self, Control::Accepting | Control::InControl)
+    }
+}
+
+struct Topics {
+    attitude: String,
+    position: String,
+    velocity: String,
+    depth: String,
+    altitude: String,
+    battery: String,
+    state: String,
+    status: String,
+    course: String,
+    actuator: String,
+    mission: String,
+    gps: String,
+    dvl: String,
+}
+
+struct Settings {
+    units: DepthUnits,
+    request: DataRequest,
+    request_every: Duration,
+    oms_timeout: f64,
+    repeat: Duration,
+    hold: Duration,
+    max_pitch: f64,
+    ack_timeout: Duration,
+    data_timeout: Duration,
+    accepting: Vec<String>,
+    in_control: Vec<String>,
+    fin_scale: f64,
+    motor_scale: f64,
+}
+
+/// A command sent and not yet answered.
+struct Pending {
+    id: i64,
+    command: &'static str,
+    code: u32,
+    sent: Instant,
+    /// published on `cmd.status` (repeats of a course command are not)
+    report: bool,
+    request: Option<(String, u64)>,
+}
+
+/// The course being held.
+struct Course {
+    oms: Command,
+    until: Instant,
+    heading: f64,
+    depth: f64,
+    speed: f64,
+}
+
+struct Iver {
+    s: Settings,
+    t: Topics,
+    last_data: Option<Instant>,
+    mode: String,
+    error: String,
+    mission: String,
+    waypoint: Option<i64>,
+    control: Control,
+    reason: String,
+    course: Option<Course>,
+    last_oms: Option<Instant>,
+    pending: VecDeque<Pending>,
+    next_id: i64,
+    last_state: Option<(Control, String, String, Instant)>,
+    heading: Option<f64>,
+    tally: Tally,
+}
+
+fn words(s: &str) -> Vec<String> {
+    s.split([' ', ','])
+        .filter(|w| !w.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
+    let p = &cfg.params;
+    let version: u32 = p.parse_or("version", 5, "a Remote Helm major version such as 5")?;
+    let letters = words(p.str("request").unwrap_or("G C S P"));
+    let mut request = DataRequest::default();
+    for l in &letters {
+        match l.as_str() {
+            "G" => request.gps = true,
+            "C" => request.compass = true,
+            "S" => request.state = true,
+            "P" => request.power = true,
+            "D" => request.dvl = true,
+            other => {
+                return Err(p
+                    .required("request")?
+                    .error(format!("`{other}` is not one of G, C, S, P, D")));
+            }
+        }
+    }
+    let oms_timeout = p.positive_or("oms_timeout", 5.0)?;
+    if oms_timeout > 120.0 {
+        return Err(p
+            .required("oms_timeout")?
+            .error("the frontseat takes 0 to 120 seconds"));
+    }
+    let repeat = p.duration_or("repeat", Duration::from_secs(1))?;
+    if repeat.as_secs_f64() >= oms_timeout {
+        let why = format!(
+            "`repeat` ({:.1}s) must be shorter than `oms_timeout` ({oms_timeout}s), or the frontseat's keep-alive lapses",
+            repeat.as_secs_f64()
+        );
+        return Err(match p.get("repeat").or_else(|| p.get("oms_timeout")) {
+            Some(param) => param.error(why),
+            None => cfg.pos.error(why),
+        });
+    }
+    let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
+        Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
+            .to_string())
+    };
+    let t = Topics {
+        attitude: topic("attitude_topic", "attitude", "nav.attitude")?,
+        position: topic("position_topic", "position", "nav.position")?,
+        velocity: topic("velocity_topic", "velocity", "nav.velocity")?,
+        depth: topic("depth_topic", "depth", "nav.depth")?,
+        altitude: topic("altitude_topic", "altitude", "nav.altitude")?,
+        battery: topic("battery_topic", "battery", "power.battery")?,
+        state: topic("state_topic", "vehicle-state", "vehicle.state")?,
+        status: topic("status_topic", "command-status", "cmd.status")?,
+        course: cat.topic_of("course-command", "cmd.course"),
+        actuator: cat.topic_of("actuator-command", "cmd.actuator"),
+        mission: cat.topic_of("mission-command", "cmd.mission"),
+        gps: p.topic_or("gps_topic", "nav.gps")?.to_string(),
+        dvl: p.topic_or("dvl_topic", "nav.dvl")?.to_string(),
+    };
+    let s = Settings {
+        units: DepthUnits::of_version(version),
+        request,
+        request_every: p.duration_or("request_every", Duration::from_millis(500))?,
+        oms_timeout,
+        repeat,
+        hold: p.duration_or("hold", Duration::from_secs(3))?,
+        max_pitch: p.positive_or("max_pitch", 20.0)?,
+        ack_timeout: p.duration_or("ack_timeout", Duration::from_secs(3))?,
+        data_timeout: p.duration_or("data_timeout", Duration::from_secs(10))?,
+        accepting: words(p.str("accepting").unwrap_or("N M m A W")),
+        in_control: words(p.str("in_control").unwrap_or("P")),
+        fin_scale: p.positive_or("fin_scale", 4.0)?,
+        motor_scale: p.positive_or("motor_scale", 1.27)?,
+    };
+    let mut decl = Declaration::new(ModuleKind::Driver)
+        .format(0, Some(Format::Bytes))
+        .consumes(TopicDecl::topic(p.str("input").unwrap_or("**")))
+        .format(1, Some(Format::Map))
+        .default_tick(Duration::from_millis(100));
+    for (topic, dataset) in [
+        (&t.attitude, "attitude"),
+        (&t.position, "position"),
+        (&t.velocity, "velocity"),
+        (&t.depth, "depth"),
+        (&t.altitude, "altitude"),
+        (&t.battery, "battery"),
+        (&t.state, "vehicle-state"),
+        (&t.status, "command-status"),
+        (&t.gps, "position"),
+        (&t.dvl, "velocity"),
+    ] {
+        decl = decl.produces(TopicDecl::dataset(topic, dataset).on_port(1));
+    }
+    decl = decl
+        .accepts(TopicDecl::dataset(&t.course, "course-command").on_port(1))
+        .accepts(TopicDecl::dataset(&t.actuator, "actuator-command").on_port(1))
+        .accepts(TopicDecl::dataset(&t.mission, "mission-command").on_port(1))
+        .accepts(
+            TopicDecl::topic("cmd.iver.waypoint")
+                .field("lat", "deg")
+                .field("lon", "deg")
+                .field("depth", "m")
+                .field("speed", "m/s")
+                .on_port(1),
+        )
+        .accepts(
+            TopicDecl::topic("cmd.iver.position")
+                .field("lat", "deg")
+                .field("lon", "deg")
+                .on_port(1),
+        )
+        .accepts(
+            TopicDecl::topic("cmd.iver.dvl")
+                .field("x", "m/s")
+                .field("y", "m/s")
+                .on_port(1),
+        );
+    Ok(Built {
+        decl,
+        module: Box::new(Iver {
+            s,
+            t,
+            last_data: None,
+            mode: String::new(),
+            error: String::new(),
+            mission: String::new(),
+            waypoint: None,
+            control: Control::Offline,
+            reason: "no data from the frontseat yet".into(),
+            course: None,
+            last_oms: None,
+            pending: VecDeque::new(),
+            next_id: 1,
+            last_state: None,
+            heading: None,
+            tally: Tally::new(),
+        }),
+    })
+}
+
+/// A fin angle as an `$OMP` byte around the neutral 0x80.
+fn fin_byte(degrees: f64, scale: f64) -> u8 {
+    (128.0 + degrees * scale).round().clamp(0.0, 255.0) as u8
+}
+
+impl Iver {
+    fn control_of(&self, mode: &str) -> Control {
+        if self.s.in_control.iter().any(|m| m == mode) {
+            Control::InControl
+        } else if self.s.accepting.iter().any(|m| m == mode) {
+            Control::Accepting
+        } else {
+            Control::Idle
+        }
+    }
+
+    /// Works out the control state from the link, the data's age and the mode.
+    fn update_control(&mut self, link: &LinkState, now: Instant) {
+        let stale = self
+            .last_data
+            .is_none_or(|t| now.duration_since(t) > self.s.data_timeout);
+        let (control, reason) = match link {
+            LinkState::Down(why) => (Control::Offline, format!("serial link down: {why}")),
+            LinkState::Up if stale => (
+                Control::Offline,
+                format!(
+                    "no data from the frontseat for {:.0}s",
+                    self.s.data_timeout.as_secs_f64()
+                ),
+            ),
+            LinkState::Up => {
+                let c = self.control_of(&self.mode);
+                let reason = if c == Control::Idle {
+                    format!(
+                        "the frontseat is {} (mode {})",
+                        protocol::mode_text(&self.mode),
+                        self.mode
+                    )
+                } else {
+                    String::new()
+                };
+                (c, reason)
+            }
+        };
+        if control != self.control {
+            tracing::info!(
+                "frontseat {} -> {}{}",
+                self.control.name(),
+                control.name(),
+                if reason.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({reason})")
+                }
+            );
+        }
+        self.control = control;
+        self.reason = reason;
+    }
+
+    async fn publish(&self, ctx: &Context, dataset: &str, topic: &str, map: DataMap) {
+        if let Err(e) = ctx.dataset_on(1, Kind::Data, dataset, topic, map).await {
+            self.tally.record(ctx.name(), "invalid-data", &e);
+        }
+    }
+
+    async fn status(
+        &self,
+        ctx: &Context,
+        id: i64,
+        command: &str,
+        state: &str,
+        error: &str,
+        request: &Option<(String, u64)>,
+    ) {
+        let mut m = DataMap::new()
+            .with("command", command)
+            .with("state", state)
+            .with("id", id)
+            .with("error", error);
+        if let Some((origin, seq)) = request {
+            m.insert("origin", origin.as_str());
+            m.insert("request_seq", *seq as i64);
+        }
+        self.publish(ctx, "command-status", &self.t.status, m).await;
+    }
+
+    /// Sends a command; with `report`, it is tracked on `cmd.status`.
+    async fn send(
+        &mut self,
+        ctx: &Context,
+        cmd: &Command,
+        report: bool,
+        request: Option<(String, u64)>,
+    ) {
+        let id = self.next_id;
+        self.next_id += 1;
+        let line = cmd.sentence(self.s.units);
+        if let Err(e) = ctx
+            .publish_on(
+                0,
+                Kind::Data,
+                "iver.command",
+                Payload::from(line.into_bytes()),
+            )
+            .await
+        {
+            if report {
+                self.status(ctx, id, cmd.name(), "refused", &e.to_string(), &request)
+                    .await;
+            }
+            return;
+        }
+        if report {
+            self.status(ctx, id, cmd.name(), "pending", "", &request)
+                .await;
+        }
+        self.pending.push_back(Pending {
+            id,
+            command: cmd.name(),
+            code: cmd.ack_code(),
+            sent: Instant::now(),
+            report,
+            request,
+        });
+    }
+
+    async fn refuse(
+        &mut self,
+        ctx: &Context,
+        command: &str,
+        why: &str,
+        request: Option<(String, u64)>,
+    ) {
+        let id = self.next_id;
+        self.next_id += 1;
+        tracing::warn!(module = ctx.name(), "{command} refused: {why}");
+        self.status(ctx, id, command, "refused", why, &request)
+            .await;
+    }
+
+    async fn on_front(&mut self, ctx: &Context, line: &str) {
+        let now = Instant::now();
+        let parsed = match protocol::parse_front(line) {
+            Ok(p) => p,
+            Err(e) => {
+                self.tally.record(ctx.name(), "unreadable", &e);
+                return;
+            }
+        };
+        self.last_data = Some(now);
+        match parsed {
+            FromFront::Osi(o) => {
+                self.mode = o.mode.clone();
+                self.error = o.error.clone();
+                self.mission = o.mission.clone();
+                self.waypoint = o.next_waypoint;
+                if let (Some(lat), Some(lon)) = (o.lat, o.lon) {
+                    let m = DataMap::new()
+                        .with("lat", lat)
+                        .with("lon", lon)
+                        .with("source", "frontseat");
+                    self.publish(ctx, "position", &self.t.position, m).await;
+                }
+                if let (Some(kn), Some(h)) = (o.speed_knots, o.heading) {
+                    self.heading = Some(h);
+                    let m = DataMap::new()
+                        .with("speed", kn * KNOT)
+                        .with("course", h.rem_euclid(360.0))
+                        .with("reference", "water");
+                    self.publish(ctx, "velocity", &self.t.velocity, m).await;
+                }
+                if let Some(ft) = o.altimeter_feet {
+                    let m = DataMap::new()
+                        .with("altitude", (ft * FOOT).max(0.0))
+                        .with("valid", ft > 0.0);
+                    self.publish(ctx, "altitude", &self.t.altitude, m).await;
+                }
+                if !self.s.request.compass
+                    && let Some(ft) = o.depth_feet
+                {
+                    self.publish(
+                        ctx,
+                        "depth",
+                        &self.t.depth,
+                        DataMap::new().with("depth", ft * FOOT),
+                    )
+                    .await;
+                }
+                if !self.s.request.power
+                    && let Some(pc) = o.battery_percent
+                {
+                    self.publish(
+                        ctx,
+                        "battery",
+                        &self.t.battery,
+                        DataMap::new().with("percent", pc),
+                    )
+                    .await;
+                }
+                let link = ctx
+                    .port(0)
+                    .map_or(LinkState::Up, |p| p.medium().link_state());
+                self.update_control(&link, now);
+                self.publish_state(ctx).await;
+            }
+            FromFront::Compass(c) => {
+                self.heading = Some(c.heading);
+                let mut m = DataMap::new()
+                    .with("yaw", c.heading.rem_euclid(360.0))
+                    .with("pitch", c.pitch)
+                    .with("roll", c.roll);
+                if let Some(t) = c.temperature {
+                    m.insert("temperature", t);
+                }
+                self.publish(ctx, "attitude", &self.t.attitude, m).await;
+                if let Some(ft) = c.depth_feet {
+                    self.publish(
+                        ctx,
+                        "depth",
+                        &self.t.depth,
+                        DataMap::new().with("depth", ft * FOOT),
+                    )
+                    .await;
+                }
+            }
+            FromFront::Opi(p) => {
+                if let Some(pc) = p.percent {
+                    let mut m = DataMap::new().with("percent", pc);
+                    for (k, v) in [
+                        ("remaining", p.remaining_wh),
+                        ("power", p.power_w),
+                        ("voltage", p.volts),
+                        ("current", p.current),
+                        ("minutes", p.minutes),
+                    ] {
+                        if let Some(v) = v {
+                            m.insert(k, v);
+                        }
+                    }
+                    let state = match p.state.as_str() {
+                        "C" => "charging",
+                        "F" => "full",
+                        _ => "discharging",
+                    };
+                    m.insert("state", state);
+                    m.insert("leak", p.leak);
+                    self.publish(ctx, "battery", &self.t.battery, m).await;
+                }
+            }
+            FromFront::Ack(a) => self.on_ack(ctx, a).await,
+            FromFront::Dvl(d) => {
+                if let (Some(vx), Some(vy)) = (d.vx, d.vy) {
+                    let speed = vx.hypot(vy);
+                    let heading = self.heading.unwrap_or(0.0);
+                    // +y is port in the vehicle's frame: starboard sway is -vy
+                    let course = (heading + (-vy).atan2(vx).to_degrees()).rem_euclid(360.0);
+                    let mut m = DataMap::new()
+                        .with("speed", speed)
+                        .with("course", course)
+                        .with("surge", vx)
+                        .with("sway", -vy)
+                        .with("reference", "ground");
+                    if let Some(vz) = d.vz {
+                        m.insert("heave", vz);
+                    }
+                    self.publish(ctx, "velocity", &self.t.dvl, m).await;
+                }
+            }
+            FromFront::Rmc(line) => {
+                if let Ok(p) = parse(&line)
+                    && let Sentence::Rmc(r) = p.sentence
+                    && let (Some(lat), Some(lon)) = (r.lat, r.lon)
+                {
+                    let m = DataMap::new()
+                        .with("lat", lat)
+                        .with("lon", lon)
+                        .with("source", "gps");
+                    self.publish(ctx, "position", &self.t.gps, m).await;
+                }
+            }
+            FromFront::Other(addr) => {
+                self.tally
+                    .record(ctx.name(), "unknown-sentence", format_args!("${addr}"));
+            }
+        }
+    }
+
+    async fn on_ack(&mut self, ctx: &Context, a: protocol::Ack) {
+        let Some(i) = self.pending.iter().position(|p| p.code == a.msg_type) else {
+            self.tally.record(
+                ctx.name(),
+                "unexpected-ack",
+                format_args!("$ACK for message type {}", a.msg_type),
+            );
+            return;
+        };
+        let Some(p) = self.pending.remove(i) else {
+            return;
+        };
+        if a.status == 0 {
+            if p.report {
+                self.status(ctx, p.id, p.command, "acknowledged", "", &p.request)
+                    .await;
+            }
+        } else {
+            let text = format!("error {}: {}", a.error, protocol::error_text(a.error));
+            tracing::warn!(
+                module = ctx.name(),
+                "the frontseat refused ${}: {text}",
+                p.command
+            );
+            // a refused repeat of a course is reported too: the course is not being held
+            self.status(ctx, p.id, p.command, "refused", &text, &p.request)
+                .await;
+        }
+    }
+
+    /// Publishes the vehicle state when it changed, and at least once a second.
+    async fn publish_state(&mut self, ctx: &Context) {
+        let now = Instant::now();
+        let changed = self
+            .last_state
+            .as_ref()
+            .is_none_or(|(c, m, e, _)| *c != self.control || *m != self.mode || *e != self.error);
+        let due = self
+            .last_state
+            .as_ref()
+            .is_none_or(|(_, _, _, at)| now.duration_since(*at) >= Duration::from_secs(1));
+        if !(changed || due) {
+            return;
+        }
+        let mut m = DataMap::new()
+            .with(
+                "mode",
+                if self.mode.is_empty() {
+                    "unknown"
+                } else {
+                    self.mode.as_str()
+                },
+            )
+            .with("control", self.control.name())
+            .with("error", protocol::error_state_text(&self.error))
+            .with("mission", self.mission.as_str())
+            .with("reason", self.reason.as_str());
+        if let Some(w) = self.waypoint.filter(|w| *w >= 0) {
+            m.insert("waypoint", w);
+        }
+        if let Some(c) = &self.course {
+            m.insert("commanded_heading", c.heading);
+            m.insert("commanded_depth", c.depth);
+            m.insert("commanded_speed", c.speed);
+        }
+        self.publish(ctx, "vehicle-state", &self.t.state, m).await;
+        self.last_state = Some((self.control, self.mode.clone(), self.error.clone(), now));
+    }
+
+    async fn on_command(&mut self, ctx: &Context, msg: Message) {
+        let Some(map) = msg.payload.as_map() else {
+            return;
+        };
+        let request = Some((msg.origin().to_string(), msg.seq()));
+        let topic = msg.topic.as_str();
+        let f = |k: &str| map.get_f64(k);
+        if topic == self.t.course {
+            if let Err(e) = ctx.catalogue().validate("course-command", map) {
+                return self.refuse(ctx, "OMS", &e.to_string(), request).await;
+            }
+            if !self.control.commandable() {
+                let why = self.reason.clone();
+                self.course = None;
+                return self.refuse(ctx, "OMS", &why, request).await;
+            }
+            let (heading, depth, speed) = (
+                f("heading").unwrap_or(0.0),
+                f("depth").unwrap_or(0.0),
+                f("speed").unwrap_or(0.0),
+            );
+            let hold = f("timeout")
+                .and_then(seabus_medium::parse::secs)
+                .filter(|d| !d.is_zero())
+                .unwrap_or(self.s.hold);
+            let oms = Command::Oms {
+                heading,
+                depth,
+                max_pitch: f("max_pitch").unwrap_or(self.s.max_pitch),
+                speed_knots: speed / KNOT,
+                timeout: self.s.oms_timeout,
+            };
+            // a new course is reported; the same course again only keeps it alive
+            let same = self
+                .course
+                .as_ref()
+                .is_some_and(|c| c.heading == heading && c.depth == depth && c.speed == speed);
+            let due = self.last_oms.is_none_or(|t| t.elapsed() >= self.s.repeat);
+            self.course = Some(Course {
+                oms: oms.clone(),
+                until: Instant::now() + hold,
+                heading,
+                depth,
+                speed,
+            });
+            if !same || due {
+                self.send(ctx, &oms, !same, request).await;
+                self.last_oms = Some(Instant::now());
+            }
+        } else if topic == self.t.actuator {
+            if let Err(e) = ctx.catalogue().validate("actuator-command", map) {
+                return self.refuse(ctx, "OMP", &e.to_string(), request).await;
+            }
+            if !self.control.commandable() {
+                let why = self.reason.clone();
+                return self.refuse(ctx, "OMP", &why, request).await;
+            }
+            let rudder = f("rudder").unwrap_or(0.0);
+            let elevator = f("elevator").unwrap_or(0.0);
+            let thrust = f("thrust").unwrap_or(0.0);
+            let (fs, ms) = (self.s.fin_scale, self.s.motor_scale);
+            let cmd = Command::Omp {
+                bytes: [
+                    fin_byte(rudder, fs),
+                    fin_byte(rudder, fs),
+                    fin_byte(elevator, fs),
+                    fin_byte(elevator, fs),
+                    fin_byte(thrust, ms),
+                ],
+                timeout: f("timeout").unwrap_or(3.0).clamp(0.0, 120.0),
+            };
+            self.send(ctx, &cmd, true, request).await;
+        } else if topic == self.t.mission {
+            if let Err(e) = ctx.catalogue().validate("mission-command", map) {
+                return self.refuse(ctx, "mission", &e.to_string(), request).await;
+            }
+            if self.control == Control::Offline {
+                let why = self.reason.clone();
+                return self.refuse(ctx, "mission", &why, request).await;
+            }
+            let cmd = match map.get_str("action").unwrap_or("") {
+                "start" => Command::OmStart {
+                    ignore_gps: map.get_bool("ignore_gps").unwrap_or(false),
+                    ignore_sounder: map.get_bool("ignore_sounder").unwrap_or(false),
+                    ignore_pressure: map.get_bool("ignore_pressure").unwrap_or(false),
+                    mission_type: 0,
+                    mission: map.get_str("name").unwrap_or("").to_string(),
+                },
+                "stop" | "abort" => Command::OmStop,
+                "goto" => match map.get_i64("waypoint").filter(|w| (0..=999).contains(w)) {
+                    Some(w) => Command::Ojw(w as u32),
+                    None => {
+                        return self
+                            .refuse(ctx, "OJW", "goto needs a waypoint from 0 to 999", request)
+                            .await;
+                    }
+                },
+                other => {
+                    let why = format!(
+                        "the Iver frontseat cannot `{other}` a mission (start, stop, abort, goto)"
+                    );
+                    return self.refuse(ctx, "mission", &why, request).await;
+                }
+            };
+            if matches!(cmd, Command::OmStop) {
+                self.course = None;
+            }
+            self.send(ctx, &cmd, true, request).await;
+        } else if topic == "cmd.iver.waypoint" {
+            if !self.control.commandable() {
+                let why = self.reason.clone();
+                return self.refuse(ctx, "OMW", &why, request).await;
+            }
+            let cmd = if map.get_str("action") == Some("stop") {
+                Command::Omw(None)
+            } else {
+                match (f("lat"), f("lon")) {
+                    (Some(lat), Some(lon)) => Command::Omw(Some(Waypoint {
+                        clear: map.get_bool("clear").unwrap_or(false),
+                        lat,
+                        lon,
+                        depth: f("depth").unwrap_or(0.0),
+                        speed_knots: f("speed").unwrap_or(1.0) / KNOT,
+                    })),
+                    _ => {
+                        return self
+                            .refuse(ctx, "OMW", "a waypoint needs lat and lon", request)
+                            .await;
+                    }
+                }
+            };
+            self.send(ctx, &cmd, true, request).await;
+        } else if topic == "cmd.iver.position" {
+            match (f("lat"), f("lon")) {
+                (Some(lat), Some(lon)) => {
+                    let cmd = Command::Opos {
+                        lat,
+                        lon,
+                        speed_knots: f("speed").unwrap_or(0.0) / KNOT,
+                    };
+                    self.send(ctx, &cmd, true, request).await;
+                }
+                _ => {
+                    self.refuse(ctx, "OPOS", "a position needs lat and lon", request)
+                        .await
+                }
+            }
+        } else if topic == "cmd.iver.dvl" {
+            match (f("x"), f("y")) {
+                (Some(x), Some(y)) => {
+                    let cmd = Command::Odvl {
+                        x,
+                        y,
+                        timeout: f("timeout").unwrap_or(3.0).clamp(0.0, 120.0),
+                    };
+                    self.send(ctx, &cmd, true, request).await;
+                }
+                _ => {
+                    self.refuse(ctx, "ODVL", "a velocity needs x and y", request)
+                        .await
+                }
+            }
+        }
+    }
+
+    async fn on_tick(&mut self, ctx: &Context) {
+        let now = Instant::now();
+        let link = ctx
+            .port(0)
+            .map_or(LinkState::Up, |p| p.medium().link_state());
+        self.update_control(&link, now);
+        // keep the course alive while it is valid; let it lapse when commands stop
+        if let Some(c) = &self.course {
+            if now >= c.until {
+                tracing::info!(
+                    module = ctx.name(),
+                    "course commands stopped; the frontseat's $OMS will time out"
+                );
+                self.course = None;
+            } else if !self.control.commandable() {
+                self.course = None;
+            } else if self
+                .last_oms
+                .is_none_or(|t| now.duration_since(t) >= self.s.repeat)
+            {
+                let oms = c.oms.clone();
+                self.send(ctx, &oms, false, None).await;
+                self.last_oms = Some(now);
+            }
+        }
+        // unanswered commands time out
+        while let Some(p) = self.pending.front() {
+            if now.duration_since(p.sent) < self.s.ack_timeout {
+                break;
+            }
+            let Some(p) = self.pending.pop_front() else {
+                break;
+            };
+            if p.report || p.command == "OMS" {
+                let why = format!("no $ACK within {:.1}s", self.s.ack_timeout.as_secs_f64());
+                self.status(ctx, p.id, p.command, "timed-out", &why, &p.request)
+                    .await;
+            }
+        }
+        self.publish_state(ctx).await;
+    }
+}
+
+#[async_trait]
+impl Module for Iver {
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        ctx.every(REQUEST, self.s.request_every);
+        Ok(())
+    }
+
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        port: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
+        if port == 0 {
+            if let Some(b) = msg.payload.as_bytes() {
+                let line = String::from_utf8_lossy(b).into_owned();
+                self.on_front(ctx, &line).await;
+            }
+        } else {
+            self.on_command(ctx, msg).await;
+        }
+        Ok(())
+    }
+
+    async fn on_timer(&mut self, ctx: &mut Context, timer: TimerId) -> Result<(), ModuleError> {
+        match timer {
+            TICK => self.on_tick(ctx).await,
+            REQUEST => {
+                let osd = Command::Osd(self.s.request.clone());
+                self.send(ctx, &osd, false, None).await;
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fin_bytes_are_centred_and_clamped() {
+        assert_eq!(fin_byte(0.0, 4.0), 0x80);
+        assert_eq!(fin_byte(10.0, 4.0), 0xA8);
+        assert_eq!(fin_byte(-10.0, 4.0), 0x58);
+        assert_eq!(fin_byte(100.0, 4.0), 0xFF);
+        assert_eq!(fin_byte(100.0, 1.27), 0xFF);
+        assert_eq!(fin_byte(-100.0, 1.27), 0x01);
+    }
+}

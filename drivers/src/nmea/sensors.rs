@@ -1,0 +1,409 @@
+//! NMEA sensor drivers: a GPS, a heading sensor and an echo sounder, each turning the sentences
+//! it reads on a serial medium into standard datasets on a bus.
+//!
+//! Each is placed on two media, the serial line first (`media="gps-line bus"`). Parameters common to
+//! all three: `talkers` (only sentences from these talkers, such as `GP GN`; default any), one
+//! parameter per output naming the sentence formatters that feed it, and one naming its topic.
+//!
+//! | type | output ← sentences (parameter, default) | topic parameter (default) |
+//! |---|---|---|
+//! | `nmea-gps` | position ← `position` (`GGA GNS GLL`); velocity ← `velocity` (`RMC VTG`) | `topic` (`nav.position`), `velocity_topic` (`nav.velocity`) |
+//! | `nmea-heading` | heading ← `heading` (`HDT HDG HDM`); attitude when `XDR` pitch and roll are fresh | `topic` (`nav.heading`), `attitude_topic` (`nav.attitude`) |
+//! | `nmea-sounder` | altitude ← `altitude` (`DBT DPT DBK`) | `topic` (`nav.altitude`) |
+//!
+//! `nmea-gps` also takes `source` (default `gps`). `nmea-heading` corrects `HDG` by its deviation and
+//! variation into a true heading, takes `variation` (degrees east, used when a magnetic heading comes
+//! without one) and `fresh` (how long a pitch and roll stay usable, default 2s). `nmea-sounder` takes
+//! `offset` (metres added to depths measured from the transducer).
+
+use super::sentence::{Parsed, Sentence, parse};
+use crate::units::{FOOT, KNOT};
+use async_trait::async_trait;
+use seabus_medium::tally::Tally;
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Format, Kind, Message};
+use seabus_modules::Catalogue;
+use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TopicDecl};
+use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// The `nmea-gps` module type.
+pub const GPS: ModuleType = ModuleType {
+    name: "nmea-gps",
+    kind: ModuleKind::Driver,
+    summary: "an NMEA GPS: position, velocity and fix quality",
+    build: |c, cat| build(c, cat, Role::Gps),
+};
+
+/// The `nmea-heading` module type.
+pub const HEADING: ModuleType = ModuleType {
+    name: "nmea-heading",
+    kind: ModuleKind::Driver,
+    summary: "an NMEA compass or gyro: heading, and attitude with XDR pitch and roll",
+    build: |c, cat| build(c, cat, Role::Heading),
+};
+
+/// The `nmea-sounder` module type.
+pub const SOUNDER: ModuleType = ModuleType {
+    name: "nmea-sounder",
+    kind: ModuleKind::Driver,
+    summary: "an NMEA echo sounder: altitude above the sea floor and water depth",
+    build: |c, cat| build(c, cat, Role::Sounder),
+};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Gps,
+    Heading,
+    Sounder,
+}
+
+/// One output: the formatters that feed it, its dataset and topic.
+struct Output {
+    feeds: Vec<String>,
+    dataset: &'static str,
+    topic: String,
+}
+
+impl Output {
+    fn fed_by(&self, formatter: &str) -> bool {
+        self.feeds.iter().any(|f| f == formatter)
+    }
+}
+
+struct Sensor {
+    role: Role,
+    talkers: Option<Vec<String>>,
+    outputs: Vec<Output>,
+    source: String,
+    variation: Option<f64>,
+    offset: f64,
+    fresh: Duration,
+    pitch_roll: Option<(f64, f64, Instant)>,
+    tally: Tally,
+}
+
+fn words(s: &str) -> Vec<String> {
+    s.split([' ', ','])
+        .filter(|w| !w.is_empty())
+        .map(str::to_string)
+        .collect()
+}
+
+fn build(cfg: &ModuleConfig, cat: &Catalogue, role: Role) -> Result<Built, FileError> {
+    let p = &cfg.params;
+    let list = |name: &str, default: &str| -> Result<Vec<String>, FileError> {
+        let v = words(p.str(name).unwrap_or(default));
+        match p.get(name) {
+            Some(param) if v.is_empty() => Err(param.error("names no sentence")),
+            _ => Ok(v),
+        }
+    };
+    let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
+        Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
+            .to_string())
+    };
+    let outputs = match role {
+        Role::Gps => vec![
+            Output {
+                feeds: list("position", "GGA GNS GLL")?,
+                dataset: "position",
+                topic: topic("topic", "position", "nav.position")?,
+            },
+            Output {
+                feeds: list("velocity", "RMC VTG")?,
+                dataset: "velocity",
+                topic: topic("velocity_topic", "velocity", "nav.velocity")?,
+            },
+        ],
+        Role::Heading => vec![
+            Output {
+                feeds: list("heading", "HDT HDG HDM")?,
+                dataset: "heading",
+                topic: topic("topic", "heading", "nav.heading")?,
+            },
+            Output {
+                feeds: vec!["XDR".into()],
+                dataset: "attitude",
+                topic: topic("attitude_topic", "attitude", "nav.attitude")?,
+            },
+        ],
+        Role::Sounder => vec![Output {
+            feeds: list("altitude", "DBT DPT DBK")?,
+            dataset: "altitude",
+            topic: topic("topic", "altitude", "nav.altitude")?,
+        }],
+    };
+    let mut decl = Declaration::new(ModuleKind::Driver)
+        .format(0, Some(Format::Bytes))
+        .consumes(TopicDecl::topic(p.str("input").unwrap_or("nmea.**")))
+        .format(1, Some(Format::Map));
+    for o in &outputs {
+        decl = decl.produces(TopicDecl::dataset(&o.topic, o.dataset).on_port(1));
+    }
+    let talkers = p.get("talkers").map(|t| words(&t.value));
+    Ok(Built {
+        decl,
+        module: Box::new(Sensor {
+            role,
+            talkers,
+            outputs,
+            source: if role == Role::Gps {
+                p.str("source").unwrap_or("gps").to_string()
+            } else {
+                String::new()
+            },
+            variation: if role == Role::Heading {
+                p.parse("variation", "degrees east")?
+            } else {
+                None
+            },
+            offset: if role == Role::Sounder {
+                p.float_or("offset", 0.0)?
+            } else {
+                0.0
+            },
+            fresh: if role == Role::Heading {
+                p.duration_or("fresh", Duration::from_secs(2))?
+            } else {
+                Duration::ZERO
+            },
+            pitch_roll: None,
+            tally: Tally::new(),
+        }),
+    })
+}
+
+/// What one sentence gives: a dataset to publish on an output.
+type Reading = (usize, DataMap);
+
+impl Sensor {
+    /// Turns a parsed sentence into readings.
+    fn read(&mut self, parsed: &Parsed, now: Instant) -> Vec<Reading> {
+        let f = parsed.formatter.as_str();
+        let fed = |i: usize| self.outputs.get(i).is_some_and(|o| o.fed_by(f));
+        let mut out = Vec::new();
+        match (&parsed.sentence, self.role) {
+            (Sentence::Gga(g), Role::Gps) if fed(0) => {
+                if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
+                    let mut m = DataMap::new().with("lat", lat).with("lon", lon);
+                    m.insert("fix", g.fix_type.map_or(0, fix_quality));
+                    if let Some(n) = g.fix_satellites {
+                        m.insert("satellites", n);
+                    }
+                    if let Some(h) = g.hdop {
+                        m.insert("hdop", f64::from(h));
+                    }
+                    if let Some(a) = g.altitude {
+                        m.insert("alt", f64::from(a));
+                    }
+                    m.insert("source", self.source.as_str());
+                    out.push((0, m));
+                }
+            }
+            (Sentence::Gns(g), Role::Gps) if fed(0) => {
+                if let (Some(lat), Some(lon)) = (g.lat, g.lon) {
+                    let mut m = DataMap::new().with("lat", lat).with("lon", lon);
+                    m.insert("satellites", i64::from(g.nsattelites));
+                    if let Some(h) = g.hdop {
+                        m.insert("hdop", f64::from(h));
+                    }
+                    m.insert("source", self.source.as_str());
+                    out.push((0, m));
+                }
+            }
+            (Sentence::Gll(g), Role::Gps) if fed(0) && g.valid => {
+                if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
+                    out.push((
+                        0,
+                        DataMap::new()
+                            .with("lat", lat)
+                            .with("lon", lon)
+                            .with("source", self.source.as_str()),
+                    ));
+                }
+            }
+            (Sentence::Rmc(r), Role::Gps) => {
+                let valid = r.status_of_fix != nmea::sentences::rmc::RmcStatusOfFix::Invalid;
+                if valid
+                    && fed(0)
+                    && let (Some(lat), Some(lon)) = (r.lat, r.lon)
+                {
+                    out.push((
+                        0,
+                        DataMap::new()
+                            .with("lat", lat)
+                            .with("lon", lon)
+                            .with("source", self.source.as_str()),
+                    ));
+                }
+                if valid
+                    && fed(1)
+                    && let (Some(sog), Some(cog)) = (r.speed_over_ground, r.true_course)
+                {
+                    out.push((1, velocity(f64::from(sog) * KNOT, f64::from(cog))));
+                }
+            }
+            (Sentence::Vtg(v), Role::Gps) if fed(1) => {
+                if let (Some(sog), Some(cog)) = (v.speed_over_ground, v.true_course) {
+                    out.push((1, velocity(f64::from(sog) * KNOT, f64::from(cog))));
+                }
+            }
+            (Sentence::Hdt(h), Role::Heading) if fed(0) => {
+                if let Some(hdg) = h.heading {
+                    out.push((0, heading(f64::from(hdg), false)));
+                }
+            }
+            (
+                Sentence::Hdg {
+                    heading: Some(hdg),
+                    deviation,
+                    variation,
+                },
+                Role::Heading,
+            ) if fed(0) => {
+                let dev = deviation.unwrap_or(0.0);
+                match variation.or(self.variation) {
+                    Some(var) => {
+                        let mut m = heading(hdg + dev + var, false);
+                        m.insert("deviation", dev);
+                        m.insert("variation", var);
+                        out.push((0, m));
+                    }
+                    None => {
+                        let mut m = heading(hdg + dev, true);
+                        m.insert("deviation", dev);
+                        out.push((0, m));
+                    }
+                }
+            }
+            (Sentence::Hdm { heading: Some(hdg) }, Role::Heading) if fed(0) => match self.variation
+            {
+                Some(var) => out.push((0, heading(hdg + var, false).with("variation", var))),
+                None => out.push((0, heading(*hdg, true))),
+            },
+            (Sentence::Xdr(x), Role::Heading) => {
+                let angle = |name: &str| {
+                    x.iter()
+                        .find(|t| t.kind == "A" && t.name.eq_ignore_ascii_case(name))
+                        .and_then(|t| t.value)
+                };
+                if let (Some(pitch), Some(roll)) = (angle("PITCH"), angle("ROLL")) {
+                    self.pitch_roll = Some((pitch, roll, now));
+                }
+            }
+            (Sentence::Dbt { metres, feet, .. }, Role::Sounder) if fed(0) => {
+                if let Some(d) = metres.or(feet.map(|f| f * FOOT)) {
+                    out.push((0, altitude(d + self.offset)));
+                }
+            }
+            (Sentence::Dpt(d), Role::Sounder) if fed(0) => {
+                if let Some(depth) = d.water_depth {
+                    out.push((0, altitude(depth + self.offset)));
+                }
+            }
+            (Sentence::Dbk(d), Role::Sounder) if fed(0) => {
+                if let Some(depth) = d.depth_meters.or(d.depth_feet.map(|f| f * FOOT)) {
+                    out.push((0, altitude(depth + self.offset)));
+                }
+            }
+            _ => {}
+        }
+        // a heading sensor that also gives pitch and roll is an attitude sensor
+        if self.role == Role::Heading
+            && let Some((_, m)) = out.iter().find(|(i, _)| *i == 0)
+            && let Some((pitch, roll, at)) = self.pitch_roll
+            && now.duration_since(at) <= self.fresh
+            && !m.get_bool("magnetic").unwrap_or(false)
+        {
+            let yaw = m.get_f64("heading").unwrap_or(0.0);
+            out.push((
+                1,
+                DataMap::new()
+                    .with("yaw", yaw)
+                    .with("pitch", pitch)
+                    .with("roll", roll),
+            ));
+        }
+        out
+    }
+}
+
+fn fix_quality(t: nmea::sentences::FixType) -> i64 {
+    use nmea::sentences::FixType::*;
+    match t {
+        Invalid => 0,
+        Gps => 1,
+        DGps => 2,
+        Pps => 3,
+        Rtk => 4,
+        FloatRtk => 5,
+        Estimated => 6,
+        Manual => 7,
+        Simulation => 8,
+    }
+}
+
+fn velocity(speed: f64, course: f64) -> DataMap {
+    let c = course.to_radians();
+    DataMap::new()
+        .with("speed", speed)
+        .with("course", course.rem_euclid(360.0))
+        .with("north", speed * c.cos())
+        .with("east", speed * c.sin())
+        .with("reference", "ground")
+}
+
+fn heading(h: f64, magnetic: bool) -> DataMap {
+    DataMap::new()
+        .with("heading", h.rem_euclid(360.0))
+        .with("magnetic", magnetic)
+}
+
+fn altitude(a: f64) -> DataMap {
+    DataMap::new()
+        .with("altitude", a.max(0.0))
+        .with("valid", true)
+}
+
+#[async_trait]
+impl Module for Sensor {
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        port: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
+        if port != 0 {
+            return Ok(());
+        }
+        let Some(bytes) = msg.payload.as_bytes() else {
+            return Ok(());
+        };
+        let line = String::from_utf8_lossy(bytes);
+        let parsed = match parse(&line) {
+            Ok(p) => p,
+            Err(e) => {
+                self.tally.record(ctx.name(), "unreadable", &e);
+                return Ok(());
+            }
+        };
+        if let Some(t) = &self.talkers
+            && !parsed.talker.is_empty()
+            && !t.contains(&parsed.talker)
+        {
+            return Ok(());
+        }
+        for (i, map) in self.read(&parsed, Instant::now()) {
+            let o = &self.outputs[i];
+            if let Err(e) = ctx
+                .dataset_on(1, Kind::Data, o.dataset, &o.topic, map)
+                .await
+            {
+                self.tally.record(ctx.name(), "invalid", &e);
+            }
+        }
+        Ok(())
+    }
+}

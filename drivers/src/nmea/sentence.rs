@@ -1,0 +1,530 @@
+//! NMEA 0183 sentences: parsing (the `nmea` crate where it covers a sentence, our own parsers for
+//! the marine sentences it lacks) and building (for simulators).
+//!
+//! Input is one whole sentence with a correct checksum, as the serial medium's NMEA framing hands
+//! it out. Parsing never panics; a sentence it does not know is [`Sentence::Other`].
+
+use seabus_medium::serial::framing::nmea_sentence;
+use std::fmt;
+use thiserror::Error;
+
+/// Why a sentence could not be read.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error("{sentence}: {reason}")]
+pub struct NmeaError {
+    /// The sentence (shortened).
+    pub sentence: String,
+    /// What was wrong.
+    pub reason: String,
+}
+
+fn err(sentence: &str, reason: impl fmt::Display) -> NmeaError {
+    NmeaError {
+        sentence: sentence.chars().take(90).collect(),
+        reason: reason.to_string(),
+    }
+}
+
+/// One transducer reading of an `XDR` sentence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Transducer {
+    /// Transducer type (`A` angle, `C` temperature, `P` pressure, …).
+    pub kind: String,
+    /// The value, when given.
+    pub value: Option<f64>,
+    /// Unit (`D` degrees, `C` Celsius, `B` bar, …).
+    pub unit: String,
+    /// The transducer's name (`PITCH`, `ROLL`, …).
+    pub name: String,
+}
+
+/// A parsed sentence.
+#[derive(Debug, PartialEq)]
+pub enum Sentence {
+    /// GGA: fix data.
+    Gga(nmea::sentences::GgaData),
+    /// RMC: recommended minimum.
+    Rmc(nmea::sentences::RmcData),
+    /// VTG: course and speed over ground.
+    Vtg(nmea::sentences::VtgData),
+    /// GLL: position.
+    Gll(nmea::sentences::GllData),
+    /// GNS: GNSS fix.
+    Gns(nmea::sentences::GnsData),
+    /// HDT: true heading.
+    Hdt(nmea::sentences::HdtData),
+    /// DPT: depth below transducer, with offset.
+    Dpt(nmea::sentences::DptData),
+    /// DBS: depth below surface.
+    Dbs(nmea::sentences::DbsData),
+    /// DBK: depth below keel.
+    Dbk(nmea::sentences::DbkData),
+    /// MTW: water temperature.
+    Mtw(nmea::sentences::MtwData),
+    /// VHW: speed and heading through the water.
+    Vhw(nmea::sentences::VhwData),
+    /// ZDA: time and date.
+    Zda(nmea::sentences::ZdaData),
+    /// HDG: magnetic sensor heading, deviation and variation (east positive).
+    Hdg {
+        /// Sensor heading, degrees.
+        heading: Option<f64>,
+        /// Deviation, degrees, east positive.
+        deviation: Option<f64>,
+        /// Variation, degrees, east positive.
+        variation: Option<f64>,
+    },
+    /// HDM: magnetic heading.
+    Hdm {
+        /// Heading, degrees magnetic.
+        heading: Option<f64>,
+    },
+    /// DBT: depth below transducer.
+    Dbt {
+        /// Feet.
+        feet: Option<f64>,
+        /// Metres.
+        metres: Option<f64>,
+        /// Fathoms.
+        fathoms: Option<f64>,
+    },
+    /// ROT: rate of turn.
+    Rot {
+        /// Degrees per minute, negative to port.
+        rate: Option<f64>,
+        /// Whether the data is valid (`A`).
+        valid: bool,
+    },
+    /// XDR: transducer measurements.
+    Xdr(Vec<Transducer>),
+    /// A sentence seabus does not read (AIS, proprietary, …), with its address.
+    Other(String),
+}
+
+/// A sentence with its talker (`GP`, `HC`, …; empty for proprietary and non-standard addresses).
+#[derive(Debug, PartialEq)]
+pub struct Parsed {
+    /// Talker id.
+    pub talker: String,
+    /// Sentence formatter (`GGA`, `HDG`, …), or the whole address when it is not standard.
+    pub formatter: String,
+    /// The contents.
+    pub sentence: Sentence,
+}
+
+/// The address of a sentence: the letters after `$`/`!` (`GPGGA`, `OSI`, and `C` for the Iver
+/// compass sentence `$C82.8P…`, which has no comma) — the same rule that names its topic on a serial
+/// medium.
+pub fn address(line: &str) -> &str {
+    let body = line.get(1..).unwrap_or("");
+    let end = body
+        .find(|c: char| !c.is_ascii_alphabetic())
+        .unwrap_or(body.len());
+    &body[..end]
+}
+
+/// The fields of a sentence: between the first comma and the `*`.
+pub fn fields(line: &str) -> Vec<&str> {
+    let body = line.get(1..).unwrap_or("");
+    let body = match body.rfind('*') {
+        Some(i) => &body[..i],
+        None => body,
+    };
+    match body.find(',') {
+        Some(i) => body[i + 1..].split(',').collect(),
+        None => Vec::new(),
+    }
+}
+
+fn num(s: &str) -> Option<f64> {
+    let s = s.trim();
+    if s.is_empty() {
+        return None;
+    }
+    s.parse::<f64>().ok().filter(|v| v.is_finite())
+}
+
+/// A field that must be a number when present.
+fn opt_num(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>, NmeaError> {
+    match f.get(i).map(|s| s.trim()) {
+        None | Some("") => Ok(None),
+        Some(s) => num(s)
+            .map(Some)
+            .ok_or_else(|| err(line, format!("{what} `{s}` is not a number"))),
+    }
+}
+
+/// An east/west signed value (`value,E` positive, `value,W` negative).
+fn east_west(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>, NmeaError> {
+    let v = opt_num(line, f, i, what)?;
+    Ok(match (v, f.get(i + 1).map(|s| s.trim())) {
+        (Some(v), Some("W")) => Some(-v),
+        (Some(v), _) => Some(v),
+        (None, _) => None,
+    })
+}
+
+/// Parses one sentence (with its checksum, without line ending).
+pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
+    if !line.is_ascii() || !line.starts_with(['$', '!']) {
+        return Err(err(line, "not an NMEA sentence"));
+    }
+    let addr = address(line);
+    let standard =
+        addr.len() == 5 && addr.bytes().all(|b| b.is_ascii_uppercase()) && !addr.starts_with('P');
+    if !standard || line.starts_with('!') {
+        return Ok(Parsed {
+            talker: String::new(),
+            formatter: addr.to_string(),
+            sentence: Sentence::Other(addr.to_string()),
+        });
+    }
+    let (talker, formatter) = addr.split_at(2);
+    let f = fields(line);
+    let by_crate = |line: &str| -> Result<nmea::ParseResult, NmeaError> {
+        nmea::parse_str(line).map_err(|e| err(line, e))
+    };
+    let sentence = match formatter {
+        "GGA" | "RMC" | "VTG" | "GLL" | "GNS" | "HDT" | "DPT" | "DBS" | "DBK" | "MTW" | "VHW"
+        | "ZDA" => match by_crate(line)? {
+            nmea::ParseResult::GGA(d) => Sentence::Gga(d),
+            nmea::ParseResult::RMC(d) => Sentence::Rmc(d),
+            nmea::ParseResult::VTG(d) => Sentence::Vtg(d),
+            nmea::ParseResult::GLL(d) => Sentence::Gll(d),
+            nmea::ParseResult::GNS(d) => Sentence::Gns(d),
+            nmea::ParseResult::HDT(d) => Sentence::Hdt(d),
+            nmea::ParseResult::DPT(d) => Sentence::Dpt(d),
+            nmea::ParseResult::DBS(d) => Sentence::Dbs(d),
+            nmea::ParseResult::DBK(d) => Sentence::Dbk(d),
+            nmea::ParseResult::MTW(d) => Sentence::Mtw(d),
+            nmea::ParseResult::VHW(d) => Sentence::Vhw(d),
+            nmea::ParseResult::ZDA(d) => Sentence::Zda(d),
+            _ => Sentence::Other(addr.to_string()),
+        },
+        "HDG" => Sentence::Hdg {
+            heading: opt_num(line, &f, 0, "heading")?,
+            deviation: east_west(line, &f, 1, "deviation")?,
+            variation: east_west(line, &f, 3, "variation")?,
+        },
+        "HDM" => Sentence::Hdm {
+            heading: opt_num(line, &f, 0, "heading")?,
+        },
+        "DBT" => Sentence::Dbt {
+            feet: opt_num(line, &f, 0, "depth in feet")?,
+            metres: opt_num(line, &f, 2, "depth in metres")?,
+            fathoms: opt_num(line, &f, 4, "depth in fathoms")?,
+        },
+        "ROT" => Sentence::Rot {
+            rate: opt_num(line, &f, 0, "rate of turn")?,
+            valid: f.get(1).is_some_and(|s| s.trim() == "A"),
+        },
+        "XDR" => {
+            if f.len() % 4 != 0 {
+                return Err(err(
+                    line,
+                    format!("XDR has {} fields, a multiple of 4 was expected", f.len()),
+                ));
+            }
+            let mut out = Vec::with_capacity(f.len() / 4);
+            for (i, q) in f.chunks(4).enumerate() {
+                out.push(Transducer {
+                    kind: q[0].trim().to_string(),
+                    value: opt_num(line, &f, i * 4 + 1, "measurement")?,
+                    unit: q[2].trim().to_string(),
+                    name: q[3].trim().to_string(),
+                });
+            }
+            Sentence::Xdr(out)
+        }
+        _ => Sentence::Other(addr.to_string()),
+    };
+    Ok(Parsed {
+        talker: talker.to_string(),
+        formatter: formatter.to_string(),
+        sentence,
+    })
+}
+
+/// Writes a latitude as `ddmm.mmmm,N`.
+pub fn lat_field(lat: f64) -> String {
+    let hemi = if lat < 0.0 { 'S' } else { 'N' };
+    let a = lat.abs();
+    let deg = a.trunc();
+    format!("{:02}{:07.4},{hemi}", deg as u32, (a - deg) * 60.0)
+}
+
+/// Writes a longitude as `dddmm.mmmm,E`.
+pub fn lon_field(lon: f64) -> String {
+    let hemi = if lon < 0.0 { 'W' } else { 'E' };
+    let a = lon.abs();
+    let deg = a.trunc();
+    format!("{:03}{:07.4},{hemi}", deg as u32, (a - deg) * 60.0)
+}
+
+/// Time of day as `hhmmss.ss` from seconds since midnight.
+pub fn time_field(secs_of_day: f64) -> String {
+    let s = secs_of_day.rem_euclid(86_400.0);
+    let h = (s / 3600.0).floor();
+    let m = ((s - h * 3600.0) / 60.0).floor();
+    let sec = s - h * 3600.0 - m * 60.0;
+    format!("{:02}{:02}{:05.2}", h as u32, m as u32, sec)
+}
+
+/// Builders of the sentences simulators send.
+pub mod build {
+    use super::*;
+
+    /// `$<talker>GGA`: a fix with `satellites` satellites, quality 1 when `fixed`, else 0.
+    pub fn gga(
+        talker: &str,
+        secs_of_day: f64,
+        lat: f64,
+        lon: f64,
+        fixed: bool,
+        satellites: u32,
+    ) -> String {
+        let q = if fixed { 1 } else { 0 };
+        nmea_sentence(
+            b'$',
+            &format!(
+                "{talker}GGA,{},{},{},{q},{satellites:02},0.9,0.0,M,0.0,M,,",
+                time_field(secs_of_day),
+                lat_field(lat),
+                lon_field(lon)
+            ),
+        )
+    }
+
+    /// `$<talker>RMC` with speed in m/s and course in degrees; `date` is `ddmmyy`.
+    pub fn rmc(
+        talker: &str,
+        secs_of_day: f64,
+        date: &str,
+        lat: f64,
+        lon: f64,
+        speed: f64,
+        course: f64,
+    ) -> String {
+        nmea_sentence(
+            b'$',
+            &format!(
+                "{talker}RMC,{},A,{},{},{:.2},{:.1},{date},,,A",
+                time_field(secs_of_day),
+                lat_field(lat),
+                lon_field(lon),
+                speed / crate::units::KNOT,
+                course.rem_euclid(360.0)
+            ),
+        )
+    }
+
+    /// `$<talker>HDT`.
+    pub fn hdt(talker: &str, heading: f64) -> String {
+        nmea_sentence(
+            b'$',
+            &format!("{talker}HDT,{:.1},T", heading.rem_euclid(360.0)),
+        )
+    }
+
+    /// `$<talker>HDG` with deviation and variation (east positive).
+    pub fn hdg(talker: &str, heading: f64, deviation: f64, variation: f64) -> String {
+        let ew = |v: f64| format!("{:.1},{}", v.abs(), if v < 0.0 { 'W' } else { 'E' });
+        nmea_sentence(
+            b'$',
+            &format!(
+                "{talker}HDG,{:.1},{},{}",
+                heading.rem_euclid(360.0),
+                ew(deviation),
+                ew(variation)
+            ),
+        )
+    }
+
+    /// `$<talker>XDR` with pitch and roll angles.
+    pub fn xdr_pitch_roll(talker: &str, pitch: f64, roll: f64) -> String {
+        nmea_sentence(
+            b'$',
+            &format!("{talker}XDR,A,{pitch:.1},D,PITCH,A,{roll:.1},D,ROLL"),
+        )
+    }
+
+    /// `$<talker>DBT` from metres.
+    pub fn dbt(talker: &str, metres: f64) -> String {
+        nmea_sentence(
+            b'$',
+            &format!(
+                "{talker}DBT,{:.1},f,{metres:.1},M,{:.1},F",
+                metres / crate::units::FOOT,
+                metres / 1.8288
+            ),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(body: &str) -> Parsed {
+        parse(&nmea_sentence(b'$', body)).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    #[test]
+    fn crate_sentences_parse_field_by_field() {
+        let g = p("GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,");
+        assert_eq!((g.talker.as_str(), g.formatter.as_str()), ("GP", "GGA"));
+        let Sentence::Gga(d) = g.sentence else {
+            panic!()
+        };
+        assert!((d.latitude.unwrap() - (48.0 + 7.038 / 60.0)).abs() < 1e-9);
+        assert!((d.longitude.unwrap() - (11.0 + 31.0 / 60.0)).abs() < 1e-9);
+        assert_eq!(
+            (d.fix_satellites, d.fix_type),
+            (Some(8), Some(nmea::sentences::FixType::Gps))
+        );
+        let Sentence::Rmc(r) =
+            p("GPRMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W").sentence
+        else {
+            panic!()
+        };
+        assert_eq!(
+            (r.speed_over_ground, r.true_course),
+            (Some(22.4), Some(84.4))
+        );
+        let Sentence::Hdt(h) = p("HEHDT,274.07,T").sentence else {
+            panic!()
+        };
+        assert_eq!(h.heading, Some(274.07));
+        let Sentence::Dpt(d) = p("SDDPT,17.5,0.3,100").sentence else {
+            panic!()
+        };
+        assert_eq!((d.water_depth, d.offset), (Some(17.5), Some(0.3)));
+        let Sentence::Mtw(m) = p("YXMTW,17.9,C").sentence else {
+            panic!()
+        };
+        assert_eq!(m.temperature, Some(17.9));
+        let Sentence::Vtg(v) = p("GPVTG,054.7,T,034.4,M,005.5,N,010.2,K").sentence else {
+            panic!()
+        };
+        assert_eq!(
+            (v.true_course, v.speed_over_ground),
+            (Some(54.7), Some(5.5))
+        );
+    }
+
+    #[test]
+    fn our_marine_sentences_parse_field_by_field() {
+        assert_eq!(
+            p("HCHDG,101.1,2.5,W,4.0,E").sentence,
+            Sentence::Hdg {
+                heading: Some(101.1),
+                deviation: Some(-2.5),
+                variation: Some(4.0)
+            }
+        );
+        assert_eq!(
+            p("HCHDG,98.3,,,,").sentence,
+            Sentence::Hdg {
+                heading: Some(98.3),
+                deviation: None,
+                variation: None
+            }
+        );
+        assert_eq!(
+            p("HCHDM,235.7,M").sentence,
+            Sentence::Hdm {
+                heading: Some(235.7)
+            }
+        );
+        assert_eq!(
+            p("SDDBT,24.6,f,7.5,M,4.1,F").sentence,
+            Sentence::Dbt {
+                feet: Some(24.6),
+                metres: Some(7.5),
+                fathoms: Some(4.1)
+            }
+        );
+        assert_eq!(
+            p("TIROT,-12.3,A").sentence,
+            Sentence::Rot {
+                rate: Some(-12.3),
+                valid: true
+            }
+        );
+        assert_eq!(
+            p("TIROT,5.0,V").sentence,
+            Sentence::Rot {
+                rate: Some(5.0),
+                valid: false
+            }
+        );
+        let Sentence::Xdr(x) = p("IIXDR,A,-2.5,D,PITCH,A,1.25,D,ROLL").sentence else {
+            panic!()
+        };
+        assert_eq!(x.len(), 2);
+        assert_eq!((x[0].name.as_str(), x[0].value), ("PITCH", Some(-2.5)));
+        assert_eq!(
+            (x[1].kind.as_str(), x[1].unit.as_str(), x[1].value),
+            ("A", "D", Some(1.25))
+        );
+    }
+
+    #[test]
+    fn bad_fields_are_errors_naming_the_field() {
+        let e = parse(&nmea_sentence(b'$', "HCHDG,east,,,,")).unwrap_err();
+        assert!(e.reason.contains("heading `east` is not a number"), "{e}");
+        let e = parse(&nmea_sentence(b'$', "IIXDR,A,1,D")).unwrap_err();
+        assert!(e.reason.contains("multiple of 4"), "{e}");
+        assert!(parse(&nmea_sentence(b'$', "GPGGA,garbage")).is_err());
+        assert!(parse("GPGGA,1*00").is_err());
+    }
+
+    #[test]
+    fn others_pass_through() {
+        let a = parse(&nmea_sentence(
+            b'!',
+            "AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0",
+        ))
+        .unwrap();
+        assert_eq!(a.sentence, Sentence::Other("AIVDM".into()));
+        let o = parse(&nmea_sentence(b'$', "OSI,8080808080,S,1")).unwrap();
+        assert_eq!(o.sentence, Sentence::Other("OSI".into()));
+        let x = parse(&nmea_sentence(b'$', "PGRME,15.0,M,45.0,M,25.0,M")).unwrap();
+        assert_eq!(x.sentence, Sentence::Other("PGRME".into()));
+    }
+
+    #[test]
+    fn built_sentences_read_back() {
+        let Sentence::Gga(g) = parse(&build::gga("GP", 3723.5, 43.508, -16.44, true, 9))
+            .unwrap()
+            .sentence
+        else {
+            panic!()
+        };
+        assert!((g.latitude.unwrap() - 43.508).abs() < 1e-6);
+        assert!((g.longitude.unwrap() + 16.44).abs() < 1e-6);
+        let Sentence::Rmc(r) = parse(&build::rmc("GP", 60.0, "211126", -12.5, 170.25, 2.0, 359.9))
+            .unwrap()
+            .sentence
+        else {
+            panic!()
+        };
+        assert!((f64::from(r.speed_over_ground.unwrap()) - 2.0 / crate::units::KNOT).abs() < 0.01);
+        assert_eq!(
+            parse(&build::hdg("HC", 10.0, -1.5, 3.0)).unwrap().sentence,
+            Sentence::Hdg {
+                heading: Some(10.0),
+                deviation: Some(-1.5),
+                variation: Some(3.0)
+            }
+        );
+        let Sentence::Xdr(x) = parse(&build::xdr_pitch_roll("II", 3.0, -4.0))
+            .unwrap()
+            .sentence
+        else {
+            panic!()
+        };
+        assert_eq!((x[0].value, x[1].value), (Some(3.0), Some(-4.0)));
+        assert_eq!(time_field(3723.5), "010203.50");
+    }
+}

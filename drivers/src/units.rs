@@ -1,0 +1,6 @@
+//! Unit conversions the device protocols need.
+
+/// Metres per second in one knot.
+pub const KNOT: f64 = 1852.0 / 3600.0;
+/// Metres in one foot.
+pub const FOOT: f64 = 0.3048;
