@@ -39,7 +39,7 @@ enum Command {
         #[arg(long = "for", value_name = "SECS")]
         duration: Option<f64>,
     },
-    /// Run the built-in demo: a simulated vehicle, traffic on udp://239.255.42.1:47800.
+    /// Run the built-in demo (a simulated Iver2 and its backseat); traffic on udp://239.255.42.1:47800.
     Demo {
         /// Stop by itself after this many seconds.
         #[arg(long = "for", value_name = "SECS")]
@@ -145,8 +145,9 @@ fn main() -> ExitCode {
             Command::Demo { duration } => match SystemSpec::parse("configs/demo.xml (built in)", DEMO) {
                 Ok(spec) => {
                     eprintln!(
-                        "seabus demo: a simulated vehicle driven around a square.\n  \
-                         Its traffic is on udp://239.255.42.1:47800 (loopback only): in another terminal run\n  \
+                        "seabus demo: a simulated Iver2 frontseat on a pseudo-terminal, the Iver2 driver on the\n  \
+                         backseat, NMEA GPS and compass, and a helm driving the vehicle around a square.\n  \
+                         The traffic is on udp://239.255.42.1:47800 (loopback only): in another terminal run\n  \
                          seabus spy udp://239.255.42.1:47800\n  Ctrl-C stops."
                     );
                     run(spec, duration).await

@@ -40,7 +40,11 @@ fn backseat(path: &str) -> String {
 }
 
 /// Waits (at most `limit`) for a message on `port` that `want` accepts.
-async fn wait_for(port: &mut Interface, limit: Duration, want: impl Fn(&Message) -> bool) -> Message {
+async fn wait_for(
+    port: &mut Interface,
+    limit: Duration,
+    want: impl Fn(&Message) -> bool,
+) -> Message {
     let deadline = Instant::now() + limit;
     loop {
         let left = deadline.saturating_duration_since(Instant::now());
@@ -62,7 +66,9 @@ fn text<'m>(m: &'m Message, k: &str) -> &'m str {
 
 async fn status(port: &mut Interface, command: &str, state: &str) -> Message {
     wait_for(port, Duration::from_secs(5), |m| {
-        m.topic.as_str() == "cmd.status" && text(m, "command") == command && text(m, "state") == state
+        m.topic.as_str() == "cmd.status"
+            && text(m, "command") == command
+            && text(m, "state") == state
     })
     .await
 }
@@ -85,23 +91,35 @@ async fn the_driver_commands_the_simulated_frontseat_over_a_pty() {
     let front = start(&frontseat(&path)).await;
     let back = start(&backseat(&path)).await;
     let bus: Medium = back.medium("bus").unwrap().clone();
-    let mut watch = bus.attach_with("watch", 1 << 16, 256).subscribed("**").unwrap();
+    let mut watch = bus
+        .attach_with("watch", 1 << 16, 256)
+        .subscribed("**")
+        .unwrap();
     let cmd = bus.attach("operator");
 
     // the simulated frontseat starts stopped: the driver sees it idle and refuses a course
     let idle = control(&mut watch, "idle").await;
     assert_eq!(text(&idle, "mode"), "S");
-    cmd.command("cmd.course", DataMap::new().with("heading", 90.0).with("depth", 2.0).with("speed", 1.5))
-        .await
-        .unwrap();
+    cmd.command(
+        "cmd.course",
+        DataMap::new()
+            .with("heading", 90.0)
+            .with("depth", 2.0)
+            .with("speed", 1.5),
+    )
+    .await
+    .unwrap();
     let refused = status(&mut watch, "OMS", "refused").await;
     assert!(text(&refused, "error").contains("stopped"), "{refused:?}");
     assert_eq!(text(&refused, "origin"), "back/bus");
 
     // a mission start goes out, is pending, then acknowledged
-    cmd.command("cmd.mission", DataMap::new().with("action", "start").with("name", "t.mis"))
-        .await
-        .unwrap();
+    cmd.command(
+        "cmd.mission",
+        DataMap::new().with("action", "start").with("name", "t.mis"),
+    )
+    .await
+    .unwrap();
     status(&mut watch, "OMSTART", "pending").await;
     status(&mut watch, "OMSTART", "acknowledged").await;
     control(&mut watch, "accepting").await;
@@ -109,36 +127,71 @@ async fn the_driver_commands_the_simulated_frontseat_over_a_pty() {
     // a course is taken, acknowledged, and moves the vehicle; the backseat is then in control
     cmd.command(
         "cmd.course",
-        DataMap::new().with("heading", 90.0).with("depth", 2.0).with("speed", 1.5).with("timeout", 30.0),
+        DataMap::new()
+            .with("heading", 90.0)
+            .with("depth", 2.0)
+            .with("speed", 1.5)
+            .with("timeout", 30.0),
     )
     .await
     .unwrap();
     status(&mut watch, "OMS", "acknowledged").await;
     let in_control = control(&mut watch, "in-control").await;
-    assert_eq!(field(&in_control, "commanded_heading").and_then(|v| v.as_f64()), Some(90.0));
+    assert_eq!(
+        field(&in_control, "commanded_heading").and_then(|v| v.as_f64()),
+        Some(90.0)
+    );
     wait_for(&mut watch, Duration::from_secs(15), |m| {
-        m.topic.as_str() == "nav.attitude" && field(m, "yaw").and_then(|v| v.as_f64()).is_some_and(|y| y > 60.0)
+        m.topic.as_str() == "nav.attitude"
+            && field(m, "yaw")
+                .and_then(|v| v.as_f64())
+                .is_some_and(|y| y > 60.0)
     })
     .await;
     wait_for(&mut watch, Duration::from_secs(15), |m| {
-        m.topic.as_str() == "nav.depth" && field(m, "depth").and_then(|v| v.as_f64()).is_some_and(|d| d > 1.0)
+        m.topic.as_str() == "nav.depth"
+            && field(m, "depth")
+                .and_then(|v| v.as_f64())
+                .is_some_and(|d| d > 1.0)
     })
     .await;
-    let battery = wait_for(&mut watch, Duration::from_secs(5), |m| m.topic.as_str() == "power.battery").await;
-    assert!(field(&battery, "percent").and_then(|v| v.as_f64()).is_some_and(|p| p > 90.0));
+    let battery = wait_for(&mut watch, Duration::from_secs(5), |m| {
+        m.topic.as_str() == "power.battery"
+    })
+    .await;
+    assert!(
+        field(&battery, "percent")
+            .and_then(|v| v.as_f64())
+            .is_some_and(|p| p > 90.0)
+    );
 
     // a course the frontseat finds bad comes back refused with the error's text
-    cmd.command("cmd.course", DataMap::new().with("heading", 90.0).with("depth", 2.0).with("speed", 6.0))
-        .await
-        .unwrap();
+    cmd.command(
+        "cmd.course",
+        DataMap::new()
+            .with("heading", 90.0)
+            .with("depth", 2.0)
+            .with("speed", 6.0),
+    )
+    .await
+    .unwrap();
     let bad = status(&mut watch, "OMS", "refused").await;
     assert_eq!(text(&bad, "error"), "error 20: bad $OMS values");
     // and one the dataset forbids never leaves the backseat
-    cmd.command("cmd.course", DataMap::new().with("heading", 400.0).with("depth", 2.0).with("speed", 1.0))
-        .await
-        .unwrap();
+    cmd.command(
+        "cmd.course",
+        DataMap::new()
+            .with("heading", 400.0)
+            .with("depth", 2.0)
+            .with("speed", 1.0),
+    )
+    .await
+    .unwrap();
     let invalid = status(&mut watch, "OMS", "refused").await;
-    assert!(text(&invalid, "error").contains("`heading` = 400"), "{invalid:?}");
+    assert!(
+        text(&invalid, "error").contains("`heading` = 400"),
+        "{invalid:?}"
+    );
 
     // the link goes: the frontseat is reported offline; it comes back: the driver recovers by itself
     front.shutdown().await;
@@ -146,7 +199,11 @@ async fn the_driver_commands_the_simulated_frontseat_over_a_pty() {
     assert!(!text(&offline, "reason").is_empty());
     let front = start(&frontseat(&path)).await;
     let back_again = control(&mut watch, "idle").await;
-    assert_eq!(text(&back_again, "mode"), "S", "a fresh simulator starts stopped");
+    assert_eq!(
+        text(&back_again, "mode"),
+        "S",
+        "a fresh simulator starts stopped"
+    );
     assert_eq!(watch.stats().dropped_oldest, 0);
     front.shutdown().await;
     back.shutdown().await;
@@ -159,15 +216,24 @@ async fn course_commands_keep_the_frontseat_alive_and_stop_when_they_stop() {
     let front = start(&frontseat(&path)).await;
     let back = start(&backseat(&path)).await;
     let bus = back.medium("bus").unwrap().clone();
-    let mut watch = bus.attach_with("watch", 1 << 16, 256).subscribed("**").unwrap();
+    let mut watch = bus
+        .attach_with("watch", 1 << 16, 256)
+        .subscribed("**")
+        .unwrap();
     let cmd = bus.attach("operator");
     control(&mut watch, "idle").await;
-    cmd.command("cmd.mission", DataMap::new().with("action", "start")).await.unwrap();
+    cmd.command("cmd.mission", DataMap::new().with("action", "start"))
+        .await
+        .unwrap();
     control(&mut watch, "accepting").await;
     // one course command valid for 2 s: the driver repeats $OMS (5 s keep-alive) for those 2 s only
     cmd.command(
         "cmd.course",
-        DataMap::new().with("heading", 45.0).with("depth", 0.0).with("speed", 1.0).with("timeout", 2.0),
+        DataMap::new()
+            .with("heading", 45.0)
+            .with("depth", 0.0)
+            .with("speed", 1.0)
+            .with("timeout", 2.0),
     )
     .await
     .unwrap();
@@ -178,7 +244,10 @@ async fn course_commands_keep_the_frontseat_alive_and_stop_when_they_stop() {
     let stopped = control_within(&mut watch, "idle", Duration::from_secs(15)).await;
     let waited = started.elapsed();
     assert_eq!(text(&stopped, "mode"), "S");
-    assert!(waited >= Duration::from_secs(4), "stopped after only {waited:?}");
+    assert!(
+        waited >= Duration::from_secs(4),
+        "stopped after only {waited:?}"
+    );
     front.shutdown().await;
     back.shutdown().await;
 }

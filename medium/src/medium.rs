@@ -720,6 +720,14 @@ impl Ingress {
         }
     }
 
+    /// Sets the state the link starts in, without logging it (a transport that has not reached its
+    /// wire yet starts down).
+    pub fn init_link(&self, state: LinkState) {
+        if let Some(inner) = self.inner.upgrade() {
+            inner.link.send_replace(state);
+        }
+    }
+
     /// Sets the link state (logged on change).
     pub fn set_link(&self, state: LinkState) {
         let Some(inner) = self.inner.upgrade() else {

@@ -11,7 +11,8 @@
 //! (error 20, 21, 27, 30 for bad values; 45 when no mission runs); an `$OSD` is answered with the
 //! asked sentences in the order G, C, S, P, D, then its `$ACK`.
 //!
-//! Parameters: `lat`, `lon`, `heading`, `version` (Remote Helm major version, 5), `mission`
+//! Parameters: `lat`, `lon`, `heading`, `autostart` (start with the mission running, false),
+//! `version` (Remote Helm major version, 5), `mission`
 //! (`demo.mis`), `mission_speed` (m/s, 1), `backseat_mode` (`P`), `battery` (Wh, 600),
 //! `water_depth` (m, 40), `declination` (deg, 0), faults: `noise` (standard deviation of sensor
 //! noise, degrees and metres, 0), `garbage` (chance, per reply, of a line of junk first, 0; needs
@@ -134,7 +135,13 @@ impl Sim {
             ),
             limits: Limits::default(),
             units: DepthUnits::of_version(version),
-            drive: Drive::Stopped,
+            drive: if p.flag_or("autostart", false)? {
+                Drive::Mission {
+                    heading: p.float_or("heading", 0.0)?,
+                }
+            } else {
+                Drive::Stopped
+            },
             mission: p.str("mission").unwrap_or("demo.mis").to_string(),
             mission_speed: p.non_negative_or("mission_speed", 1.0)?,
             backseat_mode: p.str("backseat_mode").unwrap_or("P").to_string(),

@@ -92,60 +92,71 @@ fn words(s: &str) -> Vec<String> {
 }
 
 fn build(cfg: &ModuleConfig, cat: &Catalogue, role: Role) -> Result<Built, FileError> {
-    let p = &cfg.params;
-    let list = |name: &str, default: &str| -> Result<Vec<String>, FileError> {
-        let v = words(p.str(name).unwrap_or(default));
-        match p.get(name) {
-            Some(param) if v.is_empty() => Err(param.error("names no sentence")),
-            _ => Ok(v),
-        }
-    };
-    let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
-        Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
-            .to_string())
-    };
-    let outputs = match role {
-        Role::Gps => vec![
-            Output {
-                feeds: list("position", "GGA GNS GLL")?,
-                dataset: "position",
-                topic: topic("topic", "position", "nav.position")?,
-            },
-            Output {
-                feeds: list("velocity", "RMC VTG")?,
-                dataset: "velocity",
-                topic: topic("velocity_topic", "velocity", "nav.velocity")?,
-            },
-        ],
-        Role::Heading => vec![
-            Output {
-                feeds: list("heading", "HDT HDG HDM")?,
-                dataset: "heading",
-                topic: topic("topic", "heading", "nav.heading")?,
-            },
-            Output {
-                feeds: vec!["XDR".into()],
-                dataset: "attitude",
-                topic: topic("attitude_topic", "attitude", "nav.attitude")?,
-            },
-        ],
-        Role::Sounder => vec![Output {
-            feeds: list("altitude", "DBT DPT DBK")?,
-            dataset: "altitude",
-            topic: topic("topic", "altitude", "nav.altitude")?,
-        }],
-    };
-    let mut decl = Declaration::new(ModuleKind::Driver)
-        .format(0, Some(Format::Bytes))
-        .consumes(TopicDecl::topic(p.str("input").unwrap_or("nmea.**")))
-        .format(1, Some(Format::Map));
-    for o in &outputs {
-        decl = decl.produces(TopicDecl::dataset(&o.topic, o.dataset).on_port(1));
-    }
-    let talkers = p.get("talkers").map(|t| words(&t.value));
+    let (sensor, decl) = Sensor::new(&cfg.params, cat, role)?;
     Ok(Built {
         decl,
-        module: Box::new(Sensor {
+        module: Box::new(sensor),
+    })
+}
+
+impl Sensor {
+    /// A driver of `role` from its parameters, with its declaration.
+    fn new(
+        p: &seabus_modules::Params,
+        cat: &Catalogue,
+        role: Role,
+    ) -> Result<(Sensor, Declaration), FileError> {
+        let list = |name: &str, default: &str| -> Result<Vec<String>, FileError> {
+            let v = words(p.str(name).unwrap_or(default));
+            match p.get(name) {
+                Some(param) if v.is_empty() => Err(param.error("names no sentence")),
+                _ => Ok(v),
+            }
+        };
+        let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
+            Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
+                .to_string())
+        };
+        let outputs = match role {
+            Role::Gps => vec![
+                Output {
+                    feeds: list("position", "GGA GNS GLL")?,
+                    dataset: "position",
+                    topic: topic("topic", "position", "nav.position")?,
+                },
+                Output {
+                    feeds: list("velocity", "RMC VTG")?,
+                    dataset: "velocity",
+                    topic: topic("velocity_topic", "velocity", "nav.velocity")?,
+                },
+            ],
+            Role::Heading => vec![
+                Output {
+                    feeds: list("heading", "HDT HDG HDM")?,
+                    dataset: "heading",
+                    topic: topic("topic", "heading", "nav.heading")?,
+                },
+                Output {
+                    feeds: vec!["XDR".into()],
+                    dataset: "attitude",
+                    topic: topic("attitude_topic", "attitude", "nav.attitude")?,
+                },
+            ],
+            Role::Sounder => vec![Output {
+                feeds: list("altitude", "DBT DPT DBK")?,
+                dataset: "altitude",
+                topic: topic("topic", "altitude", "nav.altitude")?,
+            }],
+        };
+        let mut decl = Declaration::new(ModuleKind::Driver)
+            .format(0, Some(Format::Bytes))
+            .consumes(TopicDecl::topic(p.str("input").unwrap_or("nmea.**")))
+            .format(1, Some(Format::Map));
+        for o in &outputs {
+            decl = decl.produces(TopicDecl::dataset(&o.topic, o.dataset).on_port(1));
+        }
+        let talkers = p.get("talkers").map(|t| words(&t.value));
+        let sensor = Sensor {
             role,
             talkers,
             outputs,
@@ -171,8 +182,9 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue, role: Role) -> Result<Built, FileE
             },
             pitch_roll: None,
             tally: Tally::new(),
-        }),
-    })
+        };
+        Ok((sensor, decl))
+    }
 }
 
 /// What one sentence gives: a dataset to publish on an output.
@@ -405,5 +417,110 @@ impl Module for Sensor {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use seabus_medium::serial::framing::nmea_sentence;
+    use seabus_modules::Params;
+
+    fn sensor(role: Role, pairs: &[(&str, &str)]) -> Sensor {
+        let params = Params::from_pairs(pairs);
+        let (s, _) = Sensor::new(&params, &Catalogue::built_in(), role).unwrap();
+        params.finish("t").unwrap();
+        s
+    }
+
+    fn read(s: &mut Sensor, body: &str) -> Vec<(usize, DataMap)> {
+        let parsed = parse(&nmea_sentence(b'$', body)).unwrap();
+        s.read(&parsed, Instant::now())
+    }
+
+    #[test]
+    fn gps_sentences_become_position_and_velocity() {
+        let mut g = sensor(Role::Gps, &[]);
+        let out = read(
+            &mut g,
+            "GPGGA,123519,4807.038,N,01131.000,E,2,08,0.9,545.4,M,46.9,M,,",
+        );
+        assert_eq!(out.len(), 1);
+        let (i, m) = &out[0];
+        assert_eq!(*i, 0);
+        assert_eq!(
+            (
+                m.get_i64("fix"),
+                m.get_i64("satellites"),
+                m.get_str("source")
+            ),
+            (Some(2), Some(8), Some("gps"))
+        );
+        assert!((m.get_f64("hdop").unwrap() - 0.9).abs() < 1e-6);
+        let out = read(
+            &mut g,
+            "GPRMC,123519,A,4807.038,N,01131.000,E,010.0,090.0,230394,,",
+        );
+        assert_eq!(out.len(), 1, "RMC feeds velocity only by default");
+        let (i, v) = &out[0];
+        assert_eq!(*i, 1);
+        assert!((v.get_f64("speed").unwrap() - 10.0 * KNOT).abs() < 1e-9);
+        assert!((v.get_f64("east").unwrap() - 10.0 * KNOT).abs() < 1e-6);
+        // no fix, no position
+        assert!(read(&mut g, "GPGGA,123519,,,,,0,00,,,M,,M,,").is_empty());
+        // other talkers can be left out, and RMC can feed position too
+        let mut only = sensor(Role::Gps, &[("talkers", "GN"), ("position", "RMC")]);
+        assert!(only.talkers.as_ref().unwrap().contains(&"GN".to_string()));
+        let out = read(
+            &mut only,
+            "GNRMC,123519,A,4807.038,N,01131.000,E,010.0,090.0,230394,,",
+        );
+        assert_eq!(out.iter().map(|(i, _)| *i).collect::<Vec<_>>(), [0, 1]);
+    }
+
+    #[test]
+    fn headings_are_corrected_and_attitude_needs_fresh_pitch_and_roll() {
+        let mut h = sensor(Role::Heading, &[]);
+        let out = read(&mut h, "HCHDG,100.0,2.0,W,5.0,E");
+        let (_, m) = &out[0];
+        assert_eq!(
+            (m.get_f64("heading"), m.get_bool("magnetic")),
+            (Some(103.0), Some(false))
+        );
+        assert_eq!(
+            (m.get_f64("deviation"), m.get_f64("variation")),
+            (Some(-2.0), Some(5.0))
+        );
+        let out = read(&mut h, "HCHDM,10.0,M");
+        assert_eq!(out[0].1.get_bool("magnetic"), Some(true));
+        assert!(read(&mut h, "HCXDR,A,2.5,D,PITCH,A,-1.0,D,ROLL").is_empty());
+        let out = read(&mut h, "HEHDT,359.5,T");
+        assert_eq!(
+            out.len(),
+            2,
+            "heading, and attitude with the fresh pitch and roll"
+        );
+        let (i, a) = &out[1];
+        assert_eq!(
+            (*i, a.get_f64("yaw"), a.get_f64("pitch"), a.get_f64("roll")),
+            (1, Some(359.5), Some(2.5), Some(-1.0))
+        );
+        let mut with_var = sensor(Role::Heading, &[("variation", "-3")]);
+        let out = read(&mut with_var, "HCHDM,10.0,M");
+        assert_eq!(
+            (out[0].1.get_f64("heading"), out[0].1.get_bool("magnetic")),
+            (Some(7.0), Some(false))
+        );
+    }
+
+    #[test]
+    fn sounder_depths_become_altitude() {
+        let mut s = sensor(Role::Sounder, &[("offset", "0.5")]);
+        let out = read(&mut s, "SDDBT,24.6,f,7.5,M,4.1,F");
+        assert_eq!(out[0].1.get_f64("altitude"), Some(8.0));
+        let out = read(&mut s, "SDDPT,17.5,0.3,100");
+        assert_eq!(out[0].1.get_f64("altitude"), Some(18.0));
+        let out = read(&mut s, "SDDBT,10.0,f,,M,,F");
+        assert!((out[0].1.get_f64("altitude").unwrap() - (10.0 * FOOT + 0.5)).abs() < 1e-9);
     }
 }

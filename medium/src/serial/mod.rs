@@ -273,7 +273,7 @@ pub(crate) fn open_serial(mut o: Opening) -> Result<Arc<SerialTransport>, OpenEr
         path: cfg.path.display().to_string(),
     });
     o.ingress
-        .set_link(LinkState::Down(format!("{} not opened yet", shared.path)));
+        .init_link(LinkState::Down(format!("{} not opened yet", shared.path)));
     let task = tokio::spawn(keep_open(cfg, shared.clone(), rx, o.ingress.clone()));
     o.ingress.own_task(task.abort_handle());
     Ok(Arc::new(SerialTransport {
