@@ -295,7 +295,7 @@ fn fields_map(fields: &[String]) -> Result<DataMap, String> {
         if k.is_empty() {
             return Err(format!("`{f}` has an empty key"));
         }
-        map.insert(k, Value::parse_loose(v));
+        map.insert(k.to_string(), Value::parse_loose(v));
     }
     Ok(map)
 }

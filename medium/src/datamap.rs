@@ -3,6 +3,7 @@
 //! Keys keep the order they were inserted in (a dataset's fields read in the order a driver wrote them).
 //! Values are booleans, 64-bit integers, 64-bit floats, UTF-8 strings, byte strings, and lists of values.
 
+use std::borrow::Cow;
 use std::fmt;
 
 /// One value in a [`DataMap`].
@@ -173,12 +174,15 @@ impl From<&str> for Value {
     }
 }
 
+/// A datamap key: a field name written in code costs no allocation.
+pub type Key = Cow<'static, str>;
+
 /// An ordered map of named values: the "named datamap" payload format.
 ///
 /// Lookups are linear: datamaps hold a dataset's handful of fields, where a scan beats hashing.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct DataMap {
-    entries: Vec<(String, Value)>,
+    entries: Vec<(Key, Value)>,
 }
 
 impl DataMap {
@@ -197,7 +201,7 @@ impl DataMap {
     }
 
     /// Sets `key` to `value`: replaces the value in place when the key exists, appends otherwise.
-    pub fn insert(&mut self, key: impl Into<String>, value: impl Into<Value>) {
+    pub fn insert(&mut self, key: impl Into<Key>, value: impl Into<Value>) {
         let key = key.into();
         let value = value.into();
         match self.entries.iter_mut().find(|(k, _)| *k == key) {
@@ -206,8 +210,20 @@ impl DataMap {
         }
     }
 
+    /// Appends an entry without looking for an existing key: for building a map whose keys are
+    /// known to differ (a repeated key would stay repeated, as decoders keep them).
+    pub fn push(&mut self, key: impl Into<Key>, value: impl Into<Value>) {
+        self.entries.push((key.into(), value.into()));
+    }
+
+    /// Builder form of [`DataMap::push`].
+    pub fn and(mut self, key: impl Into<Key>, value: impl Into<Value>) -> Self {
+        self.push(key, value);
+        self
+    }
+
     /// Builder form of [`DataMap::insert`].
-    pub fn with(mut self, key: impl Into<String>, value: impl Into<Value>) -> Self {
+    pub fn with(mut self, key: impl Into<Key>, value: impl Into<Value>) -> Self {
         self.insert(key, value);
         self
     }
@@ -252,7 +268,7 @@ impl DataMap {
         let Some(idx) = self.entries.iter().position(|(k, _)| k == from) else {
             return false;
         };
-        self.entries[idx].0 = to.to_string();
+        self.entries[idx].0 = Cow::Owned(to.to_string());
         let mut i = 0;
         self.entries.retain(|(k, _)| {
             let keep = i == idx || k != to;
@@ -279,7 +295,7 @@ impl DataMap {
 
     /// The entries in order.
     pub fn iter(&self) -> impl Iterator<Item = (&str, &Value)> {
-        self.entries.iter().map(|(k, v)| (k.as_str(), v))
+        self.entries.iter().map(|(k, v)| (k.as_ref(), v))
     }
 
     /// The number of entries.
@@ -295,7 +311,7 @@ impl DataMap {
     /// Appends an entry without looking for an existing key; decoders use it so that the order and
     /// content of a received map is kept exactly, duplicates included.
     pub(crate) fn push_raw(&mut self, key: String, value: Value) {
-        self.entries.push((key, value));
+        self.entries.push((Cow::Owned(key), value));
     }
 }
 
@@ -311,7 +327,7 @@ impl fmt::Display for DataMap {
     }
 }
 
-impl<K: Into<String>, V: Into<Value>> FromIterator<(K, V)> for DataMap {
+impl<K: Into<Key>, V: Into<Value>> FromIterator<(K, V)> for DataMap {
     fn from_iter<I: IntoIterator<Item = (K, V)>>(iter: I) -> Self {
         let mut map = DataMap::new();
         for (k, v) in iter {

@@ -716,7 +716,11 @@ impl Ingress {
     /// every power of two).
     pub fn reject(&self, reason: &str, detail: impl fmt::Display) {
         if let Some(inner) = self.inner.upgrade() {
-            inner.rejected.record(&inner.name, reason, detail);
+            inner.rejected.record(
+                &inner.name,
+                reason,
+                format_args!("rejected input: {detail}"),
+            );
         }
     }
 

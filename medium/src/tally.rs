@@ -1,5 +1,5 @@
-//! Counting rejected input by reason, and logging it without flooding the log: the first few of
-//! each reason, then every power of two.
+//! Counting rejected input and refused requests by reason, and logging them without flooding the
+//! log: the first few of each reason, then every power of two.
 
 use std::collections::BTreeMap;
 use std::fmt;
@@ -27,7 +27,7 @@ impl Tally {
             *n
         };
         if n <= 5 || n.is_power_of_two() {
-            tracing::warn!(source = who, reason, count = n, "rejected input: {detail}");
+            tracing::warn!(source = who, reason, count = n, "{detail}");
         }
         n
     }

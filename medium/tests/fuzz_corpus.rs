@@ -2,6 +2,7 @@
 //! fuzz targets, so that every seed runs with the ordinary tests, without libFuzzer.
 
 use bytes::Bytes;
+use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
 use seabus_medium::udp::wire;
 use seabus_medium::url::MediumUrl;
 use seabus_medium::{DataMap, Medium, Value, binary, json, xmlform};
@@ -157,5 +158,157 @@ fn datamap_json_seeds() {
             );
         }
         true
+    });
+}
+
+/// The framing, checksum policy, maximum frame length and stream a framer seed describes: the first
+/// byte picks the framing (`b % 4`) and the policy (`b / 4 % 3`), the next two the maximum
+/// (little-endian, at least 8).
+fn framer_setup(data: &[u8]) -> Option<(Framing, ChecksumPolicy, usize, &[u8])> {
+    let [sel, lo, hi, stream @ ..] = data else {
+        return None;
+    };
+    let framing =
+        [Framing::Nmea, Framing::Lines, Framing::Cobs, Framing::Slip][usize::from(sel % 4)];
+    let policy = [
+        ChecksumPolicy::Require,
+        ChecksumPolicy::AllowMissing,
+        ChecksumPolicy::Ignore,
+    ][usize::from(sel / 4 % 3)];
+    let max = usize::from(u16::from_le_bytes([*lo, *hi])).max(8);
+    Some((framing, policy, max, stream))
+}
+
+/// The stream cut into pieces of `b % 17 + 1` bytes, `b` being each piece's first byte.
+fn framer_pieces(stream: &[u8]) -> Vec<&[u8]> {
+    let mut out = Vec::new();
+    let mut rest = stream;
+    while let Some(&b) = rest.first() {
+        let (piece, tail) = rest.split_at(usize::from(b % 17 + 1).min(rest.len()));
+        out.push(piece);
+        rest = tail;
+    }
+    out
+}
+
+/// Feeds `chunks` to a new framer in turn, checking after each that it holds at most `max` bytes;
+/// returns everything it handed out.
+fn framer_run<'a>(
+    at: &Path,
+    framing: Framing,
+    policy: ChecksumPolicy,
+    max: usize,
+    chunks: impl IntoIterator<Item = &'a [u8]>,
+) -> Vec<Output> {
+    let mut framer = Framer::new(framing, policy, max);
+    let mut got = Vec::new();
+    for chunk in chunks {
+        framer.push(chunk, &mut |o| got.push(o));
+        assert!(
+            framer.pending() <= max + 1,
+            "{}: the framer holds {} bytes, more than {max}",
+            at.display(),
+            framer.pending()
+        );
+    }
+    got
+}
+
+/// Checks one frame handed out: its length, its checksum (NMEA), and that it encodes back to bytes
+/// a fresh framer reads as the same frame.
+fn framer_check_frame(
+    at: &Path,
+    framing: Framing,
+    policy: ChecksumPolicy,
+    max: usize,
+    frame: &[u8],
+) {
+    let at = at.display();
+    match framing {
+        Framing::Nmea => {
+            assert_eq!(
+                check_nmea(frame, ChecksumPolicy::Require).as_deref(),
+                Ok(frame),
+                "{at}: a framed sentence carries a correct checksum"
+            );
+            // a sentence accepted without a checksum gets `*hh` added
+            let bound = if policy == ChecksumPolicy::Require {
+                max
+            } else {
+                max + 3
+            };
+            assert!(
+                frame.len() <= bound,
+                "{at}: sentence of {} bytes",
+                frame.len()
+            );
+        }
+        Framing::Lines => {
+            assert!(
+                !frame.is_empty() && !frame.contains(&b'\n'),
+                "{at}: line {frame:?}"
+            );
+            assert!(frame.len() <= max, "{at}: line of {} bytes", frame.len());
+        }
+        // a COBS frame of at most `max` bytes decodes to fewer bytes
+        Framing::Cobs => assert!(
+            frame.len() < max,
+            "{at}: COBS frame of {} bytes",
+            frame.len()
+        ),
+        Framing::Slip => {
+            assert!(!frame.is_empty(), "{at}: empty SLIP frame");
+            assert!(
+                frame.len() <= max,
+                "{at}: SLIP frame of {} bytes",
+                frame.len()
+            );
+        }
+    }
+    let wire =
+        encode(framing, frame).unwrap_or_else(|e| panic!("{at}: {frame:?} does not encode: {e}"));
+    let mut framer = Framer::new(framing, ChecksumPolicy::Require, wire.len());
+    let mut back = Vec::new();
+    framer.push(&wire, &mut |o| back.push(o));
+    assert_eq!(back, [Ok(frame.to_vec())], "{at}: round trip via {wire:?}");
+}
+
+/// Framer seeds are framed without a panic and within the maximum, the same whole and in chunks;
+/// NMEA sentences handed out carry a correct checksum and every frame survives an encode/frame
+/// round trip.
+#[test]
+fn nmea_framer_seeds() {
+    replay("nmea_framer", |path, data| {
+        let Some((framing, policy, max, stream)) = framer_setup(data) else {
+            return false;
+        };
+        let whole = framer_run(path, framing, policy, max, [stream]);
+        let chunked = framer_run(path, framing, policy, max, framer_pieces(stream));
+        assert_eq!(
+            chunked,
+            whole,
+            "{}: chunking changed the output",
+            path.display()
+        );
+        let mut last = 0;
+        let mut frames = 0;
+        for out in &whole {
+            match out {
+                Ok(frame) => {
+                    framer_check_frame(path, framing, policy, max, frame);
+                    frames += 1;
+                }
+                Err(r) => {
+                    assert!(
+                        r.offset >= last && r.offset < stream.len() as u64,
+                        "{}: rejection at {}",
+                        path.display(),
+                        r.offset
+                    );
+                    last = r.offset;
+                }
+            }
+        }
+        frames > 0
     });
 }

@@ -435,7 +435,11 @@ impl Iver {
     ) {
         let id = self.next_id;
         self.next_id += 1;
-        tracing::warn!(module = ctx.name(), "{command} refused: {why}");
+        self.tally.record(
+            ctx.name(),
+            "refused",
+            format_args!("{command} refused: {why}"),
+        );
         self.status(ctx, id, command, "refused", why, &request)
             .await;
     }

@@ -11,7 +11,7 @@
 //! | `nmea-heading` | heading ← `heading` (`HDT HDG HDM`); attitude when `XDR` pitch and roll are fresh | `topic` (`nav.heading`), `attitude_topic` (`nav.attitude`) |
 //! | `nmea-sounder` | altitude ← `altitude` (`DBT DPT DBK`) | `topic` (`nav.altitude`) |
 //!
-//! `nmea-gps` also takes `source` (default `gps`). `nmea-heading` corrects `HDG` by its deviation and
+//! `nmea-gps` also takes `source` (a name put in each position, such as `rtk`; none by default). `nmea-heading` corrects `HDG` by its deviation and
 //! variation into a true heading, takes `variation` (degrees east, used when a magnetic heading comes
 //! without one) and `fresh` (how long a pitch and roll stay usable, default 2s). `nmea-sounder` takes
 //! `offset` (metres added to depths measured from the transducer).
@@ -52,10 +52,14 @@ pub const SOUNDER: ModuleType = ModuleType {
     build: |c, cat| build(c, cat, Role::Sounder),
 };
 
+/// What an NMEA sensor driver reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Role {
+pub enum Role {
+    /// A GPS.
     Gps,
+    /// A compass or gyro.
     Heading,
+    /// An echo sounder.
     Sounder,
 }
 
@@ -67,16 +71,18 @@ struct Output {
 }
 
 impl Output {
+    /// Whether sentences of `formatter` feed this output.
     fn fed_by(&self, formatter: &str) -> bool {
         self.feeds.iter().any(|f| f == formatter)
     }
 }
 
-struct Sensor {
+/// An NMEA sensor driver: sentences in, datasets out.
+pub struct Sensor {
     role: Role,
     talkers: Option<Vec<String>>,
     outputs: Vec<Output>,
-    source: String,
+    source: Option<String>,
     variation: Option<f64>,
     offset: f64,
     fresh: Duration,
@@ -101,7 +107,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue, role: Role) -> Result<Built, FileE
 
 impl Sensor {
     /// A driver of `role` from its parameters, with its declaration.
-    fn new(
+    pub fn new(
         p: &seabus_modules::Params,
         cat: &Catalogue,
         role: Role,
@@ -161,9 +167,9 @@ impl Sensor {
             talkers,
             outputs,
             source: if role == Role::Gps {
-                p.str("source").unwrap_or("gps").to_string()
+                p.str("source").map(str::to_string)
             } else {
-                String::new()
+                None
             },
             variation: if role == Role::Heading {
                 p.parse("variation", "degrees east")?
@@ -187,53 +193,91 @@ impl Sensor {
     }
 }
 
-/// What one sentence gives: a dataset to publish on an output.
-type Reading = (usize, DataMap);
+/// What one sentence gives: the index of an output and the dataset to publish on it.
+pub type Reading = (usize, DataMap);
+
+/// The readings of one sentence: at most two (RMC gives a position and a velocity; a heading
+/// gives a heading and an attitude), kept without allocating.
+#[derive(Debug, Default)]
+pub struct Readings([Option<Reading>; 2]);
+
+impl Readings {
+    fn push(&mut self, r: Reading) {
+        if let Some(slot) = self.0.iter_mut().find(|s| s.is_none()) {
+            *slot = Some(r);
+        }
+    }
+
+    fn iter(&self) -> impl Iterator<Item = &Reading> {
+        self.0.iter().flatten()
+    }
+
+    /// How many readings there are.
+    pub fn len(&self) -> usize {
+        self.iter().count()
+    }
+
+    /// True when the sentence gave nothing.
+    pub fn is_empty(&self) -> bool {
+        self.0[0].is_none()
+    }
+}
+
+impl IntoIterator for Readings {
+    type Item = Reading;
+    type IntoIter = std::iter::Flatten<std::array::IntoIter<Option<Reading>, 2>>;
+    fn into_iter(self) -> Self::IntoIter {
+        self.0.into_iter().flatten()
+    }
+}
 
 impl Sensor {
+    /// A position with its source, when one is configured.
+    fn fix(&self, lat: f64, lon: f64) -> DataMap {
+        let mut m = DataMap::with_capacity(8).and("lat", lat).and("lon", lon);
+        if let Some(src) = &self.source {
+            m.push("source", src.clone());
+        }
+        m
+    }
+
     /// Turns a parsed sentence into readings.
-    fn read(&mut self, parsed: &Parsed, now: Instant) -> Vec<Reading> {
-        let f = parsed.formatter.as_str();
+    pub fn read(&mut self, parsed: &Parsed, now: Instant) -> Readings {
+        let f = parsed.formatter;
         let fed = |i: usize| self.outputs.get(i).is_some_and(|o| o.fed_by(f));
-        let mut out = Vec::new();
+        let mut out = Readings::default();
         match (&parsed.sentence, self.role) {
             (Sentence::Gga(g), Role::Gps) if fed(0) => {
                 if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
-                    let mut m = DataMap::new().with("lat", lat).with("lon", lon);
-                    m.insert("fix", g.fix_type.map_or(0, fix_quality));
+                    let mut m = self.fix(lat, lon);
+                    m.push("fix", g.fix_type.map_or(0, fix_quality));
                     if let Some(n) = g.fix_satellites {
-                        m.insert("satellites", n);
+                        m.push("satellites", n);
                     }
                     if let Some(h) = g.hdop {
-                        m.insert("hdop", f64::from(h));
+                        m.push("hdop", f64::from(h));
                     }
                     if let Some(a) = g.altitude {
-                        m.insert("alt", f64::from(a));
+                        m.push("alt", f64::from(a));
                     }
-                    m.insert("source", self.source.as_str());
+
                     out.push((0, m));
                 }
             }
             (Sentence::Gns(g), Role::Gps) if fed(0) => {
                 if let (Some(lat), Some(lon)) = (g.lat, g.lon) {
-                    let mut m = DataMap::new().with("lat", lat).with("lon", lon);
-                    m.insert("satellites", i64::from(g.nsattelites));
+                    let mut m = self.fix(lat, lon);
+                    m.push("satellites", i64::from(g.nsattelites));
                     if let Some(h) = g.hdop {
-                        m.insert("hdop", f64::from(h));
+                        m.push("hdop", f64::from(h));
                     }
-                    m.insert("source", self.source.as_str());
+
                     out.push((0, m));
                 }
             }
             (Sentence::Gll(g), Role::Gps) if fed(0) && g.valid => {
                 if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
-                    out.push((
-                        0,
-                        DataMap::new()
-                            .with("lat", lat)
-                            .with("lon", lon)
-                            .with("source", self.source.as_str()),
-                    ));
+                    out.push((0, self.fix(lat, lon)));
                 }
             }
             (Sentence::Rmc(r), Role::Gps) => {
@@ -242,13 +286,7 @@ impl Sensor {
                     && fed(0)
                     && let (Some(lat), Some(lon)) = (r.lat, r.lon)
                 {
-                    out.push((
-                        0,
-                        DataMap::new()
-                            .with("lat", lat)
-                            .with("lon", lon)
-                            .with("source", self.source.as_str()),
-                    ));
+                    out.push((0, self.fix(lat, lon)));
                 }
                 if valid
                     && fed(1)
@@ -323,19 +361,22 @@ impl Sensor {
             _ => {}
         }
         // a heading sensor that also gives pitch and roll is an attitude sensor
+        let true_heading = out
+            .iter()
+            .find(|(i, _)| *i == 0)
+            .filter(|(_, m)| !m.get_bool("magnetic").unwrap_or(false))
+            .and_then(|(_, m)| m.get_f64("heading"));
         if self.role == Role::Heading
-            && let Some((_, m)) = out.iter().find(|(i, _)| *i == 0)
+            && let Some(yaw) = true_heading
             && let Some((pitch, roll, at)) = self.pitch_roll
             && now.duration_since(at) <= self.fresh
-            && !m.get_bool("magnetic").unwrap_or(false)
         {
-            let yaw = m.get_f64("heading").unwrap_or(0.0);
             out.push((
                 1,
-                DataMap::new()
-                    .with("yaw", yaw)
-                    .with("pitch", pitch)
-                    .with("roll", roll),
+                DataMap::with_capacity(3)
+                    .and("yaw", yaw)
+                    .and("pitch", pitch)
+                    .and("roll", roll),
             ));
         }
         out
@@ -359,12 +400,12 @@ fn fix_quality(t: nmea::sentences::FixType) -> i64 {
 
 fn velocity(speed: f64, course: f64) -> DataMap {
     let c = course.to_radians();
-    DataMap::new()
-        .with("speed", speed)
-        .with("course", course.rem_euclid(360.0))
-        .with("north", speed * c.cos())
-        .with("east", speed * c.sin())
-        .with("reference", "ground")
+    DataMap::with_capacity(5)
+        .and("speed", speed)
+        .and("course", course.rem_euclid(360.0))
+        .and("north", speed * c.cos())
+        .and("east", speed * c.sin())
+        .and("reference", "ground")
 }
 
 fn heading(h: f64, magnetic: bool) -> DataMap {
@@ -403,7 +444,7 @@ impl Module for Sensor {
         };
         if let Some(t) = &self.talkers
             && !parsed.talker.is_empty()
-            && !t.contains(&parsed.talker)
+            && !t.iter().any(|x| x == parsed.talker)
         {
             return Ok(());
         }
@@ -434,8 +475,9 @@ mod tests {
     }
 
     fn read(s: &mut Sensor, body: &str) -> Vec<(usize, DataMap)> {
-        let parsed = parse(&nmea_sentence(b'$', body)).unwrap();
-        s.read(&parsed, Instant::now())
+        let line = nmea_sentence(b'$', body);
+        let parsed = parse(&line).unwrap();
+        s.read(&parsed, Instant::now()).into_iter().collect()
     }
 
     #[test]
@@ -454,7 +496,7 @@ mod tests {
                 m.get_i64("satellites"),
                 m.get_str("source")
             ),
-            (Some(2), Some(8), Some("gps"))
+            (Some(2), Some(8), None)
         );
         assert!((m.get_f64("hdop").unwrap() - 0.9).abs() < 1e-6);
         let out = read(
@@ -466,6 +508,12 @@ mod tests {
         assert_eq!(*i, 1);
         assert!((v.get_f64("speed").unwrap() - 10.0 * KNOT).abs() < 1e-9);
         assert!((v.get_f64("east").unwrap() - 10.0 * KNOT).abs() < 1e-6);
+        let mut named = sensor(Role::Gps, &[("source", "rtk")]);
+        let out = read(
+            &mut named,
+            "GPGGA,123519,4807.038,N,01131.000,E,4,12,0.5,5.0,M,46.9,M,,",
+        );
+        assert_eq!(out[0].1.get_str("source"), Some("rtk"));
         // no fix, no position
         assert!(read(&mut g, "GPGGA,123519,,,,,0,00,,,M,,M,,").is_empty());
         // other talkers can be left out, and RMC can feed position too

@@ -2,7 +2,8 @@
 //! the marine sentences it lacks) and building (for simulators).
 //!
 //! Input is one whole sentence with a correct checksum, as the serial medium's NMEA framing hands
-//! it out. Parsing never panics; a sentence it does not know is [`Sentence::Other`].
+//! it out: the checksum is not checked again here. Parsing never panics; a sentence it does not
+//! know is [`Sentence::Other`].
 
 use seabus_medium::serial::framing::nmea_sentence;
 use std::fmt;
@@ -38,9 +39,9 @@ pub struct Transducer {
     pub name: String,
 }
 
-/// A parsed sentence.
+/// A parsed sentence; it borrows the line it was read from.
 #[derive(Debug, PartialEq)]
-pub enum Sentence {
+pub enum Sentence<'a> {
     /// GGA: fix data.
     Gga(nmea::sentences::GgaData),
     /// RMC: recommended minimum.
@@ -98,18 +99,18 @@ pub enum Sentence {
     /// XDR: transducer measurements.
     Xdr(Vec<Transducer>),
     /// A sentence seabus does not read (AIS, proprietary, …), with its address.
-    Other(String),
+    Other(&'a str),
 }
 
 /// A sentence with its talker (`GP`, `HC`, …; empty for proprietary and non-standard addresses).
 #[derive(Debug, PartialEq)]
-pub struct Parsed {
+pub struct Parsed<'a> {
     /// Talker id.
-    pub talker: String,
+    pub talker: &'a str,
     /// Sentence formatter (`GGA`, `HDG`, …), or the whole address when it is not standard.
-    pub formatter: String,
+    pub formatter: &'a str,
     /// The contents.
-    pub sentence: Sentence,
+    pub sentence: Sentence<'a>,
 }
 
 /// The address of a sentence: the letters after `$`/`!` (`GPGGA`, `OSI`, and `C` for the Iver
@@ -165,7 +166,7 @@ fn east_west(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>
 }
 
 /// Parses one sentence (with its checksum, without line ending).
-pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
+pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
     if !line.is_ascii() || !line.starts_with(['$', '!']) {
         return Err(err(line, "not an NMEA sentence"));
     }
@@ -174,33 +175,50 @@ pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
         addr.len() == 5 && addr.bytes().all(|b| b.is_ascii_uppercase()) && !addr.starts_with('P');
     if !standard || line.starts_with('!') {
         return Ok(Parsed {
-            talker: String::new(),
-            formatter: addr.to_string(),
-            sentence: Sentence::Other(addr.to_string()),
+            talker: "",
+            formatter: addr,
+            sentence: Sentence::Other(addr),
         });
     }
     let (talker, formatter) = addr.split_at(2);
-    let f = fields(line);
-    let by_crate = |line: &str| -> Result<nmea::ParseResult, NmeaError> {
-        nmea::parse_str(line).map_err(|e| err(line, e))
+    // our own parsers read the fields; the crate's read the whole line
+    let f = match formatter {
+        "HDG" | "HDM" | "DBT" | "ROT" | "XDR" => fields(line),
+        _ => Vec::new(),
     };
+    // The crate's parser for each sentence is handed the sentence's data directly: the framing
+    // has already checked the checksum and the address is known, so neither is worked out again.
+    let data = {
+        let body = &line[1..];
+        let start = body.find(',').map_or(body.len(), |i| i + 1);
+        let end = body
+            .rfind('*')
+            .filter(|e| *e >= start)
+            .unwrap_or(body.len());
+        &body[start..end]
+    };
+    let crate_sentence = |id: nmea::SentenceType| nmea::NmeaSentence {
+        talker_id: talker,
+        message_id: id,
+        data,
+        checksum: 0,
+    };
+    let crate_err = |e: nmea::Error<'_>| err(line, e);
+    use nmea::SentenceType as T;
+    use nmea::sentences as n;
     let sentence = match formatter {
-        "GGA" | "RMC" | "VTG" | "GLL" | "GNS" | "HDT" | "DPT" | "DBS" | "DBK" | "MTW" | "VHW"
-        | "ZDA" => match by_crate(line)? {
-            nmea::ParseResult::GGA(d) => Sentence::Gga(d),
-            nmea::ParseResult::RMC(d) => Sentence::Rmc(d),
-            nmea::ParseResult::VTG(d) => Sentence::Vtg(d),
-            nmea::ParseResult::GLL(d) => Sentence::Gll(d),
-            nmea::ParseResult::GNS(d) => Sentence::Gns(d),
-            nmea::ParseResult::HDT(d) => Sentence::Hdt(d),
-            nmea::ParseResult::DPT(d) => Sentence::Dpt(d),
-            nmea::ParseResult::DBS(d) => Sentence::Dbs(d),
-            nmea::ParseResult::DBK(d) => Sentence::Dbk(d),
-            nmea::ParseResult::MTW(d) => Sentence::Mtw(d),
-            nmea::ParseResult::VHW(d) => Sentence::Vhw(d),
-            nmea::ParseResult::ZDA(d) => Sentence::Zda(d),
-            _ => Sentence::Other(addr.to_string()),
-        },
+        "GGA" => Sentence::Gga(n::parse_gga(crate_sentence(T::GGA)).map_err(crate_err)?),
+        "RMC" => Sentence::Rmc(n::parse_rmc(crate_sentence(T::RMC)).map_err(crate_err)?),
+        "VTG" => Sentence::Vtg(n::parse_vtg(crate_sentence(T::VTG)).map_err(crate_err)?),
+        "GLL" => Sentence::Gll(n::parse_gll(crate_sentence(T::GLL)).map_err(crate_err)?),
+        "GNS" => Sentence::Gns(n::parse_gns(crate_sentence(T::GNS)).map_err(crate_err)?),
+        "HDT" => Sentence::Hdt(n::parse_hdt(crate_sentence(T::HDT)).map_err(crate_err)?),
+        "DPT" => Sentence::Dpt(n::parse_dpt(crate_sentence(T::DPT)).map_err(crate_err)?),
+        "DBS" => Sentence::Dbs(n::parse_dbs(crate_sentence(T::DBS)).map_err(crate_err)?),
+        "DBK" => Sentence::Dbk(n::parse_dbk(crate_sentence(T::DBK)).map_err(crate_err)?),
+        "MTW" => Sentence::Mtw(n::parse_mtw(crate_sentence(T::MTW)).map_err(crate_err)?),
+        "VHW" => Sentence::Vhw(n::parse_vhw(crate_sentence(T::VHW)).map_err(crate_err)?),
+        "ZDA" => Sentence::Zda(n::parse_zda(crate_sentence(T::ZDA)).map_err(crate_err)?),
         "HDG" => Sentence::Hdg {
             heading: opt_num(line, &f, 0, "heading")?,
             deviation: east_west(line, &f, 1, "deviation")?,
@@ -236,11 +254,11 @@ pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
             }
             Sentence::Xdr(out)
         }
-        _ => Sentence::Other(addr.to_string()),
+        _ => Sentence::Other(addr),
     };
     Ok(Parsed {
-        talker: talker.to_string(),
-        formatter: formatter.to_string(),
+        talker,
+        formatter,
         sentence,
     })
 }
@@ -365,14 +383,19 @@ pub mod build {
 mod tests {
     use super::*;
 
-    fn p(body: &str) -> Parsed {
-        parse(&nmea_sentence(b'$', body)).unwrap_or_else(|e| panic!("{e}"))
+    /// A sentence kept for the rest of the test run, so that what is parsed from it can be kept too.
+    fn line(start: u8, body: &str) -> &'static str {
+        Box::leak(nmea_sentence(start, body).into_boxed_str())
+    }
+
+    fn p(body: &str) -> Parsed<'static> {
+        parse(line(b'$', body)).unwrap_or_else(|e| panic!("{e}"))
     }
 
     #[test]
     fn crate_sentences_parse_field_by_field() {
         let g = p("GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,");
-        assert_eq!((g.talker.as_str(), g.formatter.as_str()), ("GP", "GGA"));
+        assert_eq!((g.talker, g.formatter), ("GP", "GGA"));
         let Sentence::Gga(d) = g.sentence else {
             panic!()
         };
@@ -471,31 +494,28 @@ mod tests {
 
     #[test]
     fn bad_fields_are_errors_naming_the_field() {
-        let e = parse(&nmea_sentence(b'$', "HCHDG,east,,,,")).unwrap_err();
+        let e = parse(line(b'$', "HCHDG,east,,,,")).unwrap_err();
         assert!(e.reason.contains("heading `east` is not a number"), "{e}");
-        let e = parse(&nmea_sentence(b'$', "IIXDR,A,1,D")).unwrap_err();
+        let e = parse(line(b'$', "IIXDR,A,1,D")).unwrap_err();
         assert!(e.reason.contains("multiple of 4"), "{e}");
-        assert!(parse(&nmea_sentence(b'$', "GPGGA,garbage")).is_err());
+        assert!(parse(line(b'$', "GPGGA,garbage")).is_err());
         assert!(parse("GPGGA,1*00").is_err());
     }
 
     #[test]
     fn others_pass_through() {
-        let a = parse(&nmea_sentence(
-            b'!',
-            "AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0",
-        ))
-        .unwrap();
-        assert_eq!(a.sentence, Sentence::Other("AIVDM".into()));
-        let o = parse(&nmea_sentence(b'$', "OSI,8080808080,S,1")).unwrap();
-        assert_eq!(o.sentence, Sentence::Other("OSI".into()));
-        let x = parse(&nmea_sentence(b'$', "PGRME,15.0,M,45.0,M,25.0,M")).unwrap();
-        assert_eq!(x.sentence, Sentence::Other("PGRME".into()));
+        let a = parse(line(b'!', "AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0")).unwrap();
+        assert_eq!(a.sentence, Sentence::Other("AIVDM"));
+        let o = parse(line(b'$', "OSI,8080808080,S,1")).unwrap();
+        assert_eq!(o.sentence, Sentence::Other("OSI"));
+        let x = parse(line(b'$', "PGRME,15.0,M,45.0,M,25.0,M")).unwrap();
+        assert_eq!(x.sentence, Sentence::Other("PGRME"));
     }
 
     #[test]
     fn built_sentences_read_back() {
-        let Sentence::Gga(g) = parse(&build::gga("GP", 3723.5, 43.508, -16.44, true, 9))
+        let keep = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
+        let Sentence::Gga(g) = parse(keep(build::gga("GP", 3723.5, 43.508, -16.44, true, 9)))
             .unwrap()
             .sentence
         else {
@@ -503,22 +523,22 @@ mod tests {
         };
         assert!((g.latitude.unwrap() - 43.508).abs() < 1e-6);
         assert!((g.longitude.unwrap() + 16.44).abs() < 1e-6);
-        let Sentence::Rmc(r) = parse(&build::rmc("GP", 60.0, "211126", -12.5, 170.25, 2.0, 359.9))
-            .unwrap()
-            .sentence
-        else {
+        let rmc = keep(build::rmc("GP", 60.0, "211126", -12.5, 170.25, 2.0, 359.9));
+        let Sentence::Rmc(r) = parse(rmc).unwrap().sentence else {
             panic!()
         };
         assert!((f64::from(r.speed_over_ground.unwrap()) - 2.0 / crate::units::KNOT).abs() < 0.01);
         assert_eq!(
-            parse(&build::hdg("HC", 10.0, -1.5, 3.0)).unwrap().sentence,
+            parse(keep(build::hdg("HC", 10.0, -1.5, 3.0)))
+                .unwrap()
+                .sentence,
             Sentence::Hdg {
                 heading: Some(10.0),
                 deviation: Some(-1.5),
                 variation: Some(3.0)
             }
         );
-        let Sentence::Xdr(x) = parse(&build::xdr_pitch_roll("II", 3.0, -4.0))
+        let Sentence::Xdr(x) = parse(keep(build::xdr_pitch_roll("II", 3.0, -4.0)))
             .unwrap()
             .sentence
         else {

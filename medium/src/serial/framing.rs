@@ -2,7 +2,7 @@
 //!
 //! A [`Framer`] is fed bytes as they arrive, in chunks of any size, and hands out whole frames or
 //! rejections, each rejection with a reason from a fixed set so that it can be counted. It never
-//! panics and never holds more than its maximum frame length.
+//! panics and never holds more than its maximum frame length (and the CR of a line ending).
 //!
 //! NMEA framing: a sentence starts at `$` or `!` and ends at LF (a CR before it is dropped). Bytes
 //! outside a sentence are garbage. A new `$`/`!` before the end means the previous sentence was cut
@@ -130,6 +130,11 @@ fn hex(b: u8) -> Option<u8> {
 /// Checks one complete NMEA sentence (`$…` without line ending) against `policy`; returns the
 /// sentence with a correct checksum.
 pub fn check_nmea(line: &[u8], policy: ChecksumPolicy) -> Result<Vec<u8>, Reject> {
+    check_nmea_owned(line.to_vec(), policy)
+}
+
+/// [`check_nmea`] on a sentence it may keep: a sentence that is already right is handed back as is.
+pub fn check_nmea_owned(line: Vec<u8>, policy: ChecksumPolicy) -> Result<Vec<u8>, Reject> {
     if line.len() < 2 || !matches!(line[0], b'$' | b'!') {
         return Err(Reject::Empty);
     }
@@ -150,7 +155,7 @@ pub fn check_nmea(line: &[u8], policy: ChecksumPolicy) -> Result<Vec<u8>, Reject
             };
             let actual = nmea_checksum(body);
             match (given, policy) {
-                (Some(g), _) if g == actual => Ok(line.to_vec()),
+                (Some(g), _) if g == actual => Ok(line),
                 (_, ChecksumPolicy::Ignore) => {
                     let mut out = line[..i + 1].to_vec();
                     out.extend_from_slice(format!("{actual:02X}").as_bytes());
@@ -240,7 +245,21 @@ impl Framer {
 
     /// Feeds bytes; `out` gets each frame or rejection, in order.
     pub fn push(&mut self, bytes: &[u8], out: &mut impl FnMut(Output)) {
-        for &b in bytes {
+        let mut i = 0;
+        while i < bytes.len() {
+            // inside a sentence, plain bytes are copied a run at a time
+            if self.framing == Framing::Nmea && matches!(self.state, State::In) {
+                let rest = &bytes[i..];
+                let run = memchr::memchr3(b'\n', b'$', b'!', rest).unwrap_or(rest.len());
+                if run > 0 && run <= self.max.saturating_sub(self.buf.len()) {
+                    self.buf.extend_from_slice(&rest[..run]);
+                    self.offset += run as u64;
+                    i += run;
+                    continue;
+                }
+            }
+            let b = bytes[i];
+            i += 1;
             let offset = self.offset;
             let mut emit =
                 |r: Result<Vec<u8>, Reject>| out(r.map_err(|reason| Rejected { reason, offset }));
@@ -267,7 +286,9 @@ impl Framer {
 
     fn take(&mut self) -> Vec<u8> {
         self.state = State::Idle;
-        std::mem::take(&mut self.buf)
+        // the next frame gets a buffer of the usual size up front, not one grown step by step
+        let room = self.buf.len().clamp(16, 128);
+        std::mem::replace(&mut self.buf, Vec::with_capacity(room))
     }
 
     fn nmea(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
@@ -301,8 +322,10 @@ impl Framer {
                     if line.last() == Some(&b'\r') {
                         line.pop();
                     }
-                    out(check_nmea(&line, self.policy));
-                } else if self.buf.len() >= self.max {
+                    out(check_nmea_owned(line, self.policy));
+                } else if self.buf.len() >= self.max && !(b == b'\r' && self.buf.len() == self.max)
+                {
+                    // (a CR right after a full sentence may be its line ending)
                     self.buf.clear();
                     self.state = State::Skipping;
                     out(Err(Reject::TooLong));
@@ -322,14 +345,15 @@ impl Framer {
             }
             _ if b == b'\n' => {
                 let mut line = self.take();
-                if line.last() == Some(&b'\r') {
+                // CRs at the end are line-ending noise: a line cannot carry them (see `encode`)
+                while line.last() == Some(&b'\r') {
                     line.pop();
                 }
                 if !line.is_empty() {
                     out(Ok(line));
                 }
             }
-            _ if self.buf.len() >= self.max => {
+            _ if self.buf.len() >= self.max && !(b == b'\r' && self.buf.len() == self.max) => {
                 self.buf.clear();
                 self.state = State::Skipping;
                 out(Err(Reject::TooLong));
@@ -431,6 +455,9 @@ pub fn encode(framing: Framing, frame: &[u8]) -> Result<Vec<u8>, &'static str> {
         Framing::Lines => {
             if frame.contains(&b'\n') {
                 return Err("a line cannot hold a line feed");
+            }
+            if frame.last() == Some(&b'\r') {
+                return Err("a line cannot end in a carriage return");
             }
             let mut s = frame.to_vec();
             s.push(b'\n');
@@ -617,6 +644,32 @@ mod tests {
     }
 
     #[test]
+    fn regression_a_full_frame_may_end_in_cr_lf_and_lines_shed_trailing_crs() {
+        // found by the nmea_framer fuzz target
+        let s = nmea_sentence(b'$', "A,1");
+        let max = s.len();
+        let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, max);
+        let mut got = Vec::new();
+        f.push(format!("{s}\r\n").as_bytes(), &mut |o| {
+            got.push(o.map_err(|r| r.reason))
+        });
+        assert_eq!(got, [Ok(s.into_bytes())]);
+        let mut f = Framer::new(Framing::Lines, ChecksumPolicy::Require, 8);
+        let mut got = Vec::new();
+        f.push(b"ABCDEFGH\r\nx\r\r\n", &mut |o| {
+            got.push(o.map_err(|r| r.reason))
+        });
+        assert_eq!(got, [Ok(b"ABCDEFGH".to_vec()), Ok(b"x".to_vec())]);
+        // a CR held at the limit and more bytes after it: too long, not a crash
+        let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, 8);
+        let mut got = Vec::new();
+        f.push(b"$ABCDEFG\rXYZ\n", &mut |o| {
+            got.push(o.map_err(|r| r.reason))
+        });
+        assert_eq!(got, [Err(Reject::TooLong)]);
+    }
+
+    #[test]
     fn non_printable_bytes_inside_a_sentence_are_rejected() {
         let got = frames(
             Framing::Nmea,
@@ -678,5 +731,6 @@ mod tests {
             format!("{}\r\n", nmea_sentence(b'$', "OSD,G,C,S,P,,,,")).into_bytes()
         );
         assert!(encode(Framing::Lines, b"a\nb").is_err());
+        assert!(encode(Framing::Lines, b"a\r").is_err());
     }
 }

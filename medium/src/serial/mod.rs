@@ -197,6 +197,44 @@ impl SerialConfig {
     }
 }
 
+/// Names received frames, remembering the topic of each NMEA address it has seen (a line carries a
+/// handful of sentence types; making their topic again for every sentence would be waste).
+pub struct FrameTopics {
+    cfg: SerialConfig,
+    known: Vec<(Box<[u8]>, Topic)>,
+}
+
+impl FrameTopics {
+    /// Topics for frames of a medium with these settings.
+    pub fn new(cfg: &SerialConfig) -> FrameTopics {
+        FrameTopics {
+            cfg: cfg.clone(),
+            known: Vec::new(),
+        }
+    }
+
+    /// The topic of a received frame ([`SerialConfig::topic_of`]).
+    pub fn topic_of(&mut self, frame: &[u8]) -> Option<Topic> {
+        if self.cfg.framing != Framing::Nmea {
+            return self.cfg.topic_of(frame);
+        }
+        let letters = frame
+            .iter()
+            .skip(1)
+            .take_while(|b| b.is_ascii_alphabetic())
+            .count();
+        let address = frame.get(1..1 + letters)?;
+        if let Some((_, t)) = self.known.iter().find(|(a, _)| **a == *address) {
+            return Some(t.clone());
+        }
+        let topic = self.cfg.topic_of(frame)?;
+        if self.known.len() < 64 {
+            self.known.push((address.into(), topic.clone()));
+        }
+        Some(topic)
+    }
+}
+
 /// What the transport writes, and whether the line is up.
 struct Shared {
     name: Arc<str>,
@@ -332,6 +370,7 @@ async fn pump<P: AsyncRead + AsyncWrite>(
 ) -> String {
     let (mut reader, mut writer) = tokio::io::split(port);
     let mut buf = vec![0u8; 4096];
+    let mut topics = FrameTopics::new(cfg);
     let path = cfg.path.display();
     loop {
         tokio::select! {
@@ -339,7 +378,7 @@ async fn pump<P: AsyncRead + AsyncWrite>(
                 Ok(0) => return format!("{path}: end of stream"),
                 Ok(n) => {
                     framer.push(&buf[..n], &mut |out| match out {
-                        Ok(frame) => match cfg.topic_of(&frame) {
+                        Ok(frame) => match topics.topic_of(&frame) {
                             Some(topic) => {
                                 ingress.originate(topic, Payload::from(frame));
                             }

@@ -180,7 +180,7 @@ impl Module for Convert {
                     if self.keep && c.target != c.source {
                         out.remove(&c.source);
                     }
-                    out.insert(c.target.as_str(), c.apply(x));
+                    out.insert(c.target.clone(), c.apply(x));
                 }
                 None => {
                     tracing::debug!(module = ctx.name(), topic = %msg.topic, "no numeric field `{}`", c.source);
