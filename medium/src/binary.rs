@@ -309,7 +309,7 @@ impl Reader<'_> {
                 b.copy_from_slice(raw);
                 Value::Float(f64::from_le_bytes(b))
             }
-            TAG_STR => Value::Str(self.text()?),
+            TAG_STR => Value::from(self.text()?),
             TAG_BYTES => {
                 let len = self.varint()?;
                 Value::Bytes(self.take(len)?.to_vec())

@@ -15,8 +15,8 @@ pub enum Value {
     Int(i64),
     /// A 64-bit IEEE float.
     Float(f64),
-    /// A UTF-8 string.
-    Str(String),
+    /// A UTF-8 string (a constant written in code costs no allocation: [`Value::label`]).
+    Str(Text),
     /// A byte string.
     Bytes(Vec<u8>),
     /// A list of values.
@@ -73,7 +73,7 @@ impl Value {
     /// else a string. A value in double quotes is always a string.
     pub fn parse_loose(text: &str) -> Value {
         if let Some(inner) = text.strip_prefix('"').and_then(|t| t.strip_suffix('"')) {
-            return Value::Str(inner.to_string());
+            return Value::from(inner);
         }
         match text {
             "true" => return Value::Bool(true),
@@ -88,7 +88,12 @@ impl Value {
         {
             return Value::Float(f);
         }
-        Value::Str(text.to_string())
+        Value::from(text)
+    }
+
+    /// A string value that is a constant in code (a unit, a mode, a reference frame).
+    pub const fn label(text: &'static str) -> Value {
+        Value::Str(Cow::Borrowed(text))
     }
 }
 
@@ -163,19 +168,27 @@ value_from! {
     u8 => Int as i64,
     f64 => Float,
     f32 => Float as f64,
-    String => Str,
     Vec<u8> => Bytes,
     Vec<Value> => List,
 }
 
 impl From<&str> for Value {
     fn from(v: &str) -> Self {
-        Value::Str(v.to_string())
+        Value::Str(Cow::Owned(v.to_string()))
     }
 }
 
+impl From<String> for Value {
+    fn from(v: String) -> Self {
+        Value::Str(Cow::Owned(v))
+    }
+}
+
+/// Text that is either a constant in code or owned: datamap keys and string values.
+pub type Text = Cow<'static, str>;
+
 /// A datamap key: a field name written in code costs no allocation.
-pub type Key = Cow<'static, str>;
+pub type Key = Text;
 
 /// An ordered map of named values: the "named datamap" payload format.
 ///
@@ -198,6 +211,12 @@ impl DataMap {
         DataMap {
             entries: Vec::with_capacity(n),
         }
+    }
+
+    /// A datamap of these entries, in this order, taken as they are (like [`DataMap::push`], a
+    /// repeated key stays repeated): the quickest way to build a dataset whose fields are known.
+    pub fn from_entries(entries: Vec<(Key, Value)>) -> Self {
+        DataMap { entries }
     }
 
     /// Sets `key` to `value`: replaces the value in place when the key exists, appends otherwise.
@@ -398,9 +417,9 @@ mod tests {
         assert_eq!(Value::parse_loose("true"), Value::Bool(true));
         assert_eq!(Value::parse_loose("-12"), Value::Int(-12));
         assert_eq!(Value::parse_loose("1.5"), Value::Float(1.5));
-        assert_eq!(Value::parse_loose("nan"), Value::Str("nan".into()));
-        assert_eq!(Value::parse_loose("\"12\""), Value::Str("12".into()));
-        assert_eq!(Value::parse_loose("N"), Value::Str("N".into()));
+        assert_eq!(Value::parse_loose("nan"), Value::label("nan"));
+        assert_eq!(Value::parse_loose("\"12\""), Value::label("12"));
+        assert_eq!(Value::parse_loose("N"), Value::label("N"));
     }
 
     #[test]

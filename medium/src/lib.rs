@@ -38,7 +38,7 @@ pub mod xml;
 pub mod xmlform;
 
 pub use active::{ActiveInterface, Handler, Outgoing, TxWaker};
-pub use datamap::{DataMap, Value};
+pub use datamap::{DataMap, Key, Text, Value};
 pub use fault::FaultConfig;
 pub use medium::{
     Ingress, Interface, InterfaceStats, IntoTopic, LinkState, Medium, MediumStats, Node, OpenError,

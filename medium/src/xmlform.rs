@@ -126,7 +126,7 @@ fn write_value(out: &mut String, name: Option<&str>, v: &Value) {
                 escape_text(out, s);
             } else {
                 out.push_str(" encoding=\"base64\">");
-                out.push_str(&B64.encode(s));
+                out.push_str(&B64.encode(s.as_bytes()));
             }
         }
         Value::Bytes(b) => {
@@ -525,9 +525,9 @@ impl<'a> Parser<'a> {
                     .decode(strip_ws(&text))
                     .ok()
                     .and_then(|b| String::from_utf8(b).ok());
-                Value::Str(raw.ok_or_else(|| bad("base64 string", &text))?)
+                Value::from(raw.ok_or_else(|| bad("base64 string", &text))?)
             }
-            Tag::Str => Value::Str(text.into_owned()),
+            Tag::Str => Value::from(text.into_owned()),
             Tag::Bytes => Value::Bytes(
                 B64.decode(strip_ws(&text))
                     .map_err(|_| bad("base64 bytes", &text))?,

@@ -17,8 +17,8 @@ fn scalar() -> impl Strategy<Value = Value> {
         // any bit pattern: NaNs with payloads, infinities, negative zero, subnormals
         any::<u64>().prop_map(|b| Value::Float(f64::from_bits(b))),
         any::<f64>().prop_map(Value::Float),
-        ".*".prop_map(Value::Str),
-        "[\\x00-\\x1f\\u{fffe}\\u{ffff}a<&>\"' \r\n\t]{0,8}".prop_map(Value::Str),
+        ".*".prop_map(Value::from),
+        "[\\x00-\\x1f\\u{fffe}\\u{ffff}a<&>\"' \r\n\t]{0,8}".prop_map(Value::from),
         proptest::collection::vec(any::<u8>(), 0..40).prop_map(Value::Bytes),
     ]
 }

@@ -26,8 +26,17 @@ pub fn moved(lat: f64, lon: f64, north: f64, east: f64) -> (f64, f64) {
 
 /// An angle in degrees, in (-180, 180].
 pub fn wrap180(a: f64) -> f64 {
-    let r = a.rem_euclid(360.0);
+    let r = wrap360(a);
     if r > 180.0 { r - 360.0 } else { r }
+}
+
+/// An angle in degrees, in [0, 360) (an angle already there is returned as is, without a division).
+pub fn wrap360(a: f64) -> f64 {
+    if (0.0..360.0).contains(&a) {
+        a
+    } else {
+        a.rem_euclid(360.0)
+    }
 }
 
 #[cfg(test)]
@@ -52,5 +61,9 @@ mod tests {
         assert_eq!(wrap180(190.0), -170.0);
         assert_eq!(wrap180(-190.0), 170.0);
         assert_eq!(wrap180(180.0), 180.0);
+        assert_eq!(wrap360(-90.0), 270.0);
+        assert_eq!(wrap360(720.5), 0.5);
+        assert_eq!(wrap360(359.5), 359.5);
+        assert_eq!(wrap360(360.0), 0.0);
     }
 }

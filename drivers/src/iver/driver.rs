@@ -36,8 +36,9 @@ use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, LinkState, Message, Payload};
+use seabus_medium::{DataMap, Format, Kind, LinkState, Message, Payload, Value};
 use seabus_modules::Catalogue;
+use seabus_modules::geo::wrap360;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
 };
@@ -464,15 +465,15 @@ impl Iver {
                     let m = DataMap::new()
                         .with("lat", lat)
                         .with("lon", lon)
-                        .with("source", "frontseat");
+                        .with("source", Value::label("frontseat"));
                     self.publish(ctx, "position", &self.t.position, m).await;
                 }
                 if let (Some(kn), Some(h)) = (o.speed_knots, o.heading) {
                     self.heading = Some(h);
                     let m = DataMap::new()
                         .with("speed", kn * KNOT)
-                        .with("course", h.rem_euclid(360.0))
-                        .with("reference", "water");
+                        .with("course", wrap360(h))
+                        .with("reference", Value::label("water"));
                     self.publish(ctx, "velocity", &self.t.velocity, m).await;
                 }
                 if let Some(ft) = o.altimeter_feet {
@@ -512,7 +513,7 @@ impl Iver {
             FromFront::Compass(c) => {
                 self.heading = Some(c.heading);
                 let mut m = DataMap::new()
-                    .with("yaw", c.heading.rem_euclid(360.0))
+                    .with("yaw", wrap360(c.heading))
                     .with("pitch", c.pitch)
                     .with("roll", c.roll);
                 if let Some(t) = c.temperature {
@@ -559,13 +560,13 @@ impl Iver {
                     let speed = vx.hypot(vy);
                     let heading = self.heading.unwrap_or(0.0);
                     // +y is port in the vehicle's frame: starboard sway is -vy
-                    let course = (heading + (-vy).atan2(vx).to_degrees()).rem_euclid(360.0);
+                    let course = wrap360(heading + (-vy).atan2(vx).to_degrees());
                     let mut m = DataMap::new()
                         .with("speed", speed)
                         .with("course", course)
                         .with("surge", vx)
                         .with("sway", -vy)
-                        .with("reference", "ground");
+                        .with("reference", Value::label("ground"));
                     if let Some(vz) = d.vz {
                         m.insert("heave", vz);
                     }
@@ -580,7 +581,7 @@ impl Iver {
                     let m = DataMap::new()
                         .with("lat", lat)
                         .with("lon", lon)
-                        .with("source", "gps");
+                        .with("source", Value::label("gps"));
                     self.publish(ctx, "position", &self.t.gps, m).await;
                 }
             }

@@ -10,6 +10,7 @@
 pub use crate::nmea::sentence::{address, fields};
 use crate::units::FOOT;
 use seabus_medium::serial::framing::nmea_sentence;
+use seabus_modules::geo::wrap360;
 use std::fmt;
 use thiserror::Error;
 
@@ -583,7 +584,7 @@ impl Command {
                 timeout,
             } => format!(
                 "OMS,{:.1},{:.1},{:.1},{:.1},{:.0}",
-                heading.rem_euclid(360.0),
+                wrap360(*heading),
                 units.from_metres(*depth),
                 max_pitch,
                 speed_knots,

@@ -29,7 +29,7 @@ use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{Format, Kind, Message, Payload, Stamp};
 use seabus_modules::Catalogue;
-use seabus_modules::geo::{offset, wrap180};
+use seabus_modules::geo::{offset, wrap180, wrap360};
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
 };
@@ -405,7 +405,7 @@ impl Sim {
                     None
                 } else {
                     Some(Setpoint {
-                        heading: e.atan2(n).to_degrees().rem_euclid(360.0),
+                        heading: wrap360(e.atan2(n).to_degrees()),
                         depth: *depth,
                         speed: *speed,
                     })
@@ -438,7 +438,7 @@ impl Sim {
 
     fn compass_line(&mut self) -> String {
         Compass {
-            heading: self.noisy(self.v.heading).rem_euclid(360.0),
+            heading: wrap360(self.noisy(self.v.heading)),
             pitch: self.noisy(self.v.pitch).clamp(-90.0, 90.0),
             roll: wrap180(self.noisy(self.v.roll)),
             temperature: Some(18.5),
@@ -612,7 +612,7 @@ impl Module for Sim {
                 }
                 lines.push(build::hdg(
                     "HC",
-                    (heading - self.declination).rem_euclid(360.0),
+                    wrap360(heading - self.declination),
                     0.0,
                     self.declination,
                 ));

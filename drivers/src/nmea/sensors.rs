@@ -3,11 +3,12 @@
 //!
 //! Each is placed on two media, the serial line first (`media="gps-line bus"`). Parameters common to
 //! all three: `talkers` (only sentences from these talkers, such as `GP GN`; default any), one
-//! parameter per output naming the sentence formatters that feed it, and one naming its topic.
+//! parameter per output naming the sentence formatters that feed it (only ones the driver reads
+//! for that output: naming another is an error), and one naming its topic.
 //!
 //! | type | output ← sentences (parameter, default) | topic parameter (default) |
 //! |---|---|---|
-//! | `nmea-gps` | position ← `position` (`GGA GNS GLL`); velocity ← `velocity` (`RMC VTG`) | `topic` (`nav.position`), `velocity_topic` (`nav.velocity`) |
+//! | `nmea-gps` | position ← `position` (`GGA GNS GLL`; `RMC` may be added); velocity ← `velocity` (`RMC VTG`) | `topic` (`nav.position`), `velocity_topic` (`nav.velocity`) |
 //! | `nmea-heading` | heading ← `heading` (`HDT HDG HDM`); attitude when `XDR` pitch and roll are fresh | `topic` (`nav.heading`), `attitude_topic` (`nav.attitude`) |
 //! | `nmea-sounder` | altitude ← `altitude` (`DBT DPT DBK`) | `topic` (`nav.altitude`) |
 //!
@@ -21,8 +22,9 @@ use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, Message};
+use seabus_medium::{DataMap, Format, Key, Kind, Message, Value};
 use seabus_modules::Catalogue;
+use seabus_modules::geo::wrap360;
 use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TopicDecl};
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
 use std::time::Duration;
@@ -48,7 +50,7 @@ pub const HEADING: ModuleType = ModuleType {
 pub const SOUNDER: ModuleType = ModuleType {
     name: "nmea-sounder",
     kind: ModuleKind::Driver,
-    summary: "an NMEA echo sounder: altitude above the sea floor and water depth",
+    summary: "an NMEA echo sounder: altitude above the sea floor",
     build: |c, cat| build(c, cat, Role::Sounder),
 };
 
@@ -65,7 +67,8 @@ pub enum Role {
 
 /// One output: the formatters that feed it, its dataset and topic.
 struct Output {
-    feeds: Vec<String>,
+    /// three-letter sentence formatters (`GGA`), each one the driver reads
+    feeds: Vec<[u8; 3]>,
     dataset: &'static str,
     topic: String,
 }
@@ -73,7 +76,7 @@ struct Output {
 impl Output {
     /// Whether sentences of `formatter` feed this output.
     fn fed_by(&self, formatter: &str) -> bool {
-        self.feeds.iter().any(|f| f == formatter)
+        <[u8; 3]>::try_from(formatter.as_bytes()).is_ok_and(|f| self.feeds.contains(&f))
     }
 }
 
@@ -88,6 +91,11 @@ pub struct Sensor {
     fresh: Duration,
     pitch_roll: Option<(f64, f64, Instant)>,
     tally: Tally,
+}
+
+/// A sentence formatter as three bytes, when it is three letters.
+fn code(formatter: &str) -> Option<[u8; 3]> {
+    formatter.as_bytes().try_into().ok()
 }
 
 fn words(s: &str) -> Vec<String> {
@@ -112,12 +120,28 @@ impl Sensor {
         cat: &Catalogue,
         role: Role,
     ) -> Result<(Sensor, Declaration), FileError> {
-        let list = |name: &str, default: &str| -> Result<Vec<String>, FileError> {
-            let v = words(p.str(name).unwrap_or(default));
-            match p.get(name) {
-                Some(param) if v.is_empty() => Err(param.error("names no sentence")),
-                _ => Ok(v),
+        // the sentences feeding an output: any of those the driver can read for it
+        let list = |name: &str, default: &[&str], readable: &[&str]| {
+            let Some(param) = p.get(name) else {
+                return Ok(default.iter().filter_map(|f| code(f)).collect());
+            };
+            let named = words(&param.value);
+            if named.is_empty() {
+                return Err(param.error("names no sentence"));
             }
+            named
+                .iter()
+                .map(|w| {
+                    code(w)
+                        .filter(|_| readable.contains(&w.as_str()))
+                        .ok_or_else(|| {
+                            param.error(format!(
+                                "`{w}` is not a sentence this driver reads for it (it reads {})",
+                                readable.join(", ")
+                            ))
+                        })
+                })
+                .collect::<Result<Vec<_>, FileError>>()
         };
         let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
             Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
@@ -126,30 +150,34 @@ impl Sensor {
         let outputs = match role {
             Role::Gps => vec![
                 Output {
-                    feeds: list("position", "GGA GNS GLL")?,
+                    feeds: list(
+                        "position",
+                        &["GGA", "GNS", "GLL"],
+                        &["GGA", "GNS", "GLL", "RMC"],
+                    )?,
                     dataset: "position",
                     topic: topic("topic", "position", "nav.position")?,
                 },
                 Output {
-                    feeds: list("velocity", "RMC VTG")?,
+                    feeds: list("velocity", &["RMC", "VTG"], &["RMC", "VTG"])?,
                     dataset: "velocity",
                     topic: topic("velocity_topic", "velocity", "nav.velocity")?,
                 },
             ],
             Role::Heading => vec![
                 Output {
-                    feeds: list("heading", "HDT HDG HDM")?,
+                    feeds: list("heading", &["HDT", "HDG", "HDM"], &["HDT", "HDG", "HDM"])?,
                     dataset: "heading",
                     topic: topic("topic", "heading", "nav.heading")?,
                 },
                 Output {
-                    feeds: vec!["XDR".into()],
+                    feeds: vec![*b"XDR"],
                     dataset: "attitude",
                     topic: topic("attitude_topic", "attitude", "nav.attitude")?,
                 },
             ],
             Role::Sounder => vec![Output {
-                feeds: list("altitude", "DBT DPT DBK")?,
+                feeds: list("altitude", &["DBT", "DPT", "DBK"], &["DBT", "DPT", "DBK"])?,
                 dataset: "altitude",
                 topic: topic("topic", "altitude", "nav.altitude")?,
             }],
@@ -217,6 +245,15 @@ impl Readings {
         self.iter().count()
     }
 
+    /// The true heading among the readings, if there is one.
+    fn true_heading(&self) -> Option<f64> {
+        let (_, m) = self.iter().find(|(i, _)| *i == 0)?;
+        match m.get_bool("magnetic") {
+            Some(true) => None,
+            _ => m.get_f64("heading"),
+        }
+    }
+
     /// True when the sentence gave nothing.
     pub fn is_empty(&self) -> bool {
         self.0[0].is_none()
@@ -232,13 +269,25 @@ impl IntoIterator for Readings {
 }
 
 impl Sensor {
-    /// A position with its source, when one is configured.
-    fn fix(&self, lat: f64, lon: f64) -> DataMap {
-        let mut m = DataMap::with_capacity(8).and("lat", lat).and("lon", lon);
-        if let Some(src) = &self.source {
-            m.push("source", src.clone());
+    /// A position: latitude and longitude, then the fields of `more` that are there, then the
+    /// source when one is configured.
+    fn fix<const N: usize>(
+        &self,
+        lat: f64,
+        lon: f64,
+        more: [(&'static str, Option<Value>); N],
+    ) -> DataMap {
+        let mut e: Vec<(Key, Value)> = Vec::with_capacity(3 + N);
+        e.extend([("lat".into(), lat.into()), ("lon".into(), lon.into())]);
+        for (k, v) in more {
+            if let Some(v) = v {
+                e.push((Key::Borrowed(k), v));
+            }
         }
-        m
+        if let Some(src) = &self.source {
+            e.push(("source".into(), src.clone().into()));
+        }
+        DataMap::from_entries(e)
     }
 
     /// Turns a parsed sentence into readings.
@@ -249,35 +298,35 @@ impl Sensor {
         match (&parsed.sentence, self.role) {
             (Sentence::Gga(g), Role::Gps) if fed(0) => {
                 if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
-                    let mut m = self.fix(lat, lon);
-                    m.push("fix", g.fix_type.map_or(0, fix_quality));
-                    if let Some(n) = g.fix_satellites {
-                        m.push("satellites", n);
-                    }
-                    if let Some(h) = g.hdop {
-                        m.push("hdop", f64::from(h));
-                    }
-                    if let Some(a) = g.altitude {
-                        m.push("alt", f64::from(a));
-                    }
-
+                    let m = self.fix(
+                        lat,
+                        lon,
+                        [
+                            ("fix", Some(g.fix_type.map_or(0, fix_quality).into())),
+                            ("satellites", g.fix_satellites.map(Value::from)),
+                            ("hdop", g.hdop.map(Value::from)),
+                            ("alt", g.altitude.map(Value::from)),
+                        ],
+                    );
                     out.push((0, m));
                 }
             }
             (Sentence::Gns(g), Role::Gps) if fed(0) => {
                 if let (Some(lat), Some(lon)) = (g.lat, g.lon) {
-                    let mut m = self.fix(lat, lon);
-                    m.push("satellites", i64::from(g.nsattelites));
-                    if let Some(h) = g.hdop {
-                        m.push("hdop", f64::from(h));
-                    }
-
+                    let m = self.fix(
+                        lat,
+                        lon,
+                        [
+                            ("satellites", Some(i64::from(g.nsattelites).into())),
+                            ("hdop", g.hdop.map(Value::from)),
+                        ],
+                    );
                     out.push((0, m));
                 }
             }
             (Sentence::Gll(g), Role::Gps) if fed(0) && g.valid => {
                 if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
-                    out.push((0, self.fix(lat, lon)));
+                    out.push((0, self.fix(lat, lon, [])));
                 }
             }
             (Sentence::Rmc(r), Role::Gps) => {
@@ -286,7 +335,7 @@ impl Sensor {
                     && fed(0)
                     && let (Some(lat), Some(lon)) = (r.lat, r.lon)
                 {
-                    out.push((0, self.fix(lat, lon)));
+                    out.push((0, self.fix(lat, lon, [])));
                 }
                 if valid
                     && fed(1)
@@ -317,20 +366,20 @@ impl Sensor {
                 match variation.or(self.variation) {
                     Some(var) => {
                         let mut m = heading(hdg + dev + var, false);
-                        m.insert("deviation", dev);
-                        m.insert("variation", var);
+                        m.push("deviation", dev);
+                        m.push("variation", var);
                         out.push((0, m));
                     }
                     None => {
                         let mut m = heading(hdg + dev, true);
-                        m.insert("deviation", dev);
+                        m.push("deviation", dev);
                         out.push((0, m));
                     }
                 }
             }
             (Sentence::Hdm { heading: Some(hdg) }, Role::Heading) if fed(0) => match self.variation
             {
-                Some(var) => out.push((0, heading(hdg + var, false).with("variation", var))),
+                Some(var) => out.push((0, heading(hdg + var, false).and("variation", var))),
                 None => out.push((0, heading(*hdg, true))),
             },
             (Sentence::Xdr(x), Role::Heading) => {
@@ -361,13 +410,8 @@ impl Sensor {
             _ => {}
         }
         // a heading sensor that also gives pitch and roll is an attitude sensor
-        let true_heading = out
-            .iter()
-            .find(|(i, _)| *i == 0)
-            .filter(|(_, m)| !m.get_bool("magnetic").unwrap_or(false))
-            .and_then(|(_, m)| m.get_f64("heading"));
         if self.role == Role::Heading
-            && let Some(yaw) = true_heading
+            && let Some(yaw) = out.true_heading()
             && let Some((pitch, roll, at)) = self.pitch_roll
             && now.duration_since(at) <= self.fresh
         {
@@ -399,25 +443,30 @@ fn fix_quality(t: nmea::sentences::FixType) -> i64 {
 }
 
 fn velocity(speed: f64, course: f64) -> DataMap {
-    let c = course.to_radians();
-    DataMap::with_capacity(5)
-        .and("speed", speed)
-        .and("course", course.rem_euclid(360.0))
-        .and("north", speed * c.cos())
-        .and("east", speed * c.sin())
-        .and("reference", "ground")
+    let (sin, cos) = course.to_radians().sin_cos();
+    DataMap::from_entries(vec![
+        ("speed".into(), Value::Float(speed)),
+        ("course".into(), Value::Float(wrap360(course))),
+        ("north".into(), Value::Float(speed * cos)),
+        ("east".into(), Value::Float(speed * sin)),
+        ("reference".into(), Value::label("ground")),
+    ])
 }
 
 fn heading(h: f64, magnetic: bool) -> DataMap {
-    DataMap::new()
-        .with("heading", h.rem_euclid(360.0))
-        .with("magnetic", magnetic)
+    let mut e = Vec::with_capacity(4);
+    e.extend([
+        ("heading".into(), Value::Float(wrap360(h))),
+        ("magnetic".into(), Value::Bool(magnetic)),
+    ]);
+    DataMap::from_entries(e)
 }
 
 fn altitude(a: f64) -> DataMap {
-    DataMap::new()
-        .with("altitude", a.max(0.0))
-        .with("valid", true)
+    DataMap::from_entries(vec![
+        ("altitude".into(), Value::Float(a.max(0.0))),
+        ("valid".into(), Value::Bool(true)),
+    ])
 }
 
 #[async_trait]
@@ -478,6 +527,26 @@ mod tests {
         let line = nmea_sentence(b'$', body);
         let parsed = parse(&line).unwrap();
         s.read(&parsed, Instant::now()).into_iter().collect()
+    }
+
+    #[test]
+    fn an_output_takes_only_sentences_its_driver_reads() {
+        let bad = |role, pairs: &[(&str, &str)]| {
+            let params = Params::from_pairs(pairs);
+            match Sensor::new(&params, &Catalogue::built_in(), role) {
+                Ok(_) => panic!("{pairs:?} was taken"),
+                Err(e) => e.to_string(),
+            }
+        };
+        let e = bad(Role::Gps, &[("position", "GGA GGX")]);
+        assert!(
+            e.contains("parameter `position`: `GGX` is not a sentence this driver reads for it (it reads GGA, GNS, GLL, RMC)"),
+            "{e}"
+        );
+        let e = bad(Role::Heading, &[("heading", "VTG")]);
+        assert!(e.contains("`VTG` is not a sentence"), "{e}");
+        let e = bad(Role::Sounder, &[("altitude", " , ")]);
+        assert!(e.contains("parameter `altitude`: names no sentence"), "{e}");
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! know is [`Sentence::Other`].
 
 use seabus_medium::serial::framing::nmea_sentence;
+use seabus_modules::geo::wrap360;
 use std::fmt;
 use thiserror::Error;
 
@@ -119,7 +120,8 @@ pub struct Parsed<'a> {
 pub fn address(line: &str) -> &str {
     let body = line.get(1..).unwrap_or("");
     let end = body
-        .find(|c: char| !c.is_ascii_alphabetic())
+        .bytes()
+        .position(|b| !b.is_ascii_alphabetic())
         .unwrap_or(body.len());
     &body[..end]
 }
@@ -181,21 +183,32 @@ pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
         });
     }
     let (talker, formatter) = addr.split_at(2);
+    // (a standard address has five letters: the formatter is three bytes, matched as a word)
+    let code: [u8; 3] = formatter.as_bytes().try_into().unwrap_or_default();
     // our own parsers read the fields; the crate's read the whole line
-    let f = match formatter {
-        "HDG" | "HDM" | "DBT" | "ROT" | "XDR" => fields(line),
+    let f = match &code {
+        b"HDG" | b"HDM" | b"DBT" | b"ROT" | b"XDR" => fields(line),
         _ => Vec::new(),
     };
     // The crate's parser for each sentence is handed the sentence's data directly: the framing
     // has already checked the checksum and the address is known, so neither is worked out again.
     let data = {
-        let body = &line[1..];
-        let start = body.find(',').map_or(body.len(), |i| i + 1);
-        let end = body
-            .rfind('*')
-            .filter(|e| *e >= start)
-            .unwrap_or(body.len());
-        &body[start..end]
+        // usually the comma right after the address, and the `*` three bytes from the end
+        let after = 1 + addr.len();
+        let start = match line.as_bytes().get(after) {
+            Some(b',') => after + 1,
+            _ => line[after..]
+                .find(',')
+                .map_or(line.len(), |i| after + i + 1),
+        };
+        let end = match line.len().checked_sub(3) {
+            Some(e) if e >= start && line.as_bytes()[e] == b'*' => e,
+            _ => line
+                .rfind('*')
+                .filter(|e| *e >= start)
+                .unwrap_or(line.len()),
+        };
+        &line[start..end]
     };
     let crate_sentence = |id: nmea::SentenceType| nmea::NmeaSentence {
         talker_id: talker,
@@ -206,37 +219,37 @@ pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
     let crate_err = |e: nmea::Error<'_>| err(line, e);
     use nmea::SentenceType as T;
     use nmea::sentences as n;
-    let sentence = match formatter {
-        "GGA" => Sentence::Gga(n::parse_gga(crate_sentence(T::GGA)).map_err(crate_err)?),
-        "RMC" => Sentence::Rmc(n::parse_rmc(crate_sentence(T::RMC)).map_err(crate_err)?),
-        "VTG" => Sentence::Vtg(n::parse_vtg(crate_sentence(T::VTG)).map_err(crate_err)?),
-        "GLL" => Sentence::Gll(n::parse_gll(crate_sentence(T::GLL)).map_err(crate_err)?),
-        "GNS" => Sentence::Gns(n::parse_gns(crate_sentence(T::GNS)).map_err(crate_err)?),
-        "HDT" => Sentence::Hdt(n::parse_hdt(crate_sentence(T::HDT)).map_err(crate_err)?),
-        "DPT" => Sentence::Dpt(n::parse_dpt(crate_sentence(T::DPT)).map_err(crate_err)?),
-        "DBS" => Sentence::Dbs(n::parse_dbs(crate_sentence(T::DBS)).map_err(crate_err)?),
-        "DBK" => Sentence::Dbk(n::parse_dbk(crate_sentence(T::DBK)).map_err(crate_err)?),
-        "MTW" => Sentence::Mtw(n::parse_mtw(crate_sentence(T::MTW)).map_err(crate_err)?),
-        "VHW" => Sentence::Vhw(n::parse_vhw(crate_sentence(T::VHW)).map_err(crate_err)?),
-        "ZDA" => Sentence::Zda(n::parse_zda(crate_sentence(T::ZDA)).map_err(crate_err)?),
-        "HDG" => Sentence::Hdg {
+    let sentence = match &code {
+        b"GGA" => Sentence::Gga(n::parse_gga(crate_sentence(T::GGA)).map_err(crate_err)?),
+        b"RMC" => Sentence::Rmc(n::parse_rmc(crate_sentence(T::RMC)).map_err(crate_err)?),
+        b"VTG" => Sentence::Vtg(n::parse_vtg(crate_sentence(T::VTG)).map_err(crate_err)?),
+        b"GLL" => Sentence::Gll(n::parse_gll(crate_sentence(T::GLL)).map_err(crate_err)?),
+        b"GNS" => Sentence::Gns(n::parse_gns(crate_sentence(T::GNS)).map_err(crate_err)?),
+        b"HDT" => Sentence::Hdt(n::parse_hdt(crate_sentence(T::HDT)).map_err(crate_err)?),
+        b"DPT" => Sentence::Dpt(n::parse_dpt(crate_sentence(T::DPT)).map_err(crate_err)?),
+        b"DBS" => Sentence::Dbs(n::parse_dbs(crate_sentence(T::DBS)).map_err(crate_err)?),
+        b"DBK" => Sentence::Dbk(n::parse_dbk(crate_sentence(T::DBK)).map_err(crate_err)?),
+        b"MTW" => Sentence::Mtw(n::parse_mtw(crate_sentence(T::MTW)).map_err(crate_err)?),
+        b"VHW" => Sentence::Vhw(n::parse_vhw(crate_sentence(T::VHW)).map_err(crate_err)?),
+        b"ZDA" => Sentence::Zda(n::parse_zda(crate_sentence(T::ZDA)).map_err(crate_err)?),
+        b"HDG" => Sentence::Hdg {
             heading: opt_num(line, &f, 0, "heading")?,
             deviation: east_west(line, &f, 1, "deviation")?,
             variation: east_west(line, &f, 3, "variation")?,
         },
-        "HDM" => Sentence::Hdm {
+        b"HDM" => Sentence::Hdm {
             heading: opt_num(line, &f, 0, "heading")?,
         },
-        "DBT" => Sentence::Dbt {
+        b"DBT" => Sentence::Dbt {
             feet: opt_num(line, &f, 0, "depth in feet")?,
             metres: opt_num(line, &f, 2, "depth in metres")?,
             fathoms: opt_num(line, &f, 4, "depth in fathoms")?,
         },
-        "ROT" => Sentence::Rot {
+        b"ROT" => Sentence::Rot {
             rate: opt_num(line, &f, 0, "rate of turn")?,
             valid: f.get(1).is_some_and(|s| s.trim() == "A"),
         },
-        "XDR" => {
+        b"XDR" => {
             if f.len() % 4 != 0 {
                 return Err(err(
                     line,
@@ -331,17 +344,14 @@ pub mod build {
                 lat_field(lat),
                 lon_field(lon),
                 speed / crate::units::KNOT,
-                course.rem_euclid(360.0)
+                wrap360(course)
             ),
         )
     }
 
     /// `$<talker>HDT`.
     pub fn hdt(talker: &str, heading: f64) -> String {
-        nmea_sentence(
-            b'$',
-            &format!("{talker}HDT,{:.1},T", heading.rem_euclid(360.0)),
-        )
+        nmea_sentence(b'$', &format!("{talker}HDT,{:.1},T", wrap360(heading)))
     }
 
     /// `$<talker>HDG` with deviation and variation (east positive).
@@ -351,7 +361,7 @@ pub mod build {
             b'$',
             &format!(
                 "{talker}HDG,{:.1},{},{}",
-                heading.rem_euclid(360.0),
+                wrap360(heading),
                 ew(deviation),
                 ew(variation)
             ),

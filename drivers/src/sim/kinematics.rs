@@ -1,7 +1,7 @@
 //! A simple vehicle model: first-order heading, depth and speed responses with rate limits, dead
 //! reckoning on a flat earth, and a battery drained by hotel load and propulsion.
 
-use seabus_modules::geo::{moved, wrap180};
+use seabus_modules::geo::{moved, wrap180, wrap360};
 
 /// What the vehicle is asked to hold.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -74,7 +74,7 @@ impl Vehicle {
         Vehicle {
             lat,
             lon,
-            heading: heading.rem_euclid(360.0),
+            heading: wrap360(heading),
             pitch: 0.0,
             roll: 0.0,
             yaw_rate: 0.0,
@@ -121,7 +121,7 @@ impl Vehicle {
         // turning needs way on: the rudder bites with speed
         let authority = (self.speed / 0.5).min(1.0);
         let turn = err.clamp(-limits.turn_rate * dt, limits.turn_rate * dt) * authority;
-        self.heading = (self.heading + turn).rem_euclid(360.0);
+        self.heading = wrap360(self.heading + turn);
         self.yaw_rate = turn / dt;
         self.roll = (-0.5 * self.yaw_rate).clamp(-20.0, 20.0);
 

@@ -14,7 +14,7 @@
 use super::kinematics::{Limits, Setpoint, Vehicle};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Message};
+use seabus_medium::{DataMap, Message, Value};
 use seabus_modules::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
@@ -176,7 +176,7 @@ impl Sim {
                 .with("north", v.speed * h.cos())
                 .with("east", v.speed * h.sin())
                 .with("down", v.vertical_speed)
-                .with("reference", "water"),
+                .with("reference", Value::label("water")),
         )
         .await
     }
@@ -190,24 +190,24 @@ impl Sim {
                 .with("percent", v.percent())
                 .with("remaining", v.energy)
                 .with("power", v.power())
-                .with("state", "discharging"),
+                .with("state", Value::label("discharging")),
         )
         .await?;
         let mut state = DataMap::new();
         match self.active(Instant::now()) {
             Some(sp) => {
-                state.insert("mode", "following");
-                state.insert("control", "in-control");
+                state.insert("mode", Value::label("following"));
+                state.insert("control", Value::label("in-control"));
                 state.insert("commanded_heading", sp.heading);
                 state.insert("commanded_depth", sp.depth);
                 state.insert("commanded_speed", sp.speed);
             }
             None => {
-                state.insert("mode", "idle");
-                state.insert("control", "accepting");
+                state.insert("mode", Value::label("idle"));
+                state.insert("control", Value::label("accepting"));
             }
         }
-        state.insert("error", "");
+        state.insert("error", Value::label(""));
         ctx.publish_dataset("vehicle-state", &self.topics.state, state)
             .await
     }

@@ -118,6 +118,29 @@ pub fn nmea_sentence(start: u8, body: &str) -> String {
     )
 }
 
+/// One pass over a line, eight bytes at a time: the XOR of all its bytes, and whether every byte is
+/// printable ASCII (0x20..=0x7E).
+fn scan(line: &[u8]) -> (u8, bool) {
+    const ONES: u64 = u64::from_ne_bytes([0x01; 8]);
+    const HIGH: u64 = u64::from_ne_bytes([0x80; 8]);
+    let mut xor = 0u64;
+    let mut bad = 0u64;
+    let mut words = line.chunks_exact(8);
+    for w in &mut words {
+        let w = u64::from_ne_bytes(w.try_into().unwrap_or_default());
+        xor ^= w;
+        // a byte below 0x20, or above 0x7E (a high bit after adding 1, or set already)
+        bad |= (w.wrapping_sub(ONES * 0x20) & !w) | w.wrapping_add(ONES) | w;
+    }
+    let mut xor = xor.to_ne_bytes().iter().fold(0u8, |a, b| a ^ b);
+    let mut ok = bad & HIGH == 0;
+    for &b in words.remainder() {
+        xor ^= b;
+        ok &= (0x20..=0x7e).contains(&b);
+    }
+    (xor, ok)
+}
+
 fn hex(b: u8) -> Option<u8> {
     match b {
         b'0'..=b'9' => Some(b - b'0'),
@@ -128,17 +151,13 @@ fn hex(b: u8) -> Option<u8> {
 }
 
 /// Checks one complete NMEA sentence (`$…` without line ending) against `policy`; returns the
-/// sentence with a correct checksum.
+/// sentence with a correct checksum, in a buffer of exactly its size.
 pub fn check_nmea(line: &[u8], policy: ChecksumPolicy) -> Result<Vec<u8>, Reject> {
-    check_nmea_owned(line.to_vec(), policy)
-}
-
-/// [`check_nmea`] on a sentence it may keep: a sentence that is already right is handed back as is.
-pub fn check_nmea_owned(line: Vec<u8>, policy: ChecksumPolicy) -> Result<Vec<u8>, Reject> {
     if line.len() < 2 || !matches!(line[0], b'$' | b'!') {
         return Err(Reject::Empty);
     }
-    if line.iter().any(|b| !(0x20..=0x7e).contains(b)) {
+    let (xor_all, printable) = scan(line);
+    if !printable {
         return Err(Reject::BadChar);
     }
     // a checksum is `*` followed by exactly two hex digits at the end
@@ -153,11 +172,13 @@ pub fn check_nmea_owned(line: Vec<u8>, policy: ChecksumPolicy) -> Result<Vec<u8>
                 (Some(h), Some(l)) => Some((h << 4) | l),
                 _ => None,
             };
-            let actual = nmea_checksum(body);
+            // the body's checksum: the whole line's, less the start, the `*` and the two digits
+            let actual = xor_all ^ line[0] ^ line[i] ^ line[i + 1] ^ line[i + 2];
             match (given, policy) {
-                (Some(g), _) if g == actual => Ok(line),
+                (Some(g), _) if g == actual => Ok(line.to_vec()),
                 (_, ChecksumPolicy::Ignore) => {
-                    let mut out = line[..i + 1].to_vec();
+                    let mut out = Vec::with_capacity(line.len());
+                    out.extend_from_slice(&line[..i + 1]);
                     out.extend_from_slice(format!("{actual:02X}").as_bytes());
                     Ok(out)
                 }
@@ -247,6 +268,20 @@ impl Framer {
     pub fn push(&mut self, bytes: &[u8], out: &mut impl FnMut(Output)) {
         let mut i = 0;
         while i < bytes.len() {
+            // a whole sentence within `bytes` is checked where it lies, without copying it in
+            if self.framing == Framing::Nmea
+                && matches!(self.state, State::Idle | State::Garbage | State::Skipping)
+                && let Some(len) = self.whole_sentence(&bytes[i..])
+            {
+                let line = &bytes[i..i + len];
+                let line = line.strip_suffix(b"\r").unwrap_or(line);
+                let offset = self.offset + len as u64;
+                out(check_nmea(line, self.policy).map_err(|reason| Rejected { reason, offset }));
+                self.state = State::Idle;
+                self.offset += len as u64 + 1;
+                i += len + 1;
+                continue;
+            }
             // inside a sentence, plain bytes are copied a run at a time
             if self.framing == Framing::Nmea && matches!(self.state, State::In) {
                 let rest = &bytes[i..];
@@ -273,6 +308,19 @@ impl Framer {
         }
     }
 
+    /// The length (to its `\n`, not included) of a whole NMEA sentence at the start of `rest`: one
+    /// that is neither cut short by another start nor longer than the limit (as the byte-by-byte
+    /// path would take it: a CR may follow a sentence of the full length).
+    fn whole_sentence(&self, rest: &[u8]) -> Option<usize> {
+        if !matches!(rest.first(), Some(b'$' | b'!')) {
+            return None;
+        }
+        let end = 1 + memchr::memchr3(b'\n', b'$', b'!', &rest[1..])?;
+        let line = &rest[..end];
+        let line = line.strip_suffix(b"\r").unwrap_or(line);
+        (rest[end] == b'\n' && line.len() <= self.max).then_some(end)
+    }
+
     /// Bytes held for an unfinished frame.
     pub fn pending(&self) -> usize {
         self.buf.len()
@@ -284,11 +332,13 @@ impl Framer {
         self.state = State::In;
     }
 
+    /// The frame in hand, in a buffer of exactly its size (it becomes a payload as it is); the
+    /// framer's own buffer is kept for the next frame.
     fn take(&mut self) -> Vec<u8> {
         self.state = State::Idle;
-        // the next frame gets a buffer of the usual size up front, not one grown step by step
-        let room = self.buf.len().clamp(16, 128);
-        std::mem::replace(&mut self.buf, Vec::with_capacity(room))
+        let frame = self.buf.to_vec();
+        self.buf.clear();
+        frame
     }
 
     fn nmea(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
@@ -318,11 +368,12 @@ impl Framer {
                     out(Err(Reject::Truncated));
                     self.start(b);
                 } else if b == b'\n' {
-                    let mut line = self.take();
-                    if line.last() == Some(&b'\r') {
-                        line.pop();
+                    self.state = State::Idle;
+                    if self.buf.last() == Some(&b'\r') {
+                        self.buf.pop();
                     }
-                    out(check_nmea_owned(line, self.policy));
+                    out(check_nmea(&self.buf, self.policy));
+                    self.buf.clear();
                 } else if self.buf.len() >= self.max && !(b == b'\r' && self.buf.len() == self.max)
                 {
                     // (a CR right after a full sentence may be its line ending)
@@ -344,11 +395,11 @@ impl Framer {
                 }
             }
             _ if b == b'\n' => {
-                let mut line = self.take();
                 // CRs at the end are line-ending noise: a line cannot carry them (see `encode`)
-                while line.last() == Some(&b'\r') {
-                    line.pop();
+                while self.buf.last() == Some(&b'\r') {
+                    self.buf.pop();
                 }
+                let line = self.take();
                 if !line.is_empty() {
                     out(Ok(line));
                 }
@@ -373,11 +424,11 @@ impl Framer {
                 }
             }
             _ if b == 0 => {
-                let raw = self.take();
-                if raw.is_empty() {
-                    return;
+                self.state = State::Idle;
+                if !self.buf.is_empty() {
+                    out(cobs_decode(&self.buf).ok_or(Reject::BadEncoding));
+                    self.buf.clear();
                 }
-                out(cobs_decode(&raw).ok_or(Reject::BadEncoding));
             }
             _ if self.buf.len() >= self.max => {
                 self.buf.clear();
@@ -558,6 +609,28 @@ mod tests {
             nmea_sentence(b'$', "C82.8P-3.89R-2.63T20.3D3.2"),
             "$C82.8P-3.89R-2.63T20.3D3.2*78"
         );
+    }
+
+    #[test]
+    fn the_word_scan_agrees_with_a_byte_by_byte_one() {
+        let naive = |l: &[u8]| {
+            (
+                l.iter().fold(0u8, |a, b| a ^ b),
+                l.iter().all(|b| (0x20..=0x7e).contains(b)),
+            )
+        };
+        // every byte value at every place of a word and of the tail, beside every kind of neighbour
+        for len in [1, 8, 13, 24] {
+            for at in 0..len {
+                for b in 0..=255u8 {
+                    for fill in [b' ', b'~', b'A', 0x7f, 0xff, 0x00] {
+                        let mut line = vec![fill; len];
+                        line[at] = b;
+                        assert_eq!(scan(&line), naive(&line), "{line:?}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

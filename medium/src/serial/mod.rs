@@ -201,7 +201,8 @@ impl SerialConfig {
 /// handful of sentence types; making their topic again for every sentence would be waste).
 pub struct FrameTopics {
     cfg: SerialConfig,
-    known: Vec<(Box<[u8]>, Topic)>,
+    /// addresses of up to eight letters, packed into a word, and their topics
+    known: Vec<(u64, Topic)>,
 }
 
 impl FrameTopics {
@@ -223,13 +224,22 @@ impl FrameTopics {
             .skip(1)
             .take_while(|b| b.is_ascii_alphabetic())
             .count();
-        let address = frame.get(1..1 + letters)?;
-        if let Some((_, t)) = self.known.iter().find(|(a, _)| **a == *address) {
+        // (letters are never zero bytes, so packing keeps addresses apart)
+        let key = frame.get(1..1 + letters).filter(|a| a.len() <= 8).map(|a| {
+            let mut word = [0u8; 8];
+            word[..a.len()].copy_from_slice(a);
+            u64::from_le_bytes(word)
+        });
+        if let Some(key) = key
+            && let Some((_, t)) = self.known.iter().find(|(k, _)| *k == key)
+        {
             return Some(t.clone());
         }
         let topic = self.cfg.topic_of(frame)?;
-        if self.known.len() < 64 {
-            self.known.push((address.into(), topic.clone()));
+        if let Some(key) = key
+            && self.known.len() < 64
+        {
+            self.known.push((key, topic.clone()));
         }
         Some(topic)
     }

@@ -7,7 +7,7 @@
 //! course command's validity, 5).
 
 use crate::datasets::Catalogue;
-use crate::geo::distance;
+use crate::geo::{distance, wrap360};
 use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl};
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
@@ -60,7 +60,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             side,
             speed,
             depth,
-            heading: p.float_or("heading", 0.0)?.rem_euclid(360.0),
+            heading: wrap360(p.float_or("heading", 0.0)?),
             turn,
             timeout,
             leg_start: None,
@@ -97,7 +97,7 @@ impl Module for Square {
         match self.leg_start {
             None => self.leg_start = Some((lat, lon)),
             Some((lat0, lon0)) if distance(lat0, lon0, lat, lon) >= self.side => {
-                self.heading = (self.heading + self.turn).rem_euclid(360.0);
+                self.heading = wrap360(self.heading + self.turn);
                 self.legs += 1;
                 self.leg_start = Some((lat, lon));
                 tracing::info!(
