@@ -1,5 +1,6 @@
 //! The Iver2 driver against the simulated frontseat over a real pseudo-terminal: states, course
-//! commands that move the vehicle, acknowledgements, refusals with their reasons, and the link lost
+//! commands that move the vehicle, acknowledgements, refusals with their reasons, commands left
+//! unanswered timing out, and the link lost
 //! and found again.
 
 use seabus_medium::{DataMap, Interface, Medium, Message};
@@ -249,5 +250,105 @@ async fn course_commands_keep_the_frontseat_alive_and_stop_when_they_stop() {
         "stopped after only {waited:?}"
     );
     front.shutdown().await;
+    back.shutdown().await;
+}
+
+/// A frontseat that sends its state and compass but acknowledges nothing: what the driver sends it
+/// is handed back on the channel.
+fn mute_frontseat(path: &str) -> (Medium, tokio::sync::mpsc::Receiver<String>) {
+    use seabus_drivers::iver::protocol::{Compass, Osi};
+    use seabus_medium::{Node, Payload};
+    let line = Medium::open(
+        "mute",
+        &format!("pty://{path}?framing=lines"),
+        &Node::new("mute"),
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    let mut port = line.attach("frontseat").subscribed("**").unwrap();
+    let (heard, hear) = tokio::sync::mpsc::channel(256);
+    let osi = Osi {
+        fins: "8080808080".into(),
+        mode: "S".into(),
+        next_waypoint: Some(1),
+        lat: Some(43.5),
+        lon: Some(16.4),
+        speed_knots: Some(0.0),
+        distance_to_waypoint: Some(0.0),
+        error: "N".into(),
+        altimeter_feet: Some(30.0),
+        park_time: None,
+        declination: Some(0.0),
+        mission: "mute.mis".into(),
+        remaining: Some(0.0),
+        heading: Some(10.0),
+        depth_feet: Some(0.0),
+        battery_percent: Some(90.0),
+        extra: Vec::new(),
+    }
+    .sentence();
+    let compass = Compass {
+        heading: 10.0,
+        pitch: 0.0,
+        roll: 0.0,
+        temperature: Some(15.0),
+        depth_feet: Some(0.0),
+    }
+    .sentence();
+    tokio::spawn(async move {
+        // at most 30 s of 100 ms rounds
+        for _ in 0..300 {
+            for s in [&osi, &compass] {
+                let _ = port
+                    .send("out", Payload::from(s.clone().into_bytes()))
+                    .await;
+            }
+            let until = Instant::now() + Duration::from_millis(100);
+            while let Ok(Some(m)) = tokio::time::timeout_at(until, port.recv()).await {
+                let text =
+                    String::from_utf8_lossy(m.payload.as_bytes().map_or(&[][..], |b| &b[..]))
+                        .to_string();
+                let _ = heard.try_send(text);
+            }
+        }
+    });
+    (line, hear)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_command_the_frontseat_never_acknowledges_times_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("frontseat").display().to_string();
+    let (_front, mut heard) = mute_frontseat(&path);
+    let back = start(&format!(
+        r#"<seabus node="back">
+  <medium name="bus" url="inproc://"/>
+  <medium name="serial" url="serial://{path}?baud=19200&amp;reopen=100ms"/>
+  <module name="iver" type="iver2" media="serial bus" request_every="200ms" data_timeout="1s" ack_timeout="500ms"/>
+</seabus>"#
+    ))
+    .await;
+    let bus = back.medium("bus").unwrap().clone();
+    let mut watch = bus
+        .attach_with("watch", 1 << 16, 256)
+        .subscribed("**")
+        .unwrap();
+    control(&mut watch, "idle").await;
+    bus.attach("operator")
+        .command("cmd.mission", DataMap::new().with("action", "start"))
+        .await
+        .unwrap();
+    status(&mut watch, "OMSTART", "pending").await;
+    let late = status(&mut watch, "OMSTART", "timed-out").await;
+    assert_eq!(text(&late, "error"), "no $ACK within 0.5s", "{late:?}");
+    // the command did go out on the line: it was the frontseat that kept quiet
+    let deadline = Instant::now() + Duration::from_secs(2);
+    let mut went_out = false;
+    while let Ok(Some(line)) = tokio::time::timeout_at(deadline, heard.recv()).await {
+        if line.starts_with("$OMSTART") {
+            went_out = true;
+            break;
+        }
+    }
+    assert!(went_out, "no $OMSTART reached the frontseat");
     back.shutdown().await;
 }

@@ -446,6 +446,71 @@ mod tests {
     }
 
     #[test]
+    fn the_other_crate_sentences_parse_field_by_field() {
+        let close = |a: Option<f64>, b: f64| a.is_some_and(|a| (a - b).abs() < 1e-9);
+        let Sentence::Gll(g) = p("GPGLL,4916.450,N,12311.120,W,225444.00,A,A").sentence else {
+            panic!()
+        };
+        assert!(close(g.latitude, 49.0 + 16.45 / 60.0), "{g:?}");
+        assert!(close(g.longitude, -(123.0 + 11.12 / 60.0)), "{g:?}");
+        assert!(g.valid);
+        let Sentence::Gll(g) = p("GPGLL,,,,,225444.00,V,N").sentence else {
+            panic!()
+        };
+        assert!(!g.valid && g.latitude.is_none());
+        let Sentence::Gns(g) =
+            p("GNGNS,101530.00,4330.4800,N,01626.4000,E,AA,11,0.8,12.5,41.2,,,V").sentence
+        else {
+            panic!()
+        };
+        assert!(close(g.lat, 43.0 + 30.48 / 60.0), "{g:?}");
+        assert!(close(g.lon, 16.0 + 26.4 / 60.0), "{g:?}");
+        assert_eq!((g.nsattelites, g.hdop, g.alt), (11, Some(0.8), Some(12.5)));
+        let Sentence::Dbs(d) = p("SDDBS,39.4,f,12.0,M,6.6,F").sentence else {
+            panic!()
+        };
+        assert_eq!(
+            (
+                d.water_depth_feet,
+                d.water_depth_meters,
+                d.water_depth_fathoms
+            ),
+            (Some(39.4), Some(12.0), Some(6.6))
+        );
+        let Sentence::Dbk(d) = p("SDDBK,16.4,f,5.0,M,2.7,F").sentence else {
+            panic!()
+        };
+        assert_eq!(
+            (d.depth_feet, d.depth_meters, d.depth_fathoms),
+            (Some(16.4), Some(5.0), Some(2.7))
+        );
+        let Sentence::Vhw(v) = p("VWVHW,245.1,T,241.3,M,4.2,N,7.8,K").sentence else {
+            panic!()
+        };
+        assert_eq!(
+            (
+                v.heading_true,
+                v.heading_magnetic,
+                v.relative_speed_knots,
+                v.relative_speed_kmph
+            ),
+            (Some(245.1), Some(241.3), Some(4.2), Some(7.8))
+        );
+        let Sentence::Zda(z) = p("GPZDA,101530.50,21,11,2026,01,30").sentence else {
+            panic!()
+        };
+        assert_eq!((z.day, z.month, z.year), (Some(21), Some(11), Some(2026)));
+        assert_eq!(
+            (z.local_zone_hours, z.local_zone_minutes),
+            (Some(1), Some(30))
+        );
+        assert_eq!(
+            z.utc_time.map(|t| t.to_string()),
+            Some("10:15:30.500".to_string())
+        );
+    }
+
+    #[test]
     fn our_marine_sentences_parse_field_by_field() {
         assert_eq!(
             p("HCHDG,101.1,2.5,W,4.0,E").sentence,
