@@ -1,7 +1,6 @@
 //! The Iver2 driver against the simulated frontseat over a real pseudo-terminal: states, course
 //! commands that move the vehicle, acknowledgements, refusals with their reasons, commands left
-//! unanswered timing out, and the link lost
-//! and found again.
+//! unanswered timing out, and the link lost and found again.
 
 use seabus_medium::{DataMap, Interface, Medium, Message};
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
