@@ -103,6 +103,9 @@ async fn garbage_and_bad_sentences_are_counted_and_the_next_one_arrives() {
     junk.extend_from_slice(b"$GPHDT,1.0,T*00\r\n");
     junk.extend(std::iter::repeat_n(b'Z', 10_000));
     junk.extend_from_slice(b"\r\n$GPGGA,cut short");
+    // a sentence 10 kB long that never ends: the next `$` starts afresh
+    junk.extend_from_slice(b"$GPTXT,");
+    junk.extend(std::iter::repeat_n(b'Y', 10_000));
     junk.extend_from_slice(format!("{good}\r\n").as_bytes());
     master.write_all(&junk).await.unwrap();
     let (topic, s) = text(&mut rx).await;
@@ -112,6 +115,7 @@ async fn garbage_and_bad_sentences_are_counted_and_the_next_one_arrives() {
     assert_eq!(st.get("garbage"), Some(&2), "{st:?}");
     assert_eq!(st.get("bad-checksum"), Some(&1), "{st:?}");
     assert_eq!(st.get("truncated"), Some(&1), "{st:?}");
+    assert_eq!(st.get("too-long"), Some(&1), "{st:?}");
     drop(held);
 }
 
