@@ -8,7 +8,8 @@
 //!                                                   /tmp/frontseat for any program to open
 //! ```
 //! Options: `baud` (default 9600), `data_bits` (5–8), `parity` (`none`, `even`, `odd`),
-//! `stop_bits` (1, 2), `framing` (`nmea`, `lines`, `cobs`, `slip`; default `nmea`), `checksum`
+//! `stop_bits` (1, 2), `flow` (flow control: `none`, `hardware` for RTS/CTS, `software` for
+//! XON/XOFF, which text framings only can use: the binary ones carry those bytes), `framing` (`nmea`, `lines`, `cobs`, `slip`; default `nmea`), `checksum`
 //! (`require`, `allow-missing`, `ignore`; NMEA only, default `require`), `max` (longest frame in
 //! bytes; 256 for NMEA, 4096 otherwise), `topic` (the topic of received frames; for NMEA the prefix
 //! of `PREFIX.ADDRESS`, default `nmea`, so that `$GPGGA,…` arrives on `nmea.GPGGA`; otherwise
@@ -35,7 +36,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio::sync::mpsc;
-use tokio_serial::{DataBits, Parity, SerialPortBuilderExt, SerialStream, StopBits};
+use tokio_serial::{DataBits, FlowControl, Parity, SerialPortBuilderExt, SerialStream, StopBits};
 
 const OPTIONS: [&str; 10] = [
     "baud",
@@ -66,6 +67,8 @@ pub struct SerialConfig {
     pub parity: Parity,
     /// Stop bits.
     pub stop_bits: StopBits,
+    /// Flow control.
+    pub flow: FlowControl,
     /// How the stream is cut into frames.
     pub framing: Framing,
     /// NMEA checksum policy.
@@ -131,12 +134,22 @@ impl SerialConfig {
             Some(2) => StopBits::Two,
             Some(n) => return Err(url.error(format!("option `stop_bits={n}`: expected 1 or 2"))),
         };
-        match url.take("flow").as_deref() {
-            None | Some("none") => {}
-            Some(f) => {
-                return Err(url.error(format!("option `flow={f}`: only `none` is supported")));
+        let flow = match url.take("flow").as_deref() {
+            None | Some("none") => FlowControl::None,
+            Some("hardware") => FlowControl::Hardware,
+            Some("software") if matches!(framing, Framing::Cobs | Framing::Slip) => {
+                return Err(url.error(
+                    "option `flow=software`: XON/XOFF bytes would be taken out of binary \
+                     frames; use `flow=hardware` or a text framing",
+                ));
             }
-        }
+            Some("software") => FlowControl::Software,
+            Some(f) => {
+                return Err(url.error(format!(
+                    "option `flow={f}`: expected none, hardware or software"
+                )));
+            }
+        };
         let default_max = if framing == Framing::Nmea { 256 } else { 4096 };
         let max: usize = url
             .take_parsed("max", "a size in bytes")?
@@ -170,6 +183,7 @@ impl SerialConfig {
             data_bits,
             parity,
             stop_bits,
+            flow,
             framing,
             checksum,
             max,
@@ -337,6 +351,7 @@ fn open_device(cfg: &SerialConfig) -> Result<SerialStream, String> {
         .data_bits(cfg.data_bits)
         .parity(cfg.parity)
         .stop_bits(cfg.stop_bits)
+        .flow_control(cfg.flow)
         .open_native_async()
         .map_err(|e| format!("cannot open {path}: {e}"))
 }
@@ -527,6 +542,24 @@ mod tests {
                 .unwrap_err()
                 .reason
                 .contains("nmea, lines, cobs or slip")
+        );
+        assert_eq!(cfg("serial:///dev/x").unwrap().flow, FlowControl::None);
+        assert_eq!(
+            cfg("serial:///dev/x?flow=hardware&framing=cobs")
+                .unwrap()
+                .flow,
+            FlowControl::Hardware
+        );
+        assert_eq!(
+            cfg("serial:///dev/x?flow=software").unwrap().flow,
+            FlowControl::Software
+        );
+        let e = cfg("serial:///dev/x?flow=software&framing=slip").unwrap_err();
+        assert!(e.reason.contains("XON/XOFF bytes"), "{e}");
+        let e = cfg("serial:///dev/x?flow=rts").unwrap_err();
+        assert!(
+            e.reason.contains("expected none, hardware or software"),
+            "{e}"
         );
         assert!(cfg("serial:///dev/x?baud=fast").is_err());
         assert!(cfg("serial:///dev/x?parity=mark").is_err());
