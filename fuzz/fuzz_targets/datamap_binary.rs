@@ -4,12 +4,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use seabus_medium::binary;
+
+#[allow(dead_code)]
+#[path = "../properties/medium.rs"]
+mod properties;
 
 fuzz_target!(|data: &[u8]| {
-    if let Ok(map) = binary::decode(data) {
-        let bytes = binary::encode(&map);
-        let back = binary::decode(&bytes).expect("an encoded datamap decodes");
-        assert_eq!(back, map, "binary round trip changed the map");
-    }
+    properties::datamap_binary(data);
 });

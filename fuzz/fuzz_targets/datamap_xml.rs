@@ -4,15 +4,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use seabus_medium::xmlform;
+
+#[allow(dead_code)]
+#[path = "../properties/medium.rs"]
+mod properties;
 
 fuzz_target!(|data: &[u8]| {
-    let Ok(text) = std::str::from_utf8(data) else {
-        return;
-    };
-    if let Ok(map) = xmlform::from_xml(text) {
-        let xml = xmlform::to_xml(&map);
-        let back = xmlform::from_xml(&xml).expect("written XML reads back");
-        assert_eq!(back, map, "XML round trip changed the map: {xml}");
-    }
+    properties::datamap_xml(data);
 });

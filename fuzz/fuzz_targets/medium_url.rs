@@ -4,15 +4,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use seabus_medium::Medium;
-use seabus_medium::url::MediumUrl;
+
+#[allow(dead_code)]
+#[path = "../properties/medium.rs"]
+mod properties;
 
 fuzz_target!(|data: &[u8]| {
-    let Ok(text) = std::str::from_utf8(data) else {
-        return;
-    };
-    let parsed = MediumUrl::parse(text);
-    if Medium::check_url(text).is_ok() {
-        assert!(parsed.is_ok(), "a URL that checks out must parse");
-    }
+    properties::medium_url(data);
 });

@@ -4,13 +4,11 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use seabus_medium::xml;
-use seabus_modules::system::SystemSpec;
+
+#[allow(dead_code)]
+#[path = "../properties/modules.rs"]
+mod properties;
 
 fuzz_target!(|data: &[u8]| {
-    let Ok(text) = std::str::from_utf8(data) else {
-        return;
-    };
-    let _ = xml::parse("fuzz.xml", text);
-    let _ = SystemSpec::parse("fuzz.xml", text);
+    properties::system_file(data);
 });

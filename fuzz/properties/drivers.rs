@@ -1,0 +1,103 @@
+//! Properties of the seabus-drivers sentence readers that every input must keep. Each function
+//! panics when an input breaks a property and tells whether the input was a valid one.
+
+use seabus_drivers::iver::protocol::{DepthUnits, FromFront, parse_command, parse_front};
+use seabus_drivers::nmea::sentence::parse;
+use seabus_medium::serial::framing::{self, ChecksumPolicy, check_nmea};
+
+/// `text` (without a leading `$` or, when `bang` is set, `!`) written as a `$` sentence with its
+/// checksum, when it is not already a whole sentence with a correct checksum and can be a sentence
+/// body: printable ASCII without `*`.
+fn wrapped(text: &str, bang: bool) -> Option<String> {
+    if check_nmea(text.as_bytes(), ChecksumPolicy::Require).is_ok() {
+        return None;
+    }
+    let starts: &[char] = if bang { &['$', '!'] } else { &['$'] };
+    let body = text.strip_prefix(starts).unwrap_or(text);
+    let printable = body
+        .bytes()
+        .all(|b| (0x20..=0x7e).contains(&b) && b != b'*');
+    printable.then(|| framing::nmea_sentence(b'$', body))
+}
+
+/// The NMEA 0183 sentence parser of the NMEA drivers: any text is read or refused without a panic.
+/// Text that is not a whole sentence with a correct checksum is also read as the body of one, so
+/// that the parsers behind a known address see well-framed sentences too; such a built sentence
+/// carries a correct checksum. True when `data` is UTF-8 text that parses as it is.
+pub fn nmea_sentence(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let parsed = parse(text);
+    if let Some(line) = wrapped(text, true) {
+        if line.len() > 4 {
+            assert_eq!(
+                check_nmea(line.as_bytes(), ChecksumPolicy::Require).as_deref(),
+                Ok(line.as_bytes()),
+                "a built sentence carries a correct checksum: {line:?}"
+            );
+        }
+        let _ = parse(&line);
+    }
+    parsed.is_ok()
+}
+
+/// The frontseat sentence written back, for the kinds the simulated frontseat sends.
+fn written(front: &FromFront) -> Option<String> {
+    match front {
+        FromFront::Osi(o) => Some(o.sentence()),
+        FromFront::Compass(c) => Some(c.sentence()),
+        FromFront::Opi(p) => Some(p.sentence()),
+        FromFront::Ack(a) => Some(a.sentence()),
+        FromFront::Dvl(d) => Some(d.sentence()),
+        FromFront::Rmc(_) | FromFront::Other(_) => None,
+    }
+}
+
+/// Reads `line` as a frontseat sentence and as a command in both depth units, checks that what
+/// reads also writes back and reads again, and tells whether anything read that writes back.
+fn remote_helm_check(line: &str) -> bool {
+    let mut read = false;
+    if let Ok(front) = parse_front(line)
+        && let Some(out) = written(&front)
+    {
+        let back = parse_front(&out).unwrap_or_else(|e| panic!("{out:?} does not read: {e}"));
+        assert_eq!(
+            std::mem::discriminant(&back),
+            std::mem::discriminant(&front),
+            "{out:?} reads as another kind of sentence"
+        );
+        if let FromFront::Ack(_) = front {
+            assert_eq!(back, front, "$ACK round trip via {out:?}");
+        }
+        read = true;
+    }
+    for units in [DepthUnits::Feet, DepthUnits::Metres] {
+        let Ok(cmd) = parse_command(line, units) else {
+            continue;
+        };
+        let out = cmd.sentence(units);
+        let back =
+            parse_command(&out, units).unwrap_or_else(|e| panic!("{out:?} does not read: {e}"));
+        assert_eq!(back.ack_code(), cmd.ack_code(), "round trip via {out:?}");
+        assert_eq!(back.name(), cmd.name(), "round trip via {out:?}");
+        read = true;
+    }
+    read
+}
+
+/// The Iver Remote Helm protocol: any text is read as a frontseat sentence and as a backseat command
+/// (in feet and in metres) without a panic, and every sentence read is written back to a sentence
+/// that reads as the same kind of sentence. Text that is not a whole sentence with a correct
+/// checksum is also read as the body of one. True when `data` is UTF-8 text that, as it is or as a
+/// sentence body, reads as a sentence or command that writes back.
+pub fn remote_helm(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let mut read = remote_helm_check(text);
+    if let Some(line) = wrapped(text, false) {
+        read |= remote_helm_check(&line);
+    }
+    read
+}

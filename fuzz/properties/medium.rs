@@ -1,0 +1,237 @@
+//! Properties of the seabus-medium codecs, framers and URLs that every input must keep. Each
+//! function panics when an input breaks a property and tells whether the input was a valid one.
+
+use bytes::Bytes;
+use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
+use seabus_medium::udp::wire;
+use seabus_medium::url::MediumUrl;
+use seabus_medium::{DataMap, Medium, Value, binary, json, xmlform};
+
+/// The compact binary datamap decoder: any input decodes or is refused without a panic, and every
+/// map it accepts encodes back to bytes that decode to the same map. True when `data` decodes.
+pub fn datamap_binary(data: &[u8]) -> bool {
+    let Ok(map) = binary::decode(data) else {
+        return false;
+    };
+    let bytes = binary::encode(&map);
+    let back = binary::decode(&bytes)
+        .unwrap_or_else(|e| panic!("an encoded datamap does not decode: {e}"));
+    assert_eq!(back, map, "binary round trip changed the map");
+    true
+}
+
+/// True when `v` is a NaN float or a list holding one at any depth.
+fn has_nan(v: &Value) -> bool {
+    match v {
+        Value::Float(f) => f.is_nan(),
+        Value::List(items) => items.iter().any(has_nan),
+        _ => false,
+    }
+}
+
+/// True when any value of `map` holds a NaN: JSON writes every NaN as `{"float": "NaN"}`, so the
+/// bits of a NaN do not survive a round trip.
+fn map_has_nan(map: &DataMap) -> bool {
+    map.iter().any(|(_, v)| has_nan(v))
+}
+
+/// The JSON form of a datamap: any text reads or is refused without a panic, and every map it reads
+/// writes back to JSON that reads as the same map (for maps without a NaN, whose bits JSON does not
+/// keep). True when `data` is UTF-8 text that reads as a map.
+pub fn datamap_json(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let Ok(map) = json::from_json(text) else {
+        return false;
+    };
+    let written = json::to_json(&map);
+    let back =
+        json::from_json(&written).unwrap_or_else(|e| panic!("written JSON does not read: {e}"));
+    if !map_has_nan(&map) {
+        assert_eq!(back, map, "JSON round trip changed the map: {written}");
+    }
+    true
+}
+
+/// The XML form of a datamap: any text reads or is refused without a panic, and every map it reads
+/// writes back to XML that reads as the same map. True when `data` is UTF-8 text that reads as a
+/// map.
+pub fn datamap_xml(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let Ok(map) = xmlform::from_xml(text) else {
+        return false;
+    };
+    let xml = xmlform::to_xml(&map);
+    let back = xmlform::from_xml(&xml).unwrap_or_else(|e| panic!("written XML does not read: {e}"));
+    assert_eq!(back, map, "XML round trip changed the map: {xml}");
+    true
+}
+
+/// Medium URLs: any text parses or is refused without a panic, and checking a URL (scheme, options
+/// and their values) never panics either; a URL that checks out also parses. True when `data` is
+/// UTF-8 text that checks out as a medium URL.
+pub fn medium_url(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let parsed = MediumUrl::parse(text);
+    let checked = Medium::check_url(text);
+    if checked.is_ok() {
+        assert!(parsed.is_ok(), "a URL that checks out must parse: {text:?}");
+    }
+    checked.is_ok()
+}
+
+/// The framing, checksum policy, maximum frame length and stream an input describes.
+fn framer_setup(data: &[u8]) -> Option<(Framing, ChecksumPolicy, usize, &[u8])> {
+    let [sel, lo, hi, stream @ ..] = data else {
+        return None;
+    };
+    let framing =
+        [Framing::Nmea, Framing::Lines, Framing::Cobs, Framing::Slip][usize::from(sel % 4)];
+    let policy = [
+        ChecksumPolicy::Require,
+        ChecksumPolicy::AllowMissing,
+        ChecksumPolicy::Ignore,
+    ][usize::from(sel / 4 % 3)];
+    let max = usize::from(u16::from_le_bytes([*lo, *hi])).max(8);
+    Some((framing, policy, max, stream))
+}
+
+/// The stream cut into pieces whose lengths come from the stream: each piece is `b % 17 + 1`
+/// bytes long, `b` being its first byte.
+fn framer_pieces(stream: &[u8]) -> Vec<&[u8]> {
+    let mut out = Vec::new();
+    let mut rest = stream;
+    while let Some(&b) = rest.first() {
+        let (piece, tail) = rest.split_at(usize::from(b % 17 + 1).min(rest.len()));
+        out.push(piece);
+        rest = tail;
+    }
+    out
+}
+
+/// Feeds `chunks` to a new framer in turn, checking after each that it holds at most `max` bytes;
+/// returns everything it handed out.
+fn framer_run<'a>(
+    framing: Framing,
+    policy: ChecksumPolicy,
+    max: usize,
+    chunks: impl IntoIterator<Item = &'a [u8]>,
+) -> Vec<Output> {
+    let mut framer = Framer::new(framing, policy, max);
+    let mut got = Vec::new();
+    for chunk in chunks {
+        framer.push(chunk, &mut |o| got.push(o));
+        assert!(
+            framer.pending() <= max + 1,
+            "the framer holds {} bytes, more than {max} and a line-ending CR",
+            framer.pending()
+        );
+    }
+    got
+}
+
+/// Checks one frame handed out: its length, its checksum (NMEA), and that it encodes back to bytes
+/// a fresh framer reads as the same frame.
+fn framer_check_frame(framing: Framing, policy: ChecksumPolicy, max: usize, frame: &[u8]) {
+    match framing {
+        Framing::Nmea => {
+            assert_eq!(
+                check_nmea(frame, ChecksumPolicy::Require).as_deref(),
+                Ok(frame),
+                "a framed sentence carries a correct checksum"
+            );
+            // a sentence accepted without a checksum gets `*hh` added
+            let bound = if policy == ChecksumPolicy::Require {
+                max
+            } else {
+                max + 3
+            };
+            assert!(frame.len() <= bound, "sentence of {} bytes", frame.len());
+        }
+        Framing::Lines => {
+            assert!(
+                !frame.is_empty() && !frame.contains(&b'\n'),
+                "line {frame:?}"
+            );
+            assert!(frame.len() <= max, "line of {} bytes", frame.len());
+        }
+        // a COBS frame of at most `max` bytes decodes to fewer bytes
+        Framing::Cobs => assert!(frame.len() < max, "COBS frame of {} bytes", frame.len()),
+        Framing::Slip => {
+            assert!(!frame.is_empty(), "empty SLIP frame");
+            assert!(frame.len() <= max, "SLIP frame of {} bytes", frame.len());
+        }
+    }
+    let wire = encode(framing, frame).unwrap_or_else(|e| panic!("{frame:?} does not encode: {e}"));
+    let back = framer_run(
+        framing,
+        ChecksumPolicy::Require,
+        wire.len(),
+        [wire.as_slice()],
+    );
+    assert_eq!(back, [Ok(frame.to_vec())], "round trip via {wire:?}");
+}
+
+/// The stream framer of serial media (NMEA, lines, COBS, SLIP): any byte stream is framed without a
+/// panic and within the maximum frame length, cutting the stream into chunks changes nothing, every
+/// NMEA sentence handed out carries a correct checksum, every frame handed out encodes back to
+/// bytes that a fresh framer reads as the same frame, and rejections come in stream order.
+///
+/// Input: the first byte picks the framing (`b % 4`: NMEA, lines, COBS, SLIP) and the checksum
+/// policy (`b / 4 % 3`: require, allow-missing, ignore), the next two the maximum frame length
+/// (little-endian, at least 8); the rest is the stream. True when the framer hands out at least one
+/// frame.
+pub fn nmea_framer(data: &[u8]) -> bool {
+    let Some((framing, policy, max, stream)) = framer_setup(data) else {
+        return false;
+    };
+    let whole = framer_run(framing, policy, max, [stream]);
+    let chunked = framer_run(framing, policy, max, framer_pieces(stream));
+    assert_eq!(chunked, whole, "chunking changed the output");
+    let mut last = 0;
+    let mut frames = 0;
+    for out in &whole {
+        match out {
+            Ok(frame) => {
+                framer_check_frame(framing, policy, max, frame);
+                frames += 1;
+            }
+            Err(r) => {
+                assert!(
+                    r.offset >= last && r.offset < stream.len() as u64,
+                    "rejection at {} after one at {last}, in a stream of {} bytes",
+                    r.offset,
+                    stream.len()
+                );
+                last = r.offset;
+            }
+        }
+    }
+    frames > 0
+}
+
+/// The UDP datagram decoder: any datagram decodes or is rejected without a panic, and every message
+/// it accepts encodes back to a datagram that decodes to the same message. True when `data`
+/// decodes.
+pub fn udp_datagram(data: &[u8]) -> bool {
+    let mut origins = wire::Origins::default();
+    let Ok((sender, msg)) = wire::decode(&Bytes::copy_from_slice(data), &mut origins) else {
+        return false;
+    };
+    let datagram = wire::encode(&msg, sender)
+        .unwrap_or_else(|e| panic!("a decoded message does not encode: {e}"));
+    let (sender2, back) = wire::decode(&datagram, &mut origins)
+        .unwrap_or_else(|e| panic!("an encoded message does not decode: {e}"));
+    assert_eq!(sender2, sender, "sender");
+    assert_eq!(back.topic, msg.topic, "topic");
+    assert_eq!(back.kind, msg.kind, "kind");
+    assert_eq!(back.provenance, msg.provenance, "provenance");
+    assert_eq!(back.stamp, msg.stamp, "stamp");
+    assert_eq!(back.payload, msg.payload, "payload");
+    true
+}
