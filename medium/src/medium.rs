@@ -235,6 +235,20 @@ pub struct Opening {
     pub ingress: Ingress,
 }
 
+impl Opening {
+    /// Turns an I/O error met while opening into an [`OpenError::Io`] naming the URL and what was
+    /// being done: `.map_err(o.io_error("binding 0.0.0.0:5000"))`.
+    pub fn io_error(&self, context: impl Into<String>) -> impl FnOnce(std::io::Error) -> OpenError {
+        let url = self.url.to_string();
+        let context = context.into();
+        move |source| OpenError::Io {
+            url,
+            context,
+            source,
+        }
+    }
+}
+
 /// Builds media one step at a time: the in-process constructor and the URL opener share it.
 struct Builder {
     name: Arc<str>,

@@ -88,6 +88,12 @@ impl fmt::Display for Topic {
     }
 }
 
+impl AsRef<str> for Topic {
+    fn as_ref(&self) -> &str {
+        &self.0
+    }
+}
+
 impl std::ops::Deref for Topic {
     type Target = str;
     fn deref(&self) -> &str {

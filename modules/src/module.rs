@@ -77,9 +77,9 @@ pub struct TopicDecl {
 
 impl TopicDecl {
     /// A topic on port 0.
-    pub fn topic(topic: impl Into<String>) -> TopicDecl {
+    pub fn topic(topic: impl AsRef<str>) -> TopicDecl {
         TopicDecl {
-            topic: topic.into(),
+            topic: topic.as_ref().to_string(),
             dataset: None,
             fields: Vec::new(),
             port: 0,
@@ -87,7 +87,7 @@ impl TopicDecl {
     }
 
     /// A topic carrying a standard dataset.
-    pub fn dataset(topic: impl Into<String>, dataset: &str) -> TopicDecl {
+    pub fn dataset(topic: impl AsRef<str>, dataset: &str) -> TopicDecl {
         TopicDecl {
             dataset: Some(dataset.to_string()),
             ..TopicDecl::topic(topic)

@@ -187,6 +187,29 @@ impl Params {
         }
     }
 
+    /// A topic parameter, or the topic the catalogue gives `dataset` (`fallback` when it has none).
+    pub fn dataset_topic_or(
+        &self,
+        name: &str,
+        cat: &crate::Catalogue,
+        dataset: &str,
+        fallback: &str,
+    ) -> Result<Topic, FileError> {
+        self.topic_or(name, &cat.topic_of(dataset, fallback))
+    }
+
+    /// The topic the catalogue gives `dataset` (`fallback` when it has none), for a module that
+    /// takes no parameter for it.
+    pub fn dataset_topic(
+        &self,
+        cat: &crate::Catalogue,
+        dataset: &str,
+        fallback: &str,
+    ) -> Result<Topic, FileError> {
+        let topic = cat.topic_of(dataset, fallback);
+        Topic::new(&topic).map_err(|e| self.pos.error(format!("topic `{topic}`: {e}")))
+    }
+
     /// A topic-pattern parameter, or `default`.
     pub fn pattern_or(&self, name: &str, default: &str) -> Result<Pattern, FileError> {
         match self.get(name) {

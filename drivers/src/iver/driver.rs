@@ -36,7 +36,7 @@ use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, LinkState, Message, Payload, Value};
+use seabus_medium::{DataMap, Format, Kind, LinkState, Message, Payload, Topic, Value};
 use seabus_modules::Catalogue;
 use seabus_modules::geo::wrap360;
 use seabus_modules::module::{
@@ -87,19 +87,19 @@ impl Control {
 }
 
 struct Topics {
-    attitude: String,
-    position: String,
-    velocity: String,
-    depth: String,
-    altitude: String,
-    battery: String,
-    state: String,
-    status: String,
-    course: String,
-    actuator: String,
-    mission: String,
-    gps: String,
-    dvl: String,
+    attitude: Topic,
+    position: Topic,
+    velocity: Topic,
+    depth: Topic,
+    altitude: Topic,
+    battery: Topic,
+    state: Topic,
+    status: Topic,
+    course: Topic,
+    actuator: Topic,
+    mission: Topic,
+    gps: Topic,
+    dvl: Topic,
 }
 
 struct Settings {
@@ -200,10 +200,11 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             None => cfg.pos.error(why),
         });
     }
-    let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
-        Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
-            .to_string())
+    let topic = |name: &str, dataset: &str, fallback: &str| {
+        p.dataset_topic_or(name, cat, dataset, fallback)
     };
+    // the commands it takes arrive on the catalogue's topics
+    let command = |dataset: &str, fallback: &str| p.dataset_topic(cat, dataset, fallback);
     let t = Topics {
         attitude: topic("attitude_topic", "attitude", "nav.attitude")?,
         position: topic("position_topic", "position", "nav.position")?,
@@ -213,11 +214,11 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         battery: topic("battery_topic", "battery", "power.battery")?,
         state: topic("state_topic", "vehicle-state", "vehicle.state")?,
         status: topic("status_topic", "command-status", "cmd.status")?,
-        course: cat.topic_of("course-command", "cmd.course"),
-        actuator: cat.topic_of("actuator-command", "cmd.actuator"),
-        mission: cat.topic_of("mission-command", "cmd.mission"),
-        gps: p.topic_or("gps_topic", "nav.gps")?.to_string(),
-        dvl: p.topic_or("dvl_topic", "nav.dvl")?.to_string(),
+        course: command("course-command", "cmd.course")?,
+        actuator: command("actuator-command", "cmd.actuator")?,
+        mission: command("mission-command", "cmd.mission")?,
+        gps: p.topic_or("gps_topic", "nav.gps")?,
+        dvl: p.topic_or("dvl_topic", "nav.dvl")?,
     };
     let s = Settings {
         units: DepthUnits::of_version(version),
@@ -668,7 +669,7 @@ impl Iver {
         let request = Some((msg.origin().to_string(), msg.seq()));
         let topic = msg.topic.as_str();
         let f = |k: &str| map.get_f64(k);
-        if topic == self.t.course {
+        if topic == self.t.course.as_str() {
             if let Err(e) = ctx.catalogue().validate("course-command", map) {
                 return self.refuse(ctx, "OMS", &e.to_string(), request).await;
             }
@@ -710,7 +711,7 @@ impl Iver {
                 self.send(ctx, &oms, !same, request).await;
                 self.last_oms = Some(Instant::now());
             }
-        } else if topic == self.t.actuator {
+        } else if topic == self.t.actuator.as_str() {
             if let Err(e) = ctx.catalogue().validate("actuator-command", map) {
                 return self.refuse(ctx, "OMP", &e.to_string(), request).await;
             }
@@ -733,7 +734,7 @@ impl Iver {
                 timeout: f("timeout").unwrap_or(3.0).clamp(0.0, 120.0),
             };
             self.send(ctx, &cmd, true, request).await;
-        } else if topic == self.t.mission {
+        } else if topic == self.t.mission.as_str() {
             if let Err(e) = ctx.catalogue().validate("mission-command", map) {
                 return self.refuse(ctx, "mission", &e.to_string(), request).await;
             }

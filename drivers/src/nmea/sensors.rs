@@ -22,7 +22,7 @@ use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Key, Kind, Message, Value};
+use seabus_medium::{DataMap, Format, Key, Kind, Message, Topic, Value};
 use seabus_modules::Catalogue;
 use seabus_modules::geo::wrap360;
 use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TopicDecl};
@@ -70,7 +70,7 @@ struct Output {
     /// three-letter sentence formatters (`GGA`), each one the driver reads
     feeds: Vec<[u8; 3]>,
     dataset: &'static str,
-    topic: String,
+    topic: Topic,
 }
 
 impl Output {
@@ -143,9 +143,8 @@ impl Sensor {
                 })
                 .collect::<Result<Vec<_>, FileError>>()
         };
-        let topic = |name: &str, dataset: &str, fallback: &str| -> Result<String, FileError> {
-            Ok(p.topic_or(name, &cat.topic_of(dataset, fallback))?
-                .to_string())
+        let topic = |name: &str, dataset: &str, fallback: &str| {
+            p.dataset_topic_or(name, cat, dataset, fallback)
         };
         let outputs = match role {
             Role::Gps => vec![

@@ -5,7 +5,7 @@
 //! it out: the checksum is not checked again here. Parsing never panics; a sentence it does not
 //! know is [`Sentence::Other`].
 
-use seabus_medium::serial::framing::nmea_sentence;
+use seabus_medium::serial::framing::{nmea_address, nmea_sentence};
 use seabus_modules::geo::wrap360;
 use std::fmt;
 use thiserror::Error;
@@ -118,12 +118,9 @@ pub struct Parsed<'a> {
 /// compass sentence `$C82.8P…`, which has no comma) — the same rule that names its topic on a serial
 /// medium.
 pub fn address(line: &str) -> &str {
-    let body = line.get(1..).unwrap_or("");
-    let end = body
-        .bytes()
-        .position(|b| !b.is_ascii_alphabetic())
-        .unwrap_or(body.len());
-    &body[..end]
+    let len = nmea_address(line.as_bytes()).len();
+    // (letters are single bytes, so the address ends on a character boundary)
+    line.get(1..1 + len).unwrap_or_default()
 }
 
 /// The fields of a sentence: between the first comma and the `*`.
@@ -278,27 +275,41 @@ pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
 
 /// Writes a latitude as `ddmm.mmmm,N`.
 pub fn lat_field(lat: f64) -> String {
-    let hemi = if lat < 0.0 { 'S' } else { 'N' };
-    let a = lat.abs();
-    let deg = a.trunc();
-    format!("{:02}{:07.4},{hemi}", deg as u32, (a - deg) * 60.0)
+    angle_field(lat, 2, ['N', 'S'])
 }
 
 /// Writes a longitude as `dddmm.mmmm,E`.
 pub fn lon_field(lon: f64) -> String {
-    let hemi = if lon < 0.0 { 'W' } else { 'E' };
-    let a = lon.abs();
-    let deg = a.trunc();
-    format!("{:03}{:07.4},{hemi}", deg as u32, (a - deg) * 60.0)
+    angle_field(lon, 3, ['E', 'W'])
 }
 
-/// Time of day as `hhmmss.ss` from seconds since midnight.
+/// An angle as degrees (`width` digits), minutes to four decimals, and its hemisphere letter
+/// (`[positive, negative]`). It is rounded as a whole first, so 59.99999′ carries into the degrees
+/// rather than printing as 60.0000′.
+fn angle_field(value: f64, width: usize, hemi: [char; 2]) -> String {
+    const PER_DEGREE: u64 = 60 * 10_000;
+    let total = (value.abs() * PER_DEGREE as f64).round() as u64;
+    let (deg, rest) = (total / PER_DEGREE, total % PER_DEGREE);
+    let hemi = hemi[usize::from(value < 0.0)];
+    format!(
+        "{deg:0width$}{:02}.{:04},{hemi}",
+        rest / 10_000,
+        rest % 10_000
+    )
+}
+
+/// Time of day as `hhmmss.ss` from seconds since midnight (rounded as a whole to the hundredth, so
+/// 59.999 s carries into the minutes).
 pub fn time_field(secs_of_day: f64) -> String {
-    let s = secs_of_day.rem_euclid(86_400.0);
-    let h = (s / 3600.0).floor();
-    let m = ((s - h * 3600.0) / 60.0).floor();
-    let sec = s - h * 3600.0 - m * 60.0;
-    format!("{:02}{:02}{:05.2}", h as u32, m as u32, sec)
+    const DAY: u64 = 86_400 * 100;
+    let cs = (secs_of_day.rem_euclid(86_400.0) * 100.0).round() as u64 % DAY;
+    format!(
+        "{:02}{:02}{:02}.{:02}",
+        cs / 360_000,
+        cs / 6_000 % 60,
+        cs / 100 % 60,
+        cs % 100
+    )
 }
 
 /// Builders of the sentences simulators send.
@@ -383,7 +394,7 @@ pub mod build {
             &format!(
                 "{talker}DBT,{:.1},f,{metres:.1},M,{:.1},F",
                 metres / crate::units::FOOT,
-                metres / 1.8288
+                metres / crate::units::FATHOM
             ),
         )
     }
@@ -443,6 +454,18 @@ mod tests {
             (v.true_course, v.speed_over_ground),
             (Some(54.7), Some(5.5))
         );
+    }
+
+    #[test]
+    fn written_fields_round_as_a_whole() {
+        assert_eq!(lat_field(43.5), "4330.0000,N");
+        assert_eq!(lat_field(-43.999_999_99), "4400.0000,S");
+        assert_eq!(lon_field(16.440_000_2), "01626.4000,E");
+        assert_eq!(lon_field(-179.999_999_999), "18000.0000,W");
+        assert_eq!(time_field(3723.5), "010203.50");
+        assert_eq!(time_field(59.999), "000100.00");
+        assert_eq!(time_field(86_399.999), "000000.00");
+        assert_eq!(time_field(-1.0), "235959.00");
     }
 
     #[test]

@@ -14,7 +14,7 @@
 use super::kinematics::{Limits, Setpoint, Vehicle};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Message, Value};
+use seabus_medium::{DataMap, Message, Topic, Value};
 use seabus_modules::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
@@ -35,15 +35,15 @@ const SLOW: TimerId = 1;
 
 /// The topics the simulator uses, taken from the dataset catalogue.
 struct Topics {
-    attitude: String,
-    position: String,
-    depth: String,
-    altitude: String,
-    velocity: String,
-    battery: String,
-    state: String,
-    course: String,
-    mission: String,
+    attitude: Topic,
+    position: Topic,
+    depth: Topic,
+    altitude: Topic,
+    velocity: Topic,
+    battery: Topic,
+    state: Topic,
+    course: Topic,
+    mission: Topic,
 }
 
 struct Sim {
@@ -71,17 +71,17 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         max_speed: p.positive_or("max_speed", 2.5)?,
         max_depth: p.positive_or("max_depth", 100.0)?,
     };
-    let topic = |dataset: &str, fallback: &str| cat.topic_of(dataset, fallback);
+    let topic = |dataset: &str, fallback: &str| p.dataset_topic(cat, dataset, fallback);
     let topics = Topics {
-        attitude: topic("attitude", "nav.attitude"),
-        position: topic("position", "nav.position"),
-        depth: topic("depth", "nav.depth"),
-        altitude: topic("altitude", "nav.altitude"),
-        velocity: topic("velocity", "nav.velocity"),
-        battery: topic("battery", "power.battery"),
-        state: topic("vehicle-state", "vehicle.state"),
-        course: topic("course-command", "cmd.course"),
-        mission: topic("mission-command", "cmd.mission"),
+        attitude: topic("attitude", "nav.attitude")?,
+        position: topic("position", "nav.position")?,
+        depth: topic("depth", "nav.depth")?,
+        altitude: topic("altitude", "nav.altitude")?,
+        velocity: topic("velocity", "nav.velocity")?,
+        battery: topic("battery", "power.battery")?,
+        state: topic("vehicle-state", "vehicle.state")?,
+        course: topic("course-command", "cmd.course")?,
+        mission: topic("mission-command", "cmd.mission")?,
     };
     let decl = Declaration::new(ModuleKind::Driver)
         .produces(TopicDecl::dataset(&topics.attitude, "attitude"))

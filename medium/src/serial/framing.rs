@@ -109,6 +109,17 @@ pub fn nmea_checksum(body: &[u8]) -> u8 {
     body.iter().fold(0, |acc, b| acc ^ b)
 }
 
+/// The address of an NMEA sentence: the letters after `$`/`!` (`GPGGA` in `$GPGGA,…`, `C` in the
+/// Iver compass sentence `$C82.8P…`, which has no comma); empty when there are none.
+pub fn nmea_address(sentence: &[u8]) -> &[u8] {
+    let body = sentence.get(1..).unwrap_or_default();
+    let len = body
+        .iter()
+        .position(|b| !b.is_ascii_alphabetic())
+        .unwrap_or(body.len());
+    &body[..len]
+}
+
 /// Builds a sentence from its body (`GPGGA,…`, without `$` and checksum): `$body*hh`.
 pub fn nmea_sentence(start: u8, body: &str) -> String {
     format!(
@@ -341,6 +352,19 @@ impl Framer {
         frame
     }
 
+    /// Whether byte `b` would make the frame in hand longer than the limit. In text framings a CR
+    /// right after a frame of the full length may be its line ending, and does not count.
+    fn overflows(&self, b: u8, text: bool) -> bool {
+        self.buf.len() >= self.max && !(text && b == b'\r' && self.buf.len() == self.max)
+    }
+
+    /// Drops the frame in hand as too long and skips the rest of it.
+    fn skip_too_long(&mut self, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
+        self.buf.clear();
+        self.state = State::Skipping;
+        out(Err(Reject::TooLong));
+    }
+
     fn nmea(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
         let starts = matches!(b, b'$' | b'!');
         match self.state {
@@ -374,12 +398,8 @@ impl Framer {
                     }
                     out(check_nmea(&self.buf, self.policy));
                     self.buf.clear();
-                } else if self.buf.len() >= self.max && !(b == b'\r' && self.buf.len() == self.max)
-                {
-                    // (a CR right after a full sentence may be its line ending)
-                    self.buf.clear();
-                    self.state = State::Skipping;
-                    out(Err(Reject::TooLong));
+                } else if self.overflows(b, true) {
+                    self.skip_too_long(out);
                 } else {
                     self.buf.push(b);
                 }
@@ -404,11 +424,7 @@ impl Framer {
                     out(Ok(line));
                 }
             }
-            _ if self.buf.len() >= self.max && !(b == b'\r' && self.buf.len() == self.max) => {
-                self.buf.clear();
-                self.state = State::Skipping;
-                out(Err(Reject::TooLong));
-            }
+            _ if self.overflows(b, true) => self.skip_too_long(out),
             _ => {
                 self.buf.push(b);
                 self.state = State::In;
@@ -430,11 +446,7 @@ impl Framer {
                     self.buf.clear();
                 }
             }
-            _ if self.buf.len() >= self.max => {
-                self.buf.clear();
-                self.state = State::Skipping;
-                out(Err(Reject::TooLong));
-            }
+            _ if self.overflows(b, false) => self.skip_too_long(out),
             _ => {
                 self.buf.push(b);
                 self.state = State::In;
@@ -475,11 +487,7 @@ impl Framer {
                     out(Ok(frame));
                 }
             }
-            _ if self.buf.len() >= self.max => {
-                self.buf.clear();
-                self.state = State::Skipping;
-                out(Err(Reject::TooLong));
-            }
+            _ if self.overflows(b, false) => self.skip_too_long(out),
             _ if b == SLIP_ESC => self.state = State::Escaped,
             _ => {
                 self.buf.push(b);

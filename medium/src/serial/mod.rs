@@ -198,15 +198,10 @@ impl SerialConfig {
         if self.framing != Framing::Nmea {
             return Topic::new(&self.topic).ok();
         }
-        let letters = frame
-            .iter()
-            .skip(1)
-            .take_while(|b| b.is_ascii_alphabetic())
-            .count();
-        if letters == 0 {
+        let address = std::str::from_utf8(framing::nmea_address(frame)).ok()?;
+        if address.is_empty() {
             return None;
         }
-        let address = std::str::from_utf8(&frame[1..1 + letters]).ok()?;
         Topic::new(&format!("{}.{address}", self.topic)).ok()
     }
 }
@@ -233,13 +228,9 @@ impl FrameTopics {
         if self.cfg.framing != Framing::Nmea {
             return self.cfg.topic_of(frame);
         }
-        let letters = frame
-            .iter()
-            .skip(1)
-            .take_while(|b| b.is_ascii_alphabetic())
-            .count();
         // (letters are never zero bytes, so packing keeps addresses apart)
-        let key = frame.get(1..1 + letters).filter(|a| a.len() <= 8).map(|a| {
+        let address = framing::nmea_address(frame);
+        let key = Some(address).filter(|a| a.len() <= 8).map(|a| {
             let mut word = [0u8; 8];
             word[..a.len()].copy_from_slice(a);
             u64::from_le_bytes(word)
@@ -429,30 +420,22 @@ async fn pump<P: AsyncRead + AsyncWrite>(
 /// Opens a `pty://` medium: a new pseudo-terminal whose other end is linked at the URL's path.
 pub(crate) fn open_pty(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
     let cfg = SerialConfig::from_url(&mut o.url)?;
-    let io_err = |context: String| {
-        let url = o.url.to_string();
-        move |source| OpenError::Io {
-            url,
-            context,
-            source,
-        }
-    };
     let (master, slave) = SerialStream::pair()
         .map_err(|e| std::io::Error::other(e.to_string()))
-        .map_err(io_err("creating a pseudo-terminal".into()))?;
+        .map_err(o.io_error("creating a pseudo-terminal"))?;
     let slave_path = tokio_serial::SerialPort::name(&slave)
         .ok_or_else(|| std::io::Error::other("the pseudo-terminal has no name"))
-        .map_err(io_err("naming the pseudo-terminal".into()))?;
+        .map_err(o.io_error("naming the pseudo-terminal"))?;
     // the other end stays open here too, so that the terminal lives while nobody has it open; it
     // is held by a plain file, without the lock a serial port takes, so that any program can open it
     let held = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
         .open(&slave_path)
-        .map_err(io_err(format!("opening {slave_path}")))?;
+        .map_err(o.io_error(format!("opening {slave_path}")))?;
     drop(slave);
     link(&cfg.path, Path::new(&slave_path))
-        .map_err(io_err(format!("linking {}", cfg.path.display())))?;
+        .map_err(o.io_error(format!("linking {}", cfg.path.display())))?;
     let (writer, rx) = mpsc::channel(WRITE_QUEUE);
     let shared = Arc::new(Shared {
         name: o.name.clone(),

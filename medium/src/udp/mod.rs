@@ -279,17 +279,10 @@ pub struct UdpTransport {
 /// Opens a UDP medium.
 pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let cfg = UdpConfig::from_url(&mut o.url)?;
-    let io_err = |context: String| {
-        let url = o.url.to_string();
-        move |source| OpenError::Io {
-            url,
-            context,
-            source,
-        }
-    };
-    let (std_socket, recv_buf) = socket(&cfg).map_err(io_err(format!("binding {}", cfg.bind)))?;
+    let (std_socket, recv_buf) =
+        socket(&cfg).map_err(o.io_error(format!("binding {}", cfg.bind)))?;
     let socket =
-        Arc::new(UdpSocket::from_std(std_socket).map_err(io_err("registering the socket".into()))?);
+        Arc::new(UdpSocket::from_std(std_socket).map_err(o.io_error("registering the socket"))?);
     if recv_buf < cfg.recv_buf {
         tracing::debug!(medium = %o.name, "receive buffer is {recv_buf} bytes (asked for {})", cfg.recv_buf);
     }
@@ -300,7 +293,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
         sender,
         dests: cfg
             .destinations()
-            .map_err(io_err("resolving the peers".into()))?,
+            .map_err(o.io_error("resolving the peers"))?,
         max: cfg.max,
     });
     let task = tokio::spawn(receive(socket, sender, o.ingress.clone()));

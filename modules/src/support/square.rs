@@ -12,7 +12,7 @@ use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, Timer
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Message};
+use seabus_medium::{DataMap, Message, Topic};
 use std::time::Duration;
 
 /// The `square` module type.
@@ -32,7 +32,7 @@ struct Square {
     timeout: f64,
     leg_start: Option<(f64, f64)>,
     legs: i64,
-    course_topic: String,
+    course_topic: Topic,
 }
 
 fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
@@ -46,7 +46,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         Some("left") => -90.0,
         Some(_) => return Err(p.required("turn")?.error("expected right or left")),
     };
-    let course_topic = cat.topic_of("course-command", "cmd.course");
+    let course_topic = p.dataset_topic(cat, "course-command", "cmd.course")?;
     let decl = Declaration::new(ModuleKind::Supporting)
         .consumes(TopicDecl::dataset(
             cat.topic_of("position", "nav.position"),
