@@ -1,6 +1,6 @@
 //! `seabus spy`: a live table of the topics on a medium, or one JSON object per message.
 
-use seabus_medium::{Medium, Message, Node, Payload};
+use seabus_medium::{Medium, Message, Node, Payload, Topic};
 use std::collections::BTreeMap;
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
@@ -35,8 +35,8 @@ struct Row {
     count: u64,
     counted_at_refresh: u64,
     rate: f64,
-    origin: String,
-    last: String,
+    /// the latest message, shown when the table is printed
+    last: Message,
 }
 
 fn shorten(text: String, max: usize) -> String {
@@ -48,7 +48,7 @@ fn shorten(text: String, max: usize) -> String {
     s
 }
 
-fn print_table(rows: &BTreeMap<String, Row>, out: &mut impl Write, clear: bool) {
+fn print_table(rows: &BTreeMap<Topic, Row>, out: &mut impl Write, clear: bool) {
     if clear {
         let _ = write!(out, "\x1b[2J\x1b[H");
     }
@@ -61,11 +61,11 @@ fn print_table(rows: &BTreeMap<String, Row>, out: &mut impl Write, clear: bool) 
         let _ = writeln!(
             out,
             "{:<32} {:>8} {:>9.1}  {:<22} {}",
-            shorten(topic.clone(), 32),
+            shorten(topic.to_string(), 32),
             r.count,
             r.rate,
-            shorten(r.origin.clone(), 22),
-            r.last
+            shorten(r.last.origin().to_string(), 22),
+            shorten(r.last.payload.to_string(), 70)
         );
     }
     let _ = out.flush();
@@ -93,7 +93,7 @@ pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str
     };
     let deadline = duration.map(|d| Instant::now() + d);
     let live = !json && std::io::stdout().is_terminal();
-    let mut rows: BTreeMap<String, Row> = BTreeMap::new();
+    let mut rows: BTreeMap<Topic, Row> = BTreeMap::new();
     let mut refresh = tokio::time::interval(Duration::from_secs(1));
     let mut last_refresh = Instant::now();
     let stdout = std::io::stdout();
@@ -127,16 +127,21 @@ pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str
                         break;
                     }
                 } else {
-                    let row = rows.entry(m.topic.to_string()).or_insert(Row {
-                        count: 0,
-                        counted_at_refresh: 0,
-                        rate: 0.0,
-                        origin: String::new(),
-                        last: String::new(),
-                    });
-                    row.count += 1;
-                    row.origin = m.origin().to_string();
-                    row.last = shorten(m.payload.to_string(), 70);
+                    match rows.get_mut(&m.topic) {
+                        Some(row) => {
+                            row.count += 1;
+                            row.last = m;
+                        }
+                        None => {
+                            let row = Row {
+                                count: 1,
+                                counted_at_refresh: 0,
+                                rate: 0.0,
+                                last: m,
+                            };
+                            rows.insert(row.last.topic.clone(), row);
+                        }
+                    }
                 }
             }
         }

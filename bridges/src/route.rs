@@ -23,6 +23,8 @@ use seabus_modules::module::{
 use seabus_modules::registry::{BridgeType, Built};
 use seabus_modules::system::BridgeSpec;
 use std::collections::HashMap;
+use std::collections::hash_map::Entry;
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::time::Instant;
 
@@ -114,7 +116,7 @@ impl RouteBridge {
                     to,
                     topics: r.topics.clone(),
                     rename: r.rename.clone(),
-                    min_interval: r.rate.and_then(seabus_medium::parse::rate_period),
+                    min_interval: r.min_interval,
                     format: r.format,
                     kind: r.kind,
                     fields: r.fields.clone(),
@@ -147,7 +149,7 @@ enum Verdict {
 }
 
 impl RouteBridge {
-    fn route(&mut self, node: &str, port: usize, msg: Message) -> Verdict {
+    fn route(&mut self, node: &str, port: usize, mut msg: Message) -> Verdict {
         match self.seen.check(&msg) {
             Seen::New => {}
             Seen::Duplicate => {
@@ -195,14 +197,16 @@ impl RouteBridge {
         };
         if let (Some(gap), Kind::Data) = (leg.min_interval, msg.kind) {
             let now = Instant::now();
-            let key = (i, topic.clone());
-            if let Some(last) = self.last_sent.get(&key)
-                && now.duration_since(*last) < gap
-            {
-                self.stats[i].rate_limited += 1;
-                return Verdict::Drop("rate limit");
+            match self.last_sent.entry((i, topic.clone())) {
+                Entry::Occupied(e) if now.duration_since(*e.get()) < gap => {
+                    self.stats[i].rate_limited += 1;
+                    return Verdict::Drop("rate limit");
+                }
+                Entry::Occupied(mut e) => *e.get_mut() = now,
+                Entry::Vacant(e) => {
+                    e.insert(now);
+                }
             }
-            self.last_sent.insert(key, now);
             if self.last_sent.len() > MAX_RATE_ENTRIES {
                 prune_rate_limits(&mut self.last_sent, &self.legs);
                 if self.last_sent.len() > MAX_RATE_ENTRIES {
@@ -211,7 +215,9 @@ impl RouteBridge {
                 }
             }
         }
-        let payload = match convert(&msg.payload, &leg.fields, leg.format) {
+        // the payload is taken out of the message, so a datamap no one else holds is renamed in place
+        let taken = std::mem::replace(&mut msg.payload, Payload::from(Vec::new()));
+        let payload = match convert(taken, &leg.fields, leg.format) {
             Ok(p) => p,
             Err(e) => {
                 self.counters.errors += 1;
@@ -288,14 +294,16 @@ fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[L
 
 /// Applies field renames (which need a datamap) and the far side's format.
 fn convert(
-    p: &Payload,
+    p: Payload,
     fields: &[(String, String)],
     format: Option<Format>,
 ) -> Result<Payload, seabus_medium::ConvertError> {
     let p = if fields.is_empty() {
-        p.clone()
+        p
     } else {
-        let mut map = (*p.to_map()?).clone();
+        let map = p.to_map()?;
+        drop(p);
+        let mut map = Arc::unwrap_or_clone(map);
         for (from, to) in fields {
             map.rename(from, to);
         }
@@ -322,8 +330,7 @@ impl Module for RouteBridge {
         port: usize,
         msg: Message,
     ) -> Result<(), ModuleError> {
-        let node = ctx.node().name.clone();
-        if let Verdict::Forward(to, out) = self.route(&node, port, msg) {
+        if let Verdict::Forward(to, out) = self.route(&ctx.node().name, port, msg) {
             let Some(iface) = ctx.port(to) else {
                 return Err(ModuleError::msg(format!("bridge has no port {to}")));
             };

@@ -13,7 +13,8 @@ pub fn datamap_binary(data: &[u8]) -> bool {
     let Ok(map) = binary::decode(data) else {
         return false;
     };
-    let bytes = binary::encode(&map);
+    let bytes = binary::encode(&map)
+        .unwrap_or_else(|e| panic!("a decoded datamap has no binary form: {e}"));
     let back = binary::decode(&bytes)
         .unwrap_or_else(|e| panic!("an encoded datamap does not decode: {e}"));
     assert_eq!(back, map, "binary round trip changed the map");
@@ -64,7 +65,8 @@ pub fn datamap_xml(data: &[u8]) -> bool {
     let Ok(map) = xmlform::from_xml(text) else {
         return false;
     };
-    let xml = xmlform::to_xml(&map);
+    let xml =
+        xmlform::to_xml(&map).unwrap_or_else(|e| panic!("a read datamap has no XML form: {e}"));
     let back = xmlform::from_xml(&xml).unwrap_or_else(|e| panic!("written XML does not read: {e}"));
     assert_eq!(back, map, "XML round trip changed the map: {xml}");
     true

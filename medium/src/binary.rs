@@ -13,17 +13,17 @@
 //!   0x06 varint count, values  list
 //! ```
 //! Varints are unsigned LEB128, at most 10 bytes, no over-long encodings. Lists nest at most
-//! [`MAX_DEPTH`] deep. The decoder never panics and tells a truncated input apart from a malformed one.
+//! [`MAX_DEPTH`] deep: the encoder refuses a deeper map, the decoder deeper input. The decoder never
+//! panics and tells a truncated input apart from a malformed one.
 
-use crate::datamap::{DataMap, Value};
+use crate::datamap::{DataMap, MAX_DEPTH, TooDeep, Value};
+use bytes::BufMut;
 use thiserror::Error;
 
 /// Magic bytes that open a binary datamap.
 pub const MAGIC: [u8; 2] = [0x53, 0x4D];
 /// The version byte this codec writes and reads.
 pub const VERSION: u8 = 1;
-/// Deepest list nesting the decoder accepts.
-pub const MAX_DEPTH: usize = 32;
 
 const TAG_FALSE: u8 = 0;
 const TAG_TRUE: u8 = 1;
@@ -80,108 +80,98 @@ impl DecodeError {
 }
 
 /// Encodes `map` in the compact binary form.
-pub fn encode(map: &DataMap) -> Vec<u8> {
-    let mut out = Vec::with_capacity(encoded_len_hint(map));
-    encode_into(map, &mut out);
-    out
+pub fn encode(map: &DataMap) -> Result<Vec<u8>, TooDeep> {
+    let mut out = Vec::with_capacity(encoded_len(map));
+    encode_into(map, &mut out)?;
+    Ok(out)
 }
 
-/// Appends the compact binary form of `map` to `out`.
-pub fn encode_into(map: &DataMap, out: &mut impl Out) {
-    out.extend_from_slice(&MAGIC);
-    out.push(VERSION);
+/// Appends the compact binary form of `map` to `out`; on error `out` holds a partial map.
+pub fn encode_into(map: &DataMap, out: &mut impl BufMut) -> Result<(), TooDeep> {
+    out.put_slice(&MAGIC);
+    out.put_u8(VERSION);
     put_varint(out, map.len() as u64);
     for (k, v) in map.iter() {
         put_varint(out, k.len() as u64);
-        out.extend_from_slice(k.as_bytes());
-        put_value(out, v);
+        out.put_slice(k.as_bytes());
+        put_value(out, v, 0)?;
+    }
+    Ok(())
+}
+
+/// The length of the binary form of `map` (counted as if lists could nest without limit).
+pub fn encoded_len(map: &DataMap) -> usize {
+    MAGIC.len()
+        + 1
+        + varint_len(map.len() as u64)
+        + map
+            .iter()
+            .map(|(k, v)| varint_len(k.len() as u64) + k.len() + value_len(v))
+            .sum::<usize>()
+}
+
+fn value_len(v: &Value) -> usize {
+    1 + match v {
+        Value::Bool(_) => 0,
+        Value::Int(i) => varint_len(zigzag(*i)),
+        Value::Float(_) => 8,
+        Value::Str(s) => varint_len(s.len() as u64) + s.len(),
+        Value::Bytes(b) => varint_len(b.len() as u64) + b.len(),
+        Value::List(items) => {
+            varint_len(items.len() as u64) + items.iter().map(value_len).sum::<usize>()
+        }
     }
 }
 
-/// Where encoded bytes go: a `Vec<u8>` or a `bytes::BytesMut`.
-pub trait Out {
-    /// Appends one byte.
-    fn push(&mut self, b: u8);
-    /// Appends bytes.
-    fn extend_from_slice(&mut self, b: &[u8]);
+fn varint_len(v: u64) -> usize {
+    // one byte per started group of 7 significant bits, and one byte for zero
+    1 + (63 - (v | 1).leading_zeros() as usize) / 7
 }
 
-impl Out for Vec<u8> {
-    fn push(&mut self, b: u8) {
-        Vec::push(self, b)
-    }
-    fn extend_from_slice(&mut self, b: &[u8]) {
-        Vec::extend_from_slice(self, b)
-    }
-}
-
-impl Out for bytes::BytesMut {
-    fn push(&mut self, b: u8) {
-        bytes::BufMut::put_u8(self, b)
-    }
-    fn extend_from_slice(&mut self, b: &[u8]) {
-        bytes::BytesMut::extend_from_slice(self, b)
-    }
-}
-
-/// A guess at the encoded size, for reserving room.
-pub fn encoded_len_hint(map: &DataMap) -> usize {
-    4 + map
-        .iter()
-        .map(|(k, v)| 2 + k.len() + value_len_hint(v))
-        .sum::<usize>()
-}
-
-fn value_len_hint(v: &Value) -> usize {
+/// Writes `v`, found inside `depth` lists; a list is refused where the decoder would refuse it.
+fn put_value(out: &mut impl BufMut, v: &Value, depth: usize) -> Result<(), TooDeep> {
     match v {
-        Value::Bool(_) => 1,
-        Value::Int(_) => 4,
-        Value::Float(_) => 9,
-        Value::Str(s) => 2 + s.len(),
-        Value::Bytes(b) => 3 + b.len(),
-        Value::List(items) => 2 + items.iter().map(value_len_hint).sum::<usize>(),
-    }
-}
-
-fn put_value(out: &mut impl Out, v: &Value) {
-    match v {
-        Value::Bool(false) => out.push(TAG_FALSE),
-        Value::Bool(true) => out.push(TAG_TRUE),
+        Value::Bool(false) => out.put_u8(TAG_FALSE),
+        Value::Bool(true) => out.put_u8(TAG_TRUE),
         Value::Int(i) => {
-            out.push(TAG_INT);
+            out.put_u8(TAG_INT);
             put_varint(out, zigzag(*i));
         }
         Value::Float(f) => {
-            out.push(TAG_FLOAT);
-            out.extend_from_slice(&f.to_le_bytes());
+            out.put_u8(TAG_FLOAT);
+            out.put_f64_le(*f);
         }
         Value::Str(s) => {
-            out.push(TAG_STR);
+            out.put_u8(TAG_STR);
             put_varint(out, s.len() as u64);
-            out.extend_from_slice(s.as_bytes());
+            out.put_slice(s.as_bytes());
         }
         Value::Bytes(b) => {
-            out.push(TAG_BYTES);
+            out.put_u8(TAG_BYTES);
             put_varint(out, b.len() as u64);
-            out.extend_from_slice(b);
+            out.put_slice(b);
         }
         Value::List(items) => {
-            out.push(TAG_LIST);
+            if depth >= MAX_DEPTH {
+                return Err(TooDeep);
+            }
+            out.put_u8(TAG_LIST);
             put_varint(out, items.len() as u64);
             for item in items {
-                put_value(out, item);
+                put_value(out, item, depth + 1)?;
             }
         }
     }
+    Ok(())
 }
 
 /// Appends `v` as an unsigned LEB128 varint.
-pub fn put_varint(out: &mut impl Out, mut v: u64) {
+pub fn put_varint(out: &mut impl BufMut, mut v: u64) {
     while v >= 0x80 {
-        out.push((v as u8) | 0x80);
+        out.put_u8((v as u8) | 0x80);
         v >>= 7;
     }
-    out.push(v as u8);
+    out.put_u8(v as u8);
 }
 
 fn zigzag(i: i64) -> u64 {
@@ -217,7 +207,7 @@ pub fn decode(bytes: &[u8]) -> Result<DataMap, DecodeError> {
     for _ in 0..count {
         let key = r.text()?;
         let value = r.value(0)?;
-        map.push_raw(key, value);
+        map.push(key, value);
     }
     if r.remaining() > 0 {
         return Err(r.err(DecodeErrorKind::Trailing(r.remaining())));
@@ -347,7 +337,7 @@ mod tests {
             .with("n", -2i64)
             .with("ok", true)
             .with("id", "a");
-        let bytes = encode(&map);
+        let bytes = encode(&map).unwrap();
         let mut expected = vec![0x53, 0x4D, 0x01, 0x04];
         expected.extend_from_slice(&[0x03, b'y', b'a', b'w', 0x03]);
         expected.extend_from_slice(&90.5f64.to_le_bytes());
@@ -366,7 +356,7 @@ mod tests {
                 Value::List(vec![1i64.into(), "x".into(), vec![1u8, 2].into()]),
             )
             .with("f", 1.0f64);
-        let bytes = encode(&map);
+        let bytes = encode(&map).unwrap();
         for cut in 0..bytes.len() {
             let err = decode(&bytes[..cut]).unwrap_err();
             assert!(err.is_incomplete(), "prefix {cut}: {err}");
@@ -405,6 +395,46 @@ mod tests {
         }
         bytes.push(TAG_TRUE);
         assert_eq!(decode(&bytes).unwrap_err().kind, DecodeErrorKind::TooDeep);
+    }
+
+    /// A map whose one entry holds `lists` lists, each inside the one before.
+    fn nested(lists: usize) -> DataMap {
+        let mut v = Value::Int(1);
+        for _ in 0..lists {
+            v = Value::List(vec![v]);
+        }
+        DataMap::new().with("k", v)
+    }
+
+    #[test]
+    fn the_encoder_nests_exactly_as_deep_as_the_decoder() {
+        let deepest = nested(MAX_DEPTH);
+        assert_eq!(decode(&encode(&deepest).unwrap()).unwrap(), deepest);
+        let mut out = Vec::new();
+        assert_eq!(encode_into(&nested(MAX_DEPTH + 1), &mut out), Err(TooDeep));
+    }
+
+    #[test]
+    fn encoded_len_is_exact() {
+        let ints = [0, 63, -64, 64, -65, 8191, i64::MAX, i64::MIN];
+        let map = DataMap::new()
+            .with(
+                "list",
+                Value::List(ints.iter().map(|&i| Value::Int(i)).collect()),
+            )
+            .with("s", "x".repeat(200))
+            .with("b", vec![7u8; 128])
+            .with("f", -0.0f64)
+            .with("t", true)
+            .with("k".repeat(130), Value::List(vec![]));
+        for m in [DataMap::new(), map, nested(MAX_DEPTH)] {
+            assert_eq!(encoded_len(&m), encode(&m).unwrap().len(), "{m}");
+        }
+        // a map too deep for the binary form still has a length: that of the form without the limit
+        assert_eq!(
+            encoded_len(&nested(MAX_DEPTH + 1)),
+            encoded_len(&nested(MAX_DEPTH)) + 2
+        );
     }
 
     #[test]

@@ -5,6 +5,16 @@
 
 use std::borrow::Cow;
 use std::fmt;
+use thiserror::Error;
+
+/// Deepest list nesting a datamap can be carried with: every payload form writes and reads lists
+/// this deep, and refuses deeper ones.
+pub const MAX_DEPTH: usize = 32;
+
+/// Why a datamap has no binary or XML form: its lists nest deeper than [`MAX_DEPTH`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
+#[error("lists nested deeper than {MAX_DEPTH}")]
+pub struct TooDeep;
 
 /// One value in a [`DataMap`].
 #[derive(Debug, Clone)]
@@ -297,21 +307,6 @@ impl DataMap {
         true
     }
 
-    /// How deeply lists nest in this map (0 when there are none).
-    pub fn depth(&self) -> usize {
-        fn depth(v: &Value) -> usize {
-            match v {
-                Value::List(items) => 1 + items.iter().map(depth).max().unwrap_or(0),
-                _ => 0,
-            }
-        }
-        self.entries
-            .iter()
-            .map(|(_, v)| depth(v))
-            .max()
-            .unwrap_or(0)
-    }
-
     /// The entries in order.
     pub fn iter(&self) -> impl Iterator<Item = (&str, &Value)> {
         self.entries.iter().map(|(k, v)| (k.as_ref(), v))
@@ -325,12 +320,6 @@ impl DataMap {
     /// True when the map has no entries.
     pub fn is_empty(&self) -> bool {
         self.entries.is_empty()
-    }
-
-    /// Appends an entry without looking for an existing key; decoders use it so that the order and
-    /// content of a received map is kept exactly, duplicates included.
-    pub(crate) fn push_raw(&mut self, key: String, value: Value) {
-        self.entries.push((Cow::Owned(key), value));
     }
 }
 
@@ -386,9 +375,9 @@ mod tests {
     fn regression_rename_with_repeated_keys_from_the_wire() {
         // decoded maps may repeat a key; renaming onto it must neither panic nor pick the wrong entry
         let mut m = DataMap::new();
-        m.push_raw("heading".into(), Value::Int(1));
-        m.push_raw("heading".into(), Value::Int(2));
-        m.push_raw("hdg".into(), Value::Int(3));
+        m.push("heading", Value::Int(1));
+        m.push("heading", Value::Int(2));
+        m.push("hdg", Value::Int(3));
         assert!(m.rename("hdg", "heading"));
         assert_eq!(
             m.iter()
@@ -397,9 +386,9 @@ mod tests {
             [("heading".to_string(), Value::Int(3))]
         );
         let mut m = DataMap::new();
-        m.push_raw("b".into(), Value::Int(1));
-        m.push_raw("a".into(), Value::Int(2));
-        m.push_raw("a".into(), Value::Int(3));
+        m.push("b", Value::Int(1));
+        m.push("a", Value::Int(2));
+        m.push("a", Value::Int(3));
         assert!(m.rename("a", "b"));
         assert_eq!(
             m.iter()

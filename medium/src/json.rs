@@ -156,7 +156,7 @@ impl<'de> Visitor<'de> for MapVisitor {
         let mut out = DataMap::with_capacity(map.size_hint().unwrap_or(0).min(256));
         // entries are kept as written, a repeated key included, as the other forms do
         while let Some((k, v)) = map.next_entry::<String, Value>()? {
-            out.push_raw(k, v);
+            out.push(k, v);
         }
         Ok(out)
     }

@@ -309,7 +309,6 @@ impl Medium {
     /// Must be called inside a tokio runtime.
     pub fn open(name: &str, url: &str, node: &Node) -> Result<Medium, OpenError> {
         let (scheme, parsed, faults) = Self::parse_url(url)?;
-        (scheme.check)(&mut parsed.clone())?;
         Builder {
             name: Arc::from(name),
             url: url.to_string(),
@@ -480,7 +479,7 @@ struct Scheme {
     name: &'static str,
     /// Takes and checks every option of the URL, without opening anything.
     check: fn(&mut MediumUrl) -> Result<(), UrlError>,
-    /// Opens the transport.
+    /// Takes and checks every option of the URL as `check` does, and opens the transport.
     open: OpenTransport,
 }
 
@@ -488,7 +487,10 @@ const SCHEMES: &[Scheme] = &[
     Scheme {
         name: "inproc",
         check: |url| url.finish(&[]),
-        open: |_| Ok(None),
+        open: |o| {
+            o.url.finish(&[])?;
+            Ok(None)
+        },
     },
     Scheme {
         name: "udp",

@@ -7,11 +7,13 @@
 //! | XML | via datamap | XML form read | as is |
 //!
 //! Datamap ↔ XML ↔ binary is lossless. Bytes that are not a binary datamap, and XML that is not a
-//! `<datamap>` document, cannot become a datamap: the conversion fails with a [`ConvertError`].
+//! `<datamap>` document, cannot become a datamap, and a datamap whose lists nest deeper than
+//! [`crate::datamap::MAX_DEPTH`] cannot become bytes: the conversion fails with a [`ConvertError`].
 //! Payloads are cheap to clone: their contents are shared, never copied.
 
 use crate::binary::{self, DecodeError};
 use crate::datamap::DataMap;
+use crate::datamap::TooDeep;
 use crate::xmlform::{self, XmlFormError};
 use bytes::Bytes;
 use std::fmt;
@@ -76,6 +78,9 @@ pub enum ConvertError {
     /// The XML text is not a datamap document.
     #[error("XML is not a datamap document: {0}")]
     NotXmlMap(#[from] XmlFormError),
+    /// The datamap's lists nest too deep for the binary form.
+    #[error("datamap has no binary form: {0}")]
+    TooDeep(#[from] TooDeep),
 }
 
 impl Payload {
@@ -94,9 +99,9 @@ impl Payload {
             return Ok(self.clone());
         }
         Ok(match format {
-            Format::Bytes => Payload::Bytes(Bytes::from(binary::encode(&*self.to_map()?))),
+            Format::Bytes => Payload::Bytes(Bytes::from(binary::encode(&*self.to_map()?)?)),
             Format::Map => Payload::Map(self.to_map()?),
-            Format::Xml => Payload::Xml(Arc::from(xmlform::to_xml(&*self.to_map()?))),
+            Format::Xml => Payload::Xml(Arc::from(xmlform::to_xml(&*self.to_map()?)?)),
         })
     }
 
@@ -137,7 +142,7 @@ impl Payload {
     pub fn len(&self) -> usize {
         match self {
             Payload::Bytes(b) => b.len(),
-            Payload::Map(m) => binary::encode(m).len(),
+            Payload::Map(m) => binary::encoded_len(m),
             Payload::Xml(x) => x.len(),
         }
     }
@@ -249,6 +254,28 @@ mod tests {
         // a payload already in the asked format is never touched
         assert_eq!(raw.convert(Format::Bytes).unwrap(), raw);
         assert_eq!(doc.convert(Format::Xml).unwrap(), doc);
+    }
+
+    #[test]
+    fn a_map_too_deep_to_decode_does_not_become_bytes() {
+        let nested = |lists| {
+            let mut v = Value::Int(1);
+            for _ in 0..lists {
+                v = Value::List(vec![v]);
+            }
+            DataMap::new().with("deep", v)
+        };
+        let deep = Payload::from(nested(crate::datamap::MAX_DEPTH + 1));
+        assert_eq!(
+            deep.convert(Format::Bytes),
+            Err(ConvertError::TooDeep(TooDeep))
+        );
+        // the deepest map the binary form carries converts and reads back
+        let deepest = nested(crate::datamap::MAX_DEPTH);
+        let bytes = Payload::from(deepest.clone())
+            .convert(Format::Bytes)
+            .unwrap();
+        assert_eq!(*bytes.to_map().unwrap(), deepest);
     }
 
     #[test]

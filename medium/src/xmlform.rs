@@ -16,7 +16,7 @@
 //! tab, newline and carriage return; U+FFFE; U+FFFF) is written in base64 with `encoding="base64"` /
 //! `name-base64="…"`. Readers accept any whitespace between elements and around numbers.
 
-use crate::datamap::{DataMap, Value};
+use crate::datamap::{DataMap, MAX_DEPTH, TooDeep, Value};
 use base64::Engine as _;
 use base64::engine::general_purpose::STANDARD as B64;
 use quick_xml::events::Event;
@@ -24,9 +24,6 @@ use quick_xml::reader::Reader;
 use std::borrow::Cow;
 use std::fmt::Write as _;
 use thiserror::Error;
-
-/// Deepest list nesting the reader accepts.
-pub const MAX_DEPTH: usize = 32;
 
 /// Why XML text could not be read as a datamap; `offset` is the byte offset into the text.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -83,17 +80,26 @@ impl XmlFormError {
 }
 
 /// Writes `map` in the XML form.
-pub fn to_xml(map: &DataMap) -> String {
+pub fn to_xml(map: &DataMap) -> Result<String, TooDeep> {
     let mut out = String::with_capacity(32 + map.len() * 40);
     out.push_str("<datamap>");
     for (k, v) in map.iter() {
-        write_value(&mut out, Some(k), v);
+        write_value(&mut out, Some(k), v, 0)?;
     }
     out.push_str("</datamap>");
-    out
+    Ok(out)
 }
 
-fn write_value(out: &mut String, name: Option<&str>, v: &Value) {
+/// Writes `v`, found inside `depth` lists; a list is refused where the reader would refuse it.
+fn write_value(
+    out: &mut String,
+    name: Option<&str>,
+    v: &Value,
+    depth: usize,
+) -> Result<(), TooDeep> {
+    if matches!(v, Value::List(_)) && depth >= MAX_DEPTH {
+        return Err(TooDeep);
+    }
     let tag = v.type_name();
     out.push('<');
     out.push_str(tag);
@@ -136,13 +142,14 @@ fn write_value(out: &mut String, name: Option<&str>, v: &Value) {
         Value::List(items) => {
             out.push('>');
             for item in items {
-                write_value(out, None, item);
+                write_value(out, None, item, depth + 1)?;
             }
         }
     }
     out.push_str("</");
     out.push_str(tag);
     out.push('>');
+    Ok(())
 }
 
 fn write_float(out: &mut String, f: f64) {
@@ -218,7 +225,7 @@ pub fn from_xml(text: &str) -> Result<DataMap, XmlFormError> {
     let mut map = DataMap::with_capacity(16);
     if !empty {
         while let Some((name, value)) = p.child(Some("datamap"), 0)? {
-            map.push_raw(name.unwrap_or_default(), value);
+            map.push(name.unwrap_or_default(), value);
         }
     }
     loop {
@@ -593,7 +600,7 @@ mod tests {
             .with("raw", vec![1u8, 2])
             .with("xs", Value::List(vec![1i64.into(), "two".into()]));
         assert_eq!(
-            to_xml(&map),
+            to_xml(&map).unwrap(),
             "<datamap><float name=\"yaw\">90.5</float><int name=\"n\">-2</int>\
              <bool name=\"ok\">true</bool><string name=\"id\">a</string>\
              <bytes name=\"raw\">AQI=</bytes><list name=\"xs\"><int>1</int><string>two</string></list></datamap>"
@@ -603,7 +610,7 @@ mod tests {
     #[test]
     fn round_trip_with_awkward_text() {
         let m = sample();
-        assert_eq!(from_xml(&to_xml(&m)).unwrap(), m);
+        assert_eq!(from_xml(&to_xml(&m).unwrap()).unwrap(), m);
         let odd = DataMap::new()
             .with("k\u{1}ey", "nul\0here")
             .with("tab\tkey", "\u{FFFF}")
@@ -612,7 +619,7 @@ mod tests {
             .with("inf", f64::NEG_INFINITY)
             .with("empty", "")
             .with("space", "  ");
-        let xml = to_xml(&odd);
+        let xml = to_xml(&odd).unwrap();
         assert!(xml.contains("name-base64"), "{xml}");
         assert_eq!(from_xml(&xml).unwrap(), odd);
     }
@@ -658,7 +665,7 @@ mod tests {
     #[test]
     fn every_truncation_is_incomplete() {
         let hand = "<?xml version=\"1.0\"?><!-- c --><datamap><string name=\"a&amp;b\">x &lt; y<![CDATA[z]]></string></datamap>";
-        for xml in [to_xml(&sample()), hand.to_string()] {
+        for xml in [to_xml(&sample()).unwrap(), hand.to_string()] {
             for cut in (0..xml.len()).filter(|c| xml.is_char_boundary(*c)) {
                 let e = from_xml(&xml[..cut]).unwrap_err();
                 assert!(e.is_incomplete(), "cut {cut} of {xml}: {e}");

@@ -47,12 +47,14 @@ proptest! {
 
     #[test]
     fn binary_round_trips(m in datamap()) {
-        prop_assert_eq!(binary::decode(&binary::encode(&m)).unwrap(), m);
+        let bytes = binary::encode(&m).unwrap();
+        prop_assert_eq!(binary::encoded_len(&m), bytes.len());
+        prop_assert_eq!(binary::decode(&bytes).unwrap(), m);
     }
 
     #[test]
     fn xml_round_trips(m in datamap()) {
-        let xml = xmlform::to_xml(&m);
+        let xml = xmlform::to_xml(&m).unwrap();
         prop_assert_eq!(xmlform::from_xml(&xml).unwrap(), m);
     }
 
@@ -66,7 +68,7 @@ proptest! {
         }
         prop_assert_eq!(&*p.to_map().unwrap(), &m);
         // and the binary form is the same whichever way it was reached
-        let direct = binary::encode(&m);
+        let direct = binary::encode(&m).unwrap();
         let via_xml = Payload::from(m.clone()).convert(Format::Xml).unwrap().convert(Format::Bytes).unwrap();
         prop_assert_eq!(via_xml.as_bytes().unwrap().as_ref(), &direct[..]);
     }

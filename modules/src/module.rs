@@ -14,6 +14,7 @@ use seabus_medium::{
     DataMap, Format, Interface, IntoTopic, Kind, Message, Node, Payload, SendError, TopicError,
 };
 use std::fmt;
+use std::pin::Pin;
 use std::sync::Arc;
 use std::time::Duration;
 use thiserror::Error;
@@ -247,6 +248,8 @@ pub struct Context {
     timers: Vec<Timer>,
     catalogue: Arc<Catalogue>,
     next_port: usize,
+    /// the wait for the earliest timer, kept between events (set again only when that changes)
+    alarm: Option<Pin<Box<tokio::time::Sleep>>>,
 }
 
 /// Something that happened for a module.
@@ -271,6 +274,7 @@ impl Context {
             timers: Vec::new(),
             catalogue,
             next_port: 0,
+            alarm: None,
         }
     }
 
@@ -400,6 +404,15 @@ impl Context {
             .iter()
             .min_by_key(|t| t.due)
             .map(|t| (t.id, t.due));
+        let alarm = due.map(|(_, at)| {
+            let sleep = self
+                .alarm
+                .get_or_insert_with(|| Box::pin(tokio::time::sleep_until(at)));
+            if sleep.deadline() != at {
+                sleep.as_mut().reset(at);
+            }
+            sleep.as_mut()
+        });
         let n = self.ports.len();
         let start = self.next_port;
         let ports = &mut self.ports;
@@ -422,8 +435,8 @@ impl Context {
         let event = tokio::select! {
             biased;
             _ = async {
-                match due {
-                    Some((_, at)) => tokio::time::sleep_until(at).await,
+                match alarm {
+                    Some(sleep) => sleep.await,
                     None => std::future::pending().await,
                 }
             } => {

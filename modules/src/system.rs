@@ -50,8 +50,8 @@ pub struct RouteSpec {
     pub topics: Pattern,
     /// New topic on the far side, filled from the pattern's wildcards.
     pub rename: Option<Pattern>,
-    /// Most messages per second per topic (data only).
-    pub rate: Option<f64>,
+    /// Least time between two messages of one topic (data only), from the route's `rate`.
+    pub min_interval: Option<std::time::Duration>,
     /// Payload format on the far side.
     pub format: Option<Format>,
     /// Only data or only commands.
@@ -370,17 +370,15 @@ fn bridge_spec(
                 Some(p)
             }
         };
-        let rate = match r.attr("rate") {
+        let min_interval = match r.attr("rate") {
             None => None,
-            Some(a) => {
-                let hz: f64 = a.parse("a rate in messages per second")?;
-                if seabus_medium::parse::rate_period(hz).is_none() {
-                    return Err(
-                        a.error("the rate must be above 0 and at most a million per second")
-                    );
-                }
-                Some(hz)
-            }
+            Some(a) => Some(parse_rate(&a.value).ok_or_else(|| {
+                a.error(format!(
+                    "`{}`: the rate must be above 0 and at most a million per second \
+                     (5, 5Hz) or a period (200ms, 2s)",
+                    a.value
+                ))
+            })?),
         };
         let format = match r.attr("format") {
             None => None,
@@ -408,7 +406,7 @@ fn bridge_spec(
             to,
             topics,
             rename,
-            rate,
+            min_interval,
             format,
             kind,
             fields,

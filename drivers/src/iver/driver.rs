@@ -4,8 +4,8 @@
 //! It asks for data with `$OSD` (`request`, default `G C S P`, every `request_every`, default
 //! 500ms) and publishes what comes back as standard datasets on the bus: attitude and depth from
 //! `$C`, position, velocity, altitude and vehicle state from `$OSI`, battery from `$OPI` (or from the
-//! `$OSI` battery field when power is not requested), the frontseat's GPS from `$GPRMC` on
-//! `gps_topic`, and DVL velocities on `dvl_topic`.
+//! `$OSI` battery field when power is not requested), the frontseat's GPS from its RMC (`$GPRMC`,
+//! `$GNRMC`, …) on `gps_topic`, and DVL velocities on `dvl_topic`.
 //!
 //! Commands it accepts on the bus:
 //! - `cmd.course` (heading, depth, speed) → `$OMS`, repeated every `repeat` (1s) while the course
@@ -30,8 +30,7 @@
 //! `version` is the Remote Helm major version (default 5): below 5, `$OMS` and `$OMW` depths are in
 //! feet.
 
-use super::protocol::{self, Command, DataRequest, DepthUnits, FromFront, Waypoint};
-use crate::nmea::sentence::{Sentence, parse};
+use super::protocol::{self, Command, DataRequest, DepthUnits, FromFront, MAX_TIMEOUT, Waypoint};
 use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
@@ -184,10 +183,10 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         }
     }
     let oms_timeout = p.positive_or("oms_timeout", 5.0)?;
-    if oms_timeout > 120.0 {
+    if oms_timeout > MAX_TIMEOUT {
         return Err(p
             .required("oms_timeout")?
-            .error("the frontseat takes 0 to 120 seconds"));
+            .error(format!("the frontseat takes 0 to {MAX_TIMEOUT} seconds")));
     }
     let repeat = p.duration_or("repeat", Duration::from_secs(1))?;
     if repeat.as_secs_f64() >= oms_timeout {
@@ -574,11 +573,8 @@ impl Iver {
                     self.publish(ctx, "velocity", &self.t.dvl, m).await;
                 }
             }
-            FromFront::Rmc(line) => {
-                if let Ok(p) = parse(&line)
-                    && let Sentence::Rmc(r) = p.sentence
-                    && let (Some(lat), Some(lon)) = (r.lat, r.lon)
-                {
+            FromFront::Rmc(r) => {
+                if let (Some(lat), Some(lon)) = (r.lat, r.lon) {
                     let m = DataMap::new()
                         .with("lat", lat)
                         .with("lon", lon)
@@ -594,15 +590,13 @@ impl Iver {
     }
 
     async fn on_ack(&mut self, ctx: &Context, a: protocol::Ack) {
-        let Some(i) = self.pending.iter().position(|p| p.code == a.msg_type) else {
+        let answered = self.pending.iter().position(|p| p.code == a.msg_type);
+        let Some(p) = answered.and_then(|i| self.pending.remove(i)) else {
             self.tally.record(
                 ctx.name(),
                 "unexpected-ack",
                 format_args!("$ACK for message type {}", a.msg_type),
             );
-            return;
-        };
-        let Some(p) = self.pending.remove(i) else {
             return;
         };
         if a.status == 0 {
@@ -612,10 +606,10 @@ impl Iver {
             }
         } else {
             let text = format!("error {}: {}", a.error, protocol::error_text(a.error));
-            tracing::warn!(
-                module = ctx.name(),
-                "the frontseat refused ${}: {text}",
-                p.command
+            self.tally.record(
+                ctx.name(),
+                "refused-by-frontseat",
+                format_args!("the frontseat refused ${}: {text}", p.command),
             );
             // a refused repeat of a course is reported too: the course is not being held
             self.status(ctx, p.id, p.command, "refused", &text, &p.request)
@@ -731,7 +725,7 @@ impl Iver {
                     fin_byte(elevator, fs),
                     fin_byte(thrust, ms),
                 ],
-                timeout: f("timeout").unwrap_or(3.0).clamp(0.0, 120.0),
+                timeout: f("timeout").unwrap_or(3.0).clamp(0.0, MAX_TIMEOUT),
             };
             self.send(ctx, &cmd, true, request).await;
         } else if topic == self.t.mission.as_str() {
@@ -815,7 +809,7 @@ impl Iver {
                     let cmd = Command::Odvl {
                         x,
                         y,
-                        timeout: f("timeout").unwrap_or(3.0).clamp(0.0, 120.0),
+                        timeout: f("timeout").unwrap_or(3.0).clamp(0.0, MAX_TIMEOUT),
                     };
                     self.send(ctx, &cmd, true, request).await;
                 }
@@ -885,7 +879,7 @@ impl Module for Iver {
     ) -> Result<(), ModuleError> {
         if port == 0 {
             if let Some(b) = msg.payload.as_bytes() {
-                let line = String::from_utf8_lossy(b).into_owned();
+                let line = String::from_utf8_lossy(b);
                 self.on_front(ctx, &line).await;
             }
         } else {

@@ -7,6 +7,7 @@
 //! major version is 5 or later, where `$OMS` and `$OMW` depths are in metres; `$OSI`, `$C` and the
 //! altimeter stay in feet in every version.
 
+use crate::nmea::sentence::{self, Sentence, num, num_field};
 pub use crate::nmea::sentence::{address, fields};
 use crate::units::FOOT;
 use seabus_medium::serial::framing::nmea_sentence;
@@ -30,6 +31,9 @@ fn rh_err(sentence: &str, reason: impl fmt::Display) -> RhError {
         reason: reason.to_string(),
     }
 }
+
+/// The longest timeout, seconds, a Remote Helm command may carry.
+pub const MAX_TIMEOUT: f64 = 120.0;
 
 /// Depth units of a Remote Helm version.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -185,40 +189,26 @@ pub enum FromFront {
     Ack(Ack),
     /// `$DVL`.
     Dvl(Dvl),
-    /// `$GPRMC` (read by the NMEA parser).
-    Rmc(String),
+    /// RMC from any talker (`$GPRMC`, `$GNRMC`, …), read by the NMEA parser.
+    Rmc(nmea::sentences::RmcData),
     /// Another sentence, by address.
     Other(String),
 }
 
-fn num(s: &str) -> Option<f64> {
-    let s = s.trim();
-    if s.is_empty() {
-        return None;
-    }
-    s.parse::<f64>().ok().filter(|v| v.is_finite())
+fn not_a_number(line: &str, i: usize, what: &str, s: &str) -> RhError {
+    rh_err(
+        line,
+        format!("field {} ({what}) `{s}` is not a number", i + 1),
+    )
 }
 
 fn req_num(line: &str, f: &[&str], i: usize, what: &str) -> Result<f64, RhError> {
     let s = f.get(i).copied().unwrap_or("");
-    num(s).ok_or_else(|| {
-        rh_err(
-            line,
-            format!("field {} ({what}) `{s}` is not a number", i + 1),
-        )
-    })
+    num(s).ok_or_else(|| not_a_number(line, i, what, s))
 }
 
 fn opt_num(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>, RhError> {
-    match f.get(i).map(|s| s.trim()) {
-        None | Some("") => Ok(None),
-        Some(s) => num(s).map(Some).ok_or_else(|| {
-            rh_err(
-                line,
-                format!("field {} ({what}) `{s}` is not a number", i + 1),
-            )
-        }),
-    }
+    num_field(f, i).map_err(|s| not_a_number(line, i, what, s))
 }
 
 fn text(f: &[&str], i: usize) -> String {
@@ -231,9 +221,9 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
         return Err(rh_err(line, "not a Remote Helm sentence"));
     }
     let addr = address(line);
-    let f = fields(line);
     Ok(match addr {
         "OSI" => {
+            let f = fields(line);
             if f.len() < 15 {
                 return Err(rh_err(
                     line,
@@ -265,17 +255,21 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
                 extra: f.iter().skip(15).map(|s| s.trim().to_string()).collect(),
             }))
         }
-        "OPI" => FromFront::Opi(Opi {
-            percent: opt_num(line, &f, 0, "battery percent")?,
-            remaining_wh: opt_num(line, &f, 1, "remaining energy")?,
-            power_w: opt_num(line, &f, 2, "power")?,
-            volts: opt_num(line, &f, 3, "volts")?,
-            current: opt_num(line, &f, 4, "current")?,
-            minutes: opt_num(line, &f, 5, "minutes")?,
-            state: text(&f, 6),
-            leak: text(&f, 7) == "1",
-        }),
+        "OPI" => {
+            let f = fields(line);
+            FromFront::Opi(Opi {
+                percent: opt_num(line, &f, 0, "battery percent")?,
+                remaining_wh: opt_num(line, &f, 1, "remaining energy")?,
+                power_w: opt_num(line, &f, 2, "power")?,
+                volts: opt_num(line, &f, 3, "volts")?,
+                current: opt_num(line, &f, 4, "current")?,
+                minutes: opt_num(line, &f, 5, "minutes")?,
+                state: text(&f, 6),
+                leak: text(&f, 7) == "1",
+            })
+        }
         "ACK" => {
+            let f = fields(line);
             let int = |i: usize, what: &str| -> Result<u32, RhError> {
                 let s = f.get(i).map(|s| s.trim()).unwrap_or("");
                 s.parse().map_err(|_| {
@@ -292,6 +286,7 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
             })
         }
         "DVL" => {
+            let f = fields(line);
             let v = |i: usize, what: &str| -> Result<Option<f64>, RhError> {
                 Ok(opt_num(line, &f, i, what)?.filter(|x| *x > -3200.0))
             };
@@ -305,8 +300,14 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
                 altitude: v(6, "altitude")?,
             })
         }
-        "GPRMC" => FromFront::Rmc(line.to_string()),
         "C" => FromFront::Compass(parse_compass(line)?),
+        rmc if rmc.len() == 5 && rmc.ends_with("RMC") => match sentence::parse(line) {
+            Ok(p) => match p.sentence {
+                Sentence::Rmc(r) => FromFront::Rmc(r),
+                _ => FromFront::Other(rmc.to_string()),
+            },
+            Err(e) => return Err(rh_err(line, e.reason)),
+        },
         other => FromFront::Other(other.to_string()),
     })
 }
@@ -342,7 +343,7 @@ fn parse_compass(line: &str) -> Result<Compass, RhError> {
 }
 
 impl Osi {
-    /// Writes the sentence (Remote Helm 5 layout when `battery_percent` is set).
+    /// Writes the sentence, with the fields after the 15th from `extra`.
     pub fn sentence(&self) -> String {
         let o = |v: Option<f64>, p: usize| v.map_or(String::new(), |v| format!("{v:.p$}"));
         let mut body = format!(
@@ -470,7 +471,7 @@ pub enum Command {
         max_pitch: f64,
         /// Speed, knots.
         speed_knots: f64,
-        /// Validity, seconds (0–120).
+        /// Validity, seconds (0 to [`MAX_TIMEOUT`]).
         timeout: f64,
     },
     /// `$OMP`: five fin/motor bytes and a timeout.
@@ -534,20 +535,27 @@ pub struct Waypoint {
     pub speed_knots: f64,
 }
 
+/// The message-type code `$ACK` uses for the command with this address (`OMS`, …).
+pub fn ack_code(address: &str) -> Option<u32> {
+    Some(match address {
+        "OMSTOP" => 1,
+        "OMSTART" => 3,
+        "OPOS" => 6,
+        "OJW" => 7,
+        "OSD" => 8,
+        "OMS" => 9,
+        "OMP" => 10,
+        "ODVL" => 15,
+        "OMW" => 16,
+        _ => return None,
+    })
+}
+
 impl Command {
     /// The message-type code `$ACK` uses for this command.
     pub fn ack_code(&self) -> u32 {
-        match self {
-            Command::OmStop => 1,
-            Command::OmStart { .. } => 3,
-            Command::Opos { .. } => 6,
-            Command::Ojw(_) => 7,
-            Command::Osd(_) => 8,
-            Command::Oms { .. } => 9,
-            Command::Omp { .. } => 10,
-            Command::Odvl { .. } => 15,
-            Command::Omw(_) => 16,
-        }
+        // every command's name has a code (tested below)
+        ack_code(self.name()).unwrap_or_default()
     }
 
     /// The command's name (its sentence address).
@@ -908,6 +916,25 @@ mod tests {
     }
 
     #[test]
+    fn rmc_is_read_from_any_talker() {
+        for talker in ["GP", "GN", "GL"] {
+            let line = s(&format!(
+                "{talker}RMC,123519,A,4807.038,N,01131.000,E,022.4,084.4,230394,003.1,W"
+            ));
+            let FromFront::Rmc(r) = parse_front(&line).unwrap() else {
+                panic!("{line}")
+            };
+            assert!((r.lat.unwrap() - (48.0 + 7.038 / 60.0)).abs() < 1e-9);
+            assert!((r.lon.unwrap() - (11.0 + 31.0 / 60.0)).abs() < 1e-9);
+        }
+        assert!(parse_front(&s("GNRMC,123519,A,north,N,01131.000,E,,,230394,,")).is_err());
+        assert_eq!(
+            parse_front(&s("PXRMC,1,2")).unwrap(),
+            FromFront::Other("PXRMC".into())
+        );
+    }
+
+    #[test]
     fn malformed_front_sentences_say_which_field() {
         let e = parse_front(&s("OSI,8080808080,S,1,north")).unwrap_err();
         assert!(e.reason.contains("at least 15"), "{e}");
@@ -1047,6 +1074,7 @@ mod tests {
                     _ => assert_eq!(back, c),
                 }
                 assert_eq!(back.ack_code(), c.ack_code());
+                assert_eq!(ack_code(c.name()), Some(c.ack_code()));
             }
         }
         let e = parse_command(&s("OSD,X,C,S,P,,,,"), DepthUnits::Metres).unwrap_err();

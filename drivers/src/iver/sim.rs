@@ -19,7 +19,7 @@
 //! `framing=lines` on the simulator's medium), `silence_every` / `silence_for` (the link goes quiet:
 //! no replies, nothing read), and `gps_rate` (NMEA GPS sentences per second on the second medium, 1).
 
-use super::protocol::{self, Ack, Command, Compass, DepthUnits, Dvl, Opi, Osi};
+use super::protocol::{self, Ack, Command, Compass, DepthUnits, Dvl, MAX_TIMEOUT, Opi, Osi};
 use crate::nmea::sentence::build;
 use crate::sim::kinematics::{Limits, Setpoint, Vehicle};
 use crate::units::{FOOT, KNOT};
@@ -90,7 +90,6 @@ struct Sim {
     started: Instant,
     rng: fastrand::Rng,
     tally: Tally,
-    mode_rh5: bool,
 }
 
 fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -156,7 +155,6 @@ impl Sim {
             started: now,
             rng: fastrand::Rng::new(),
             tally: Tally::new(),
-            mode_rh5: version >= 5,
         })
     }
 }
@@ -169,6 +167,11 @@ impl Sim {
             Drive::Backseat { .. } | Drive::ToPoint { .. } => &self.backseat_mode,
             Drive::Servo { .. } => "A",
         }
+    }
+
+    /// Remote Helm 5 or later: `$OSI` carries the battery and the fields after it.
+    fn rh5(&self) -> bool {
+        self.units == DepthUnits::Metres
     }
 
     fn running(&self) -> bool {
@@ -200,27 +203,26 @@ impl Sim {
             Ok(c) => c,
             Err(e) => {
                 // a known command with bad fields gets its error; anything else is ignored
-                let code = match protocol::address(line) {
-                    "OMS" => Some((9, 20)),
-                    "OMP" => Some((10, 21)),
-                    "OSD" => Some((8, 27)),
-                    "OMSTART" => Some((3, 30)),
-                    "OJW" => Some((7, 27)),
+                let addr = protocol::address(line);
+                let error = match addr {
+                    "OMS" => Some(20),
+                    "OMP" => Some(21),
+                    "OSD" | "OJW" => Some(27),
+                    "OMSTART" => Some(30),
                     _ => None,
                 };
                 self.tally.record("iver2-sim", "bad-command", &e);
-                return code
-                    .map(|(t, n)| {
-                        vec![
-                            Ack {
-                                msg_type: t,
-                                status: 1,
-                                error: n,
-                            }
-                            .sentence(),
-                        ]
-                    })
-                    .unwrap_or_default();
+                return match (protocol::ack_code(addr), error) {
+                    (Some(msg_type), Some(error)) => vec![
+                        Ack {
+                            msg_type,
+                            status: 1,
+                            error,
+                        }
+                        .sentence(),
+                    ],
+                    _ => Vec::new(),
+                };
             }
         };
         let ok = |c: &Command| {
@@ -270,7 +272,7 @@ impl Sim {
                 let valid = (0.0..=360.0).contains(heading)
                     && (-100.0..=100.0).contains(depth)
                     && (0.0..=10.0).contains(speed_knots)
-                    && (0.0..=120.0).contains(timeout);
+                    && (0.0..=MAX_TIMEOUT).contains(timeout);
                 if !valid {
                     return vec![fail(&cmd, 20)];
                 }
@@ -296,7 +298,7 @@ impl Sim {
                 if !self.running() {
                     return vec![fail(&cmd, 45)];
                 }
-                if !(0.0..=120.0).contains(timeout) {
+                if !(0.0..=MAX_TIMEOUT).contains(timeout) {
                     return vec![fail(&cmd, 21)];
                 }
                 let motor = f64::from(bytes[4]) - 128.0;
@@ -359,7 +361,7 @@ impl Sim {
         }
     }
 
-    /// Advances the vehicle; returns false when a timed command lapsed and the vehicle stopped.
+    /// Advances the vehicle; a timed command that lapsed stops it.
     fn step(&mut self, now: Instant) {
         let dt = now.duration_since(self.last_step).as_secs_f64().min(1.0);
         self.last_step = now;
@@ -450,7 +452,7 @@ impl Sim {
     fn osi_line(&mut self) -> String {
         let altitude_ft = (self.water_depth - self.v.depth).max(0.0) / FOOT;
         let mut extra = Vec::new();
-        if self.mode_rh5 {
+        if self.rh5() {
             extra = vec![
                 format!("{:.0}", self.v.percent()),
                 "False".into(),
@@ -474,7 +476,7 @@ impl Sim {
             remaining: Some(0.0),
             heading: Some(self.v.heading),
             depth_feet: Some(self.v.depth / FOOT),
-            battery_percent: self.mode_rh5.then(|| self.v.percent()),
+            battery_percent: self.rh5().then(|| self.v.percent()),
             extra,
         }
         .sentence()

@@ -17,7 +17,7 @@
 //! without one) and `fresh` (how long a pitch and roll stay usable, default 2s). `nmea-sounder` takes
 //! `offset` (metres added to depths measured from the transducer).
 
-use super::sentence::{Parsed, Sentence, parse};
+use super::sentence::{Parsed, Sentence, parse, talker};
 use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
@@ -483,6 +483,12 @@ impl Module for Sensor {
             return Ok(());
         };
         let line = String::from_utf8_lossy(bytes);
+        if let Some(t) = &self.talkers {
+            let talker = talker(&line);
+            if !talker.is_empty() && !t.iter().any(|x| x == talker) {
+                return Ok(());
+            }
+        }
         let parsed = match parse(&line) {
             Ok(p) => p,
             Err(e) => {
@@ -490,12 +496,6 @@ impl Module for Sensor {
                 return Ok(());
             }
         };
-        if let Some(t) = &self.talkers
-            && !parsed.talker.is_empty()
-            && !t.iter().any(|x| x == parsed.talker)
-        {
-            return Ok(());
-        }
         for (i, map) in self.read(&parsed, Instant::now()) {
             let o = &self.outputs[i];
             if let Err(e) = ctx

@@ -136,7 +136,24 @@ pub fn fields(line: &str) -> Vec<&str> {
     }
 }
 
-fn num(s: &str) -> Option<f64> {
+/// The talker and formatter of a standard address: five capital letters on a `$` sentence, not
+/// proprietary (`$P…`).
+fn standard<'a>(line: &str, addr: &'a str) -> Option<(&'a str, &'a str)> {
+    let standard = line.starts_with('$')
+        && addr.len() == 5
+        && addr.bytes().all(|b| b.is_ascii_uppercase())
+        && !addr.starts_with('P');
+    standard.then(|| addr.split_at(2))
+}
+
+/// The talker of a sentence (`GP`, `HC`, …) as [`parse`] reads it: empty for proprietary,
+/// encapsulated (`!…`) and non-standard addresses.
+pub(crate) fn talker(line: &str) -> &str {
+    standard(line, address(line)).map_or("", |(talker, _)| talker)
+}
+
+/// A number field: `None` when it is empty or not a finite number.
+pub(crate) fn num(s: &str) -> Option<f64> {
     let s = s.trim();
     if s.is_empty() {
         return None;
@@ -144,14 +161,18 @@ fn num(s: &str) -> Option<f64> {
     s.parse::<f64>().ok().filter(|v| v.is_finite())
 }
 
-/// A field that must be a number when present.
-fn opt_num(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>, NmeaError> {
+/// Field `i` read as a number when present: `None` when it is missing or empty, and its trimmed
+/// text as the error when it is not a number.
+pub(crate) fn num_field<'a>(f: &[&'a str], i: usize) -> Result<Option<f64>, &'a str> {
     match f.get(i).map(|s| s.trim()) {
         None | Some("") => Ok(None),
-        Some(s) => num(s)
-            .map(Some)
-            .ok_or_else(|| err(line, format!("{what} `{s}` is not a number"))),
+        Some(s) => num(s).map(Some).ok_or(s),
     }
+}
+
+/// A field that must be a number when present.
+fn opt_num(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>, NmeaError> {
+    num_field(f, i).map_err(|s| err(line, format!("{what} `{s}` is not a number")))
 }
 
 /// An east/west signed value (`value,E` positive, `value,W` negative).
@@ -170,16 +191,13 @@ pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
         return Err(err(line, "not an NMEA sentence"));
     }
     let addr = address(line);
-    let standard =
-        addr.len() == 5 && addr.bytes().all(|b| b.is_ascii_uppercase()) && !addr.starts_with('P');
-    if !standard || line.starts_with('!') {
+    let Some((talker, formatter)) = standard(line, addr) else {
         return Ok(Parsed {
             talker: "",
             formatter: addr,
             sentence: Sentence::Other(addr),
         });
-    }
-    let (talker, formatter) = addr.split_at(2);
+    };
     // (a standard address has five letters: the formatter is three bytes, matched as a word)
     let code: [u8; 3] = formatter.as_bytes().try_into().unwrap_or_default();
     // our own parsers read the fields; the crate's read the whole line
@@ -598,6 +616,25 @@ mod tests {
         assert!(e.reason.contains("multiple of 4"), "{e}");
         assert!(parse(line(b'$', "GPGGA,garbage")).is_err());
         assert!(parse("GPGGA,1*00").is_err());
+    }
+
+    #[test]
+    fn the_talker_is_read_as_parse_reads_it() {
+        for (body, start) in [
+            (
+                "GNRMC,123519,A,4807.038,N,01131.000,E,010.0,090.0,230394,,",
+                b'$',
+            ),
+            ("HCHDG,98.3,,,,", b'$'),
+            ("AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0", b'!'),
+            ("PGRME,15.0,M,45.0,M,25.0,M", b'$'),
+            ("OSI,8080808080,S,1", b'$'),
+        ] {
+            let l = line(start, body);
+            assert_eq!(talker(l), parse(l).unwrap().talker, "{l}");
+        }
+        assert_eq!(talker(line(b'$', "GNRMC,1")), "GN");
+        assert_eq!(talker("GPGGA,1*00"), "");
     }
 
     #[test]

@@ -13,6 +13,7 @@
 
 use super::kinematics::{Limits, Setpoint, Vehicle};
 use async_trait::async_trait;
+use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Message, Topic, Value};
 use seabus_modules::Catalogue;
@@ -54,7 +55,7 @@ struct Sim {
     course: Option<(Setpoint, Instant)>,
     last_step: Option<Instant>,
     topics: Topics,
-    commands: u64,
+    tally: Tally,
 }
 
 fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
@@ -109,7 +110,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             course: None,
             last_step: None,
             topics,
-            commands: 0,
+            tally: Tally::new(),
         }),
     })
 }
@@ -232,7 +233,11 @@ impl Module for Sim {
         };
         if *msg.topic == *self.topics.course {
             if let Err(e) = ctx.catalogue().validate("course-command", map) {
-                tracing::warn!(module = ctx.name(), origin = %msg.provenance.origin, "course command refused: {e}");
+                self.tally.record(
+                    ctx.name(),
+                    "refused",
+                    format_args!("course command from {} refused: {e}", msg.provenance.origin),
+                );
                 return Ok(());
             }
             let sp = Setpoint {
@@ -247,7 +252,6 @@ impl Module for Sim {
                     seabus_medium::parse::secs(t.min(3600.0)).unwrap_or(self.default_timeout)
                 });
             self.course = Some((sp, Instant::now() + timeout));
-            self.commands += 1;
         } else if *msg.topic == *self.topics.mission && map.get_str("action") == Some("stop") {
             self.course = None;
         }

@@ -25,15 +25,16 @@ pub enum Framing {
     Slip,
 }
 
-impl Framing {
-    /// Reads a framing name: `nmea`, `lines`, `cobs`, `slip`.
-    pub fn parse(s: &str) -> Option<Framing> {
-        Some(match s {
+/// Reads a framing name: `nmea`, `lines`, `cobs`, `slip`.
+impl std::str::FromStr for Framing {
+    type Err = ();
+    fn from_str(s: &str) -> Result<Framing, ()> {
+        Ok(match s {
             "nmea" => Framing::Nmea,
             "lines" | "line" => Framing::Lines,
             "cobs" => Framing::Cobs,
             "slip" => Framing::Slip,
-            _ => return None,
+            _ => return Err(()),
         })
     }
 }
@@ -49,14 +50,15 @@ pub enum ChecksumPolicy {
     Ignore,
 }
 
-impl ChecksumPolicy {
-    /// Reads a policy name: `require`, `allow-missing`, `ignore`.
-    pub fn parse(s: &str) -> Option<ChecksumPolicy> {
-        Some(match s {
+/// Reads a policy name: `require`, `allow-missing`, `ignore`.
+impl std::str::FromStr for ChecksumPolicy {
+    type Err = ();
+    fn from_str(s: &str) -> Result<ChecksumPolicy, ()> {
+        Ok(match s {
             "require" => ChecksumPolicy::Require,
             "allow-missing" => ChecksumPolicy::AllowMissing,
             "ignore" => ChecksumPolicy::Ignore,
-            _ => return None,
+            _ => return Err(()),
         })
     }
 }
@@ -518,7 +520,8 @@ pub fn encode(framing: Framing, frame: &[u8]) -> Result<Vec<u8>, &'static str> {
             if frame.last() == Some(&b'\r') {
                 return Err("a line cannot end in a carriage return");
             }
-            let mut s = frame.to_vec();
+            let mut s = Vec::with_capacity(frame.len() + 1);
+            s.extend_from_slice(frame);
             s.push(b'\n');
             Ok(s)
         }

@@ -90,22 +90,12 @@ impl SerialConfig {
                 url.scheme
             )));
         }
-        let framing = match url.take("framing") {
-            None => Framing::Nmea,
-            Some(f) => Framing::parse(&f).ok_or_else(|| {
-                url.error(format!(
-                    "option `framing={f}`: expected nmea, lines, cobs or slip"
-                ))
-            })?,
-        };
-        let checksum = match url.take("checksum") {
-            None => ChecksumPolicy::Require,
-            Some(c) => ChecksumPolicy::parse(&c).ok_or_else(|| {
-                url.error(format!(
-                    "option `checksum={c}`: expected require, allow-missing or ignore"
-                ))
-            })?,
-        };
+        let framing = url
+            .take_parsed("framing", "nmea, lines, cobs or slip")?
+            .unwrap_or(Framing::Nmea);
+        let checksum = url
+            .take_parsed("checksum", "require, allow-missing or ignore")?
+            .unwrap_or(ChecksumPolicy::Require);
         let baud: u32 = url
             .take_parsed("baud", "a line speed such as 19200")?
             .unwrap_or(9600);
@@ -210,6 +200,8 @@ impl SerialConfig {
 /// handful of sentence types; making their topic again for every sentence would be waste).
 pub struct FrameTopics {
     cfg: SerialConfig,
+    /// the one topic of every frame, when the framing is not NMEA
+    fixed: Option<Topic>,
     /// addresses of up to eight letters, packed into a word, and their topics
     known: Vec<(u64, Topic)>,
 }
@@ -219,6 +211,9 @@ impl FrameTopics {
     pub fn new(cfg: &SerialConfig) -> FrameTopics {
         FrameTopics {
             cfg: cfg.clone(),
+            fixed: (cfg.framing != Framing::Nmea)
+                .then(|| cfg.topic_of(&[]))
+                .flatten(),
             known: Vec::new(),
         }
     }
@@ -226,7 +221,7 @@ impl FrameTopics {
     /// The topic of a received frame ([`SerialConfig::topic_of`]).
     pub fn topic_of(&mut self, frame: &[u8]) -> Option<Topic> {
         if self.cfg.framing != Framing::Nmea {
-            return self.cfg.topic_of(frame);
+            return self.fixed.clone();
         }
         // (letters are never zero bytes, so packing keeps addresses apart)
         let address = framing::nmea_address(frame);
@@ -261,7 +256,7 @@ struct Shared {
 /// The transport of both serial schemes.
 pub struct SerialTransport {
     shared: Arc<Shared>,
-    writer: mpsc::Sender<Vec<u8>>,
+    writer: mpsc::Sender<Bytes>,
     /// for `pty://`: the link to remove when the medium closes
     link: std::sync::Mutex<Option<PathBuf>>,
 }
@@ -295,7 +290,7 @@ impl Transport for SerialTransport {
                 });
             }
             self.writer
-                .send(frame.to_vec())
+                .send(frame)
                 .await
                 .map_err(|_| SendError::Closed(self.shared.name.to_string()))
         })
@@ -350,7 +345,7 @@ fn open_device(cfg: &SerialConfig) -> Result<SerialStream, String> {
 async fn keep_open(
     cfg: SerialConfig,
     shared: Arc<Shared>,
-    mut rx: mpsc::Receiver<Vec<u8>>,
+    mut rx: mpsc::Receiver<Bytes>,
     ingress: Ingress,
 ) {
     let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
@@ -381,7 +376,7 @@ async fn pump<P: AsyncRead + AsyncWrite>(
     port: P,
     cfg: &SerialConfig,
     framer: &mut Framer,
-    rx: &mut mpsc::Receiver<Vec<u8>>,
+    rx: &mut mpsc::Receiver<Bytes>,
     ingress: &Ingress,
 ) -> String {
     let (mut reader, mut writer) = tokio::io::split(port);

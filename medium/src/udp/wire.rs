@@ -101,16 +101,13 @@ pub fn encode(msg: &Message, sender: u64) -> Result<Bytes, &'static str> {
     if medium.is_empty() || medium.len() > 255 {
         return Err("origin medium name must be 1 to 255 bytes");
     }
-    let payload_hint = match &msg.payload {
+    let payload_len = match &msg.payload {
         Payload::Bytes(b) => b.len(),
         Payload::Xml(x) => x.len(),
-        Payload::Map(m) if m.depth() > binary::MAX_DEPTH => {
-            return Err("datamap lists nest deeper than receivers read");
-        }
-        Payload::Map(m) => binary::encoded_len_hint(m),
+        Payload::Map(m) => binary::encoded_len(m),
     };
     let mut buf =
-        BytesMut::with_capacity(FIXED + node.len() + medium.len() + topic.len() + payload_hint);
+        BytesMut::with_capacity(FIXED + node.len() + medium.len() + topic.len() + payload_len);
     buf.put_slice(&MAGIC);
     buf.put_u8(VERSION);
     let kind = match msg.kind {
@@ -132,7 +129,8 @@ pub fn encode(msg: &Message, sender: u64) -> Result<Bytes, &'static str> {
     match &msg.payload {
         Payload::Bytes(b) => buf.put_slice(b),
         Payload::Xml(x) => buf.put_slice(x.as_bytes()),
-        Payload::Map(m) => binary::encode_into(m, &mut buf),
+        Payload::Map(m) => binary::encode_into(m, &mut buf)
+            .map_err(|_| "datamap lists nest deeper than receivers read")?,
     }
     Ok(buf.freeze())
 }
@@ -327,7 +325,7 @@ mod tests {
     #[test]
     fn lists_too_deep_for_receivers_are_refused_at_send() {
         let mut v = Value::Int(1);
-        for _ in 0..=binary::MAX_DEPTH {
+        for _ in 0..=crate::datamap::MAX_DEPTH {
             v = Value::List(vec![v]);
         }
         let m = msg(Payload::from(DataMap::new().with("deep", v)));
