@@ -360,10 +360,16 @@ impl Iver {
         self.reason = reason;
     }
 
-    async fn publish(&self, ctx: &Context, dataset: &str, topic: &str, map: DataMap) {
+    async fn publish(&self, ctx: &Context, dataset: &str, topic: &Topic, map: DataMap) {
         if let Err(e) = ctx.dataset_on(1, Kind::Data, dataset, topic, map).await {
             self.tally.record(ctx.name(), "invalid-data", &e);
         }
+    }
+
+    /// Depth from the surface, given in feet ($OSI, or $C when the compass is requested).
+    async fn publish_depth(&self, ctx: &Context, feet: f64) {
+        let m = DataMap::new().with("depth", feet * FOOT);
+        self.publish(ctx, "depth", &self.t.depth, m).await;
     }
 
     async fn status(
@@ -485,13 +491,7 @@ impl Iver {
                 if !self.s.request.compass
                     && let Some(ft) = o.depth_feet
                 {
-                    self.publish(
-                        ctx,
-                        "depth",
-                        &self.t.depth,
-                        DataMap::new().with("depth", ft * FOOT),
-                    )
-                    .await;
+                    self.publish_depth(ctx, ft).await;
                 }
                 if !self.s.request.power
                     && let Some(pc) = o.battery_percent
@@ -521,13 +521,7 @@ impl Iver {
                 }
                 self.publish(ctx, "attitude", &self.t.attitude, m).await;
                 if let Some(ft) = c.depth_feet {
-                    self.publish(
-                        ctx,
-                        "depth",
-                        &self.t.depth,
-                        DataMap::new().with("depth", ft * FOOT),
-                    )
-                    .await;
+                    self.publish_depth(ctx, ft).await;
                 }
             }
             FromFront::Opi(p) => {
