@@ -24,6 +24,7 @@ pub mod datamap;
 pub mod dedup;
 pub mod fault;
 pub mod json;
+pub mod lcm;
 pub mod medium;
 pub mod message;
 pub mod parse;
