@@ -498,6 +498,11 @@ const SCHEMES: &[Scheme] = &[
         open: |o| Ok(Some(crate::udp::open(o)? as Arc<dyn Transport>)),
     },
     Scheme {
+        name: "udpm",
+        check: |url| crate::lcm::udpm::LcmConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::lcm::udpm::open(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
         name: "serial",
         check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::serial::open_serial(o)? as Arc<dyn Transport>)),

@@ -8,6 +8,10 @@
 
 use std::fmt;
 
+pub mod reassembly;
+pub mod udpm;
+pub mod wire;
+
 /// Longest channel name LCM carries, in bytes.
 pub const MAX_CHANNEL_LEN: usize = 63;
 

@@ -201,12 +201,20 @@ impl UdpConfig {
 
 /// The first IPv4 address of a network interface.
 pub fn interface_address(name: &str) -> Option<Ipv4Addr> {
+    interface_addresses()
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, a)| a)
+}
+
+/// Every IPv4 address of this host's network interfaces, with the interface's name.
+pub fn interface_addresses() -> Vec<(String, Ipv4Addr)> {
     let mut addrs: *mut libc::ifaddrs = std::ptr::null_mut();
     // SAFETY: getifaddrs fills `addrs` with a list we free below with freeifaddrs
     if unsafe { libc::getifaddrs(&mut addrs) } != 0 {
-        return None;
+        return Vec::new();
     }
-    let mut found = None;
+    let mut found = Vec::new();
     let mut cur = addrs;
     while !cur.is_null() {
         // SAFETY: `cur` is a node of the list getifaddrs returned, alive until freeifaddrs
@@ -216,11 +224,13 @@ pub fn interface_address(name: &str) -> Option<Ipv4Addr> {
             let ifname = unsafe { std::ffi::CStr::from_ptr(ifa.ifa_name) };
             // SAFETY: ifa_addr is non-null and points to a sockaddr of the family it states
             let family = unsafe { (*ifa.ifa_addr).sa_family };
-            if ifname.to_bytes() == name.as_bytes() && i32::from(family) == libc::AF_INET {
+            if i32::from(family) == libc::AF_INET {
                 // SAFETY: the family is AF_INET, so the address is a sockaddr_in
                 let sin = unsafe { &*(ifa.ifa_addr as *const libc::sockaddr_in) };
-                found = Some(Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)));
-                break;
+                found.push((
+                    ifname.to_string_lossy().into_owned(),
+                    Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)),
+                ));
             }
         }
         cur = ifa.ifa_next;
@@ -230,6 +240,28 @@ pub fn interface_address(name: &str) -> Option<Ipv4Addr> {
     found
 }
 
+/// Sets a socket's receive buffer to `bytes`, beyond the system's limit when the process may
+/// (`SO_RCVBUFFORCE`, for root); returns the size the kernel granted.
+pub fn set_recv_buffer(s: &Socket, bytes: usize) -> usize {
+    let _ = s.set_recv_buffer_size(bytes);
+    if s.recv_buffer_size().unwrap_or(0) < bytes {
+        let size = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
+        // SAFETY: setsockopt reads an int from a valid pointer of the stated length; a refusal
+        // (not root) leaves the buffer as it was
+        unsafe {
+            libc::setsockopt(
+                std::os::fd::AsRawFd::as_raw_fd(s),
+                libc::SOL_SOCKET,
+                libc::SO_RCVBUFFORCE,
+                (&size as *const libc::c_int).cast(),
+                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+            );
+        }
+    }
+    // Linux reports double what was asked for (its bookkeeping overhead)
+    s.recv_buffer_size().unwrap_or(0) / 2
+}
+
 fn socket(cfg: &UdpConfig) -> std::io::Result<(std::net::UdpSocket, usize)> {
     let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))?;
     let shared = !matches!(cfg.mode, Mode::Unicast(_));
@@ -237,8 +269,7 @@ fn socket(cfg: &UdpConfig) -> std::io::Result<(std::net::UdpSocket, usize)> {
         // several listeners on one host share a multicast or broadcast port
         s.set_reuse_address(true)?;
     }
-    let _ = s.set_recv_buffer_size(cfg.recv_buf);
-    let got = s.recv_buffer_size().unwrap_or(0);
+    let got = set_recv_buffer(&s, cfg.recv_buf);
     match &cfg.mode {
         Mode::Multicast { iface, ttl, .. } => {
             s.set_multicast_ttl_v4(*ttl)?;

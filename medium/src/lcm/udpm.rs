@@ -1,0 +1,595 @@
+//! The LCM medium: LCM's UDP multicast protocol, spoken natively, for liblcm peers in any language.
+//!
+//! ```text
+//! udpm://239.255.76.67:7667?ttl=0                 LCM's default group and port
+//! udpm://                                         $LCM_DEFAULT_URL, or the default above
+//! udpm://239.255.76.67:7667?ttl=1&iface=eth0      a chosen network interface
+//! udpm://239.255.76.67:7667?channels=POSE|CAM_.*  only these channels are received
+//! ```
+//! Options: `ttl` (default 0: nothing leaves this host), `recv_buf_size` (socket receive buffer in
+//! bytes, default 8 MiB, granted beyond the system limit when running as root), `iface` (interface
+//! name or IPv4 address to join and send on; by default the route's interface, and loopback too,
+//! or loopback alone on a host without a multicast route), `channels` (regular expression the whole
+//! channel must match to be received), `frag_timeout` (how long a partial message waits for its next
+//! fragment, default 2s), `frag_mem` (bytes partial messages may hold, default 300 MiB).
+//!
+//! The channel is the topic; the payload is the LCM message's bytes. Messages this medium sent are
+//! not received back. liblcm's self-test packets are ignored. Packets that do not read, channels
+//! that are not topics, and partial messages given up (timeout, memory cap, overlap) are counted in
+//! the medium's rejected counters by reason.
+
+use super::ChannelRegex;
+use super::reassembly::{self, Dropped, Reassembler, Step};
+use super::wire::{self, Packet};
+use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::{Kind, Message, Origin, Provenance, Stamp};
+use crate::payload::{Format, Payload};
+use crate::topic::Topic;
+use crate::url::{MediumUrl, UrlError};
+use bytes::{Bytes, BytesMut};
+use socket2::{Domain, Protocol, SockRef, Socket, Type};
+use std::collections::HashMap;
+use std::io::IoSlice;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr, SocketAddrV4};
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::io::Interest;
+use tokio::net::UdpSocket;
+
+/// LCM's default URL.
+pub const DEFAULT_URL: &str = "udpm://239.255.76.67:7667?ttl=0";
+/// The environment variable naming the URL `udpm://` stands for.
+pub const ENV_URL: &str = "LCM_DEFAULT_URL";
+/// Default socket receive buffer.
+pub const DEFAULT_RECV_BUF: usize = 8 << 20;
+
+const OPTIONS: [&str; 6] = [
+    "ttl",
+    "recv_buf_size",
+    "iface",
+    "channels",
+    "frag_timeout",
+    "frag_mem",
+];
+
+/// An LCM medium's settings, read from its URL.
+#[derive(Debug, Clone)]
+pub struct LcmConfig {
+    /// The multicast group.
+    pub group: Ipv4Addr,
+    /// The port.
+    pub port: u16,
+    /// Multicast hop limit.
+    pub ttl: u32,
+    /// The interface chosen by `iface`, if any.
+    pub iface: Option<Ipv4Addr>,
+    /// Requested socket receive buffer.
+    pub recv_buf: usize,
+    /// Only channels matching this are received.
+    pub channels: Option<ChannelRegex>,
+    /// How long a partial message waits for its next fragment.
+    pub frag_timeout: Duration,
+    /// Bytes partial messages may hold.
+    pub frag_mem: usize,
+}
+
+impl LcmConfig {
+    /// Reads the settings from a `udpm://` URL, taking its options. A URL without a host stands
+    /// for `$LCM_DEFAULT_URL` (or LCM's default), whose options the URL's own override.
+    pub fn from_url(url: &mut MediumUrl) -> Result<LcmConfig, UrlError> {
+        if url.host.is_empty() && url.port.is_none() {
+            let text = std::env::var(ENV_URL).unwrap_or_else(|_| DEFAULT_URL.to_string());
+            let mut default = MediumUrl::parse(&text)
+                .map_err(|e| url.error(format!("${ENV_URL}: {}", e.reason)))?;
+            if default.scheme != "udpm" || default.host.is_empty() {
+                return Err(url.error(format!(
+                    "${ENV_URL}=`{text}`: seabus speaks LCM's udpm://GROUP:PORT provider"
+                )));
+            }
+            let mut cfg = Self::read(&mut default)?;
+            Self::options(url, &mut cfg)?;
+            return Ok(cfg);
+        }
+        Self::read(url)
+    }
+
+    fn read(url: &mut MediumUrl) -> Result<LcmConfig, UrlError> {
+        let group: Ipv4Addr = url
+            .host
+            .parse()
+            .map_err(|_| url.error(format!("`{}` is not an IPv4 address", url.host)))?;
+        if !group.is_multicast() {
+            return Err(url.error(format!(
+                "`{group}` is not a multicast group (224.0.0.0–239.255.255.255)"
+            )));
+        }
+        let mut cfg = LcmConfig {
+            group,
+            port: url.port.unwrap_or(7667),
+            ttl: 0,
+            iface: None,
+            recv_buf: DEFAULT_RECV_BUF,
+            channels: None,
+            frag_timeout: reassembly::DEFAULT_TIMEOUT,
+            frag_mem: reassembly::DEFAULT_MEMORY,
+        };
+        Self::options(url, &mut cfg)?;
+        Ok(cfg)
+    }
+
+    fn options(url: &mut MediumUrl, cfg: &mut LcmConfig) -> Result<(), UrlError> {
+        if let Some(ttl) = url.take_parsed::<u32>("ttl", "a hop count 0–255")? {
+            if ttl > 255 {
+                return Err(url.error("option `ttl`: expected a hop count 0–255"));
+            }
+            cfg.ttl = ttl;
+        }
+        if let Some(n) = url.take_parsed("recv_buf_size", "a size in bytes")? {
+            cfg.recv_buf = n;
+        }
+        if let Some(name) = url.take("iface") {
+            cfg.iface = Some(
+                name.parse::<Ipv4Addr>()
+                    .ok()
+                    .or_else(|| crate::udp::interface_address(&name))
+                    .ok_or_else(|| {
+                        url.error(format!(
+                            "option `iface={name}`: no such interface or IPv4 address"
+                        ))
+                    })?,
+            );
+        }
+        if let Some(re) = url.take("channels") {
+            cfg.channels = Some(
+                ChannelRegex::new(&re)
+                    .map_err(|e| url.error(format!("option `channels={re}`: {e}")))?,
+            );
+        }
+        if let Some(t) = url.take("frag_timeout") {
+            cfg.frag_timeout = crate::parse::parse_duration(&t)
+                .filter(|d| !d.is_zero())
+                .ok_or_else(|| {
+                    url.error(format!(
+                        "option `frag_timeout={t}`: expected a duration such as 2s or 500ms"
+                    ))
+                })?;
+        }
+        if let Some(n) = url.take_parsed("frag_mem", "a size in bytes")? {
+            cfg.frag_mem = n;
+        }
+        url.finish(&OPTIONS)
+    }
+}
+
+/// The interfaces a socket joins the group on: the chosen one, or the route's and loopback.
+fn join(s: &Socket, cfg: &LcmConfig) -> std::io::Result<Option<Ipv4Addr>> {
+    if let Some(iface) = cfg.iface {
+        s.join_multicast_v4(&cfg.group, &iface)?;
+        return Ok(Some(iface));
+    }
+    // the interface the route to the group leads to, as liblcm joins, so its packets are heard
+    let routed = s.join_multicast_v4(&cfg.group, &Ipv4Addr::UNSPECIFIED);
+    // and loopback, where a host without a network (or a peer choosing it) sends
+    let looped = s.join_multicast_v4(&cfg.group, &Ipv4Addr::LOCALHOST);
+    match (routed, looped) {
+        (Ok(()), _) => Ok(None),
+        // no multicast route: loopback alone, and the sender must use it too
+        (Err(_), Ok(())) => Ok(Some(Ipv4Addr::LOCALHOST)),
+        (Err(e), Err(_)) => Err(e),
+    }
+}
+
+/// The LCM transport.
+pub struct LcmTransport {
+    name: Arc<str>,
+    /// `None` once the medium is closed
+    socket: Mutex<Option<Arc<UdpSocket>>>,
+    dest: SocketAddr,
+    seq: AtomicU32,
+}
+
+/// Opens an LCM medium.
+pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
+    let cfg = LcmConfig::from_url(&mut o.url)?;
+    let bind = SocketAddrV4::new(cfg.group, cfg.port);
+    let rx = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))
+        .map_err(o.io_error("creating the receive socket"))?;
+    rx.set_reuse_address(true)
+        .map_err(o.io_error("sharing the port"))?;
+    let granted = crate::udp::set_recv_buffer(&rx, cfg.recv_buf);
+    // asked for in the URL, or too small for a burst of large messages: worth a warning
+    if granted < cfg.recv_buf && (o.url.as_str().contains("recv_buf_size") || granted < 1 << 20) {
+        tracing::warn!(
+            medium = %o.name,
+            "receive buffer is {granted} bytes, asked for {} (raise net.core.rmem_max, or run as \
+             root): large messages may be lost",
+            cfg.recv_buf
+        );
+    }
+    // bound to the group, not to every address: other groups on the same port stay out
+    rx.bind(&SocketAddr::V4(bind).into())
+        .map_err(o.io_error(format!("binding {bind}")))?;
+    let send_iface = join(&rx, &cfg).map_err(o.io_error(format!("joining {}", cfg.group)))?;
+    rx.set_nonblocking(true)
+        .map_err(o.io_error("configuring the receive socket"))?;
+
+    let tx = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))
+        .map_err(o.io_error("creating the send socket"))?;
+    let setup = |tx: &Socket| -> std::io::Result<()> {
+        tx.set_multicast_ttl_v4(cfg.ttl)?;
+        tx.set_multicast_loop_v4(true)?;
+        if let Some(iface) = send_iface {
+            tx.set_multicast_if_v4(&iface)?;
+        }
+        tx.bind(&SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0)).into())?;
+        tx.set_nonblocking(true)
+    };
+    setup(&tx).map_err(o.io_error("configuring the send socket"))?;
+    let own_port = tx
+        .local_addr()
+        .ok()
+        .and_then(|a| a.as_socket())
+        .map_or(0, |a| a.port());
+
+    let rx = Arc::new(
+        UdpSocket::from_std(rx.into()).map_err(o.io_error("registering the receive socket"))?,
+    );
+    let tx = Arc::new(
+        UdpSocket::from_std(tx.into()).map_err(o.io_error("registering the send socket"))?,
+    );
+    let receiver = Receiver {
+        ingress: o.ingress.clone(),
+        medium: o.name.clone(),
+        own_port,
+        local: crate::udp::interface_addresses()
+            .into_iter()
+            .map(|(_, a)| IpAddr::V4(a))
+            .collect(),
+        channels: cfg.channels.clone(),
+        reassembler: Reassembler::new(cfg.frag_timeout, cfg.frag_mem),
+        senders: HashMap::new(),
+        topics: HashMap::new(),
+        dropped: Vec::new(),
+    };
+    let task = tokio::spawn(receiver.run(rx));
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    tracing::debug!(medium = %o.name, group = %cfg.group, port = cfg.port, ttl = cfg.ttl, "lcm medium open");
+    Ok(Arc::new(LcmTransport {
+        name: o.name.clone(),
+        socket: Mutex::new(Some(tx)),
+        dest: SocketAddr::V4(bind),
+        seq: AtomicU32::new(0),
+    }))
+}
+
+impl LcmTransport {
+    fn io_error(&self, e: std::io::Error) -> SendError {
+        SendError::Io {
+            medium: self.name.to_string(),
+            reason: format!("sending to {}: {e}", self.dest),
+        }
+    }
+
+    async fn send(&self, socket: &UdpSocket, parts: &[IoSlice<'_>]) -> Result<(), SendError> {
+        let dest = self.dest.into();
+        socket
+            .async_io(Interest::WRITABLE, || {
+                SockRef::from(socket).send_to_vectored(parts, &dest)
+            })
+            .await
+            .map(|_| ())
+            .map_err(|e| self.io_error(e))
+    }
+}
+
+impl Transport for LcmTransport {
+    /// The frame is the channel, a NUL, and the message bytes; headers are added as it is sent.
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let channel = msg.topic.as_str();
+        let payload = msg
+            .payload
+            .convert(Format::Bytes)
+            .map_err(|source| SendError::Convert {
+                medium: self.name.to_string(),
+                source,
+            })?;
+        let bytes = payload.as_bytes().map_or(&[][..], |b| &b[..]);
+        wire::check(channel, bytes.len()).map_err(|e| match e {
+            wire::EncodeError::TooLarge(size) => SendError::TooLarge {
+                medium: self.name.to_string(),
+                size,
+                max: wire::MAX_MESSAGE,
+            },
+            e => SendError::Io {
+                medium: self.name.to_string(),
+                reason: e.to_string(),
+            },
+        })?;
+        let mut frame = BytesMut::with_capacity(channel.len() + 1 + bytes.len());
+        frame.extend_from_slice(channel.as_bytes());
+        frame.extend_from_slice(&[0]);
+        frame.extend_from_slice(bytes);
+        Ok(frame.freeze())
+    }
+
+    fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            let socket = self
+                .socket
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .clone()
+                .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
+            // the frame is `channel NUL payload`, as encode made it
+            let nul = memchr::memchr(0, &frame).unwrap_or(frame.len());
+            let channel = std::str::from_utf8(&frame[..nul]).unwrap_or_default();
+            let head = &frame[..(nul + 1).min(frame.len())];
+            let payload = &frame[head.len()..];
+            let seq = self.seq.fetch_add(1, Ordering::Relaxed);
+            if wire::is_short(channel, payload.len()) {
+                let header = wire::short_header(seq);
+                return self
+                    .send(&socket, &[IoSlice::new(&header), IoSlice::new(&frame)])
+                    .await;
+            }
+            for (header, range) in wire::fragments(seq, channel, payload.len()) {
+                let data = &payload[range.clone()];
+                if range.start == 0 {
+                    self.send(
+                        &socket,
+                        &[
+                            IoSlice::new(&header),
+                            IoSlice::new(head),
+                            IoSlice::new(data),
+                        ],
+                    )
+                    .await?;
+                } else {
+                    self.send(&socket, &[IoSlice::new(&header), IoSlice::new(data)])
+                        .await?;
+                }
+            }
+            Ok(())
+        })
+    }
+
+    fn close(&self) {
+        self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
+    }
+}
+
+/// What is known of one sender: its origin and the last sequence number, widened to 64 bits.
+struct Sender {
+    origin: Arc<Origin>,
+    boot: u32,
+    last: Option<u64>,
+}
+
+/// Senders and channels remembered before the tables are cleared (a flood of new ones).
+const MAX_REMEMBERED: usize = 4096;
+/// A sequence number this far behind the last one means the sender started again.
+const RESTART_GAP: i64 = 4096;
+
+struct Receiver {
+    ingress: Ingress,
+    medium: Arc<str>,
+    own_port: u16,
+    local: Vec<IpAddr>,
+    channels: Option<ChannelRegex>,
+    reassembler: Reassembler,
+    senders: HashMap<SocketAddr, Sender>,
+    topics: HashMap<Box<str>, Option<Topic>>,
+    dropped: Vec<Dropped>,
+}
+
+const RECV_CHUNK: usize = 1 << 20;
+
+impl Receiver {
+    async fn run(mut self, socket: Arc<UdpSocket>) {
+        let mut buf = BytesMut::with_capacity(RECV_CHUNK);
+        loop {
+            if buf.capacity() - buf.len() < wire::FRAGMENT_BODY + wire::FRAGMENT_HEADER + 64 {
+                buf = BytesMut::with_capacity(RECV_CHUNK);
+            }
+            let received = match self.reassembler.next_deadline() {
+                None => socket.recv_buf_from(&mut buf).await,
+                Some(deadline) => {
+                    let deadline = tokio::time::Instant::from_std(deadline);
+                    match tokio::time::timeout_at(deadline, socket.recv_buf_from(&mut buf)).await {
+                        Ok(r) => r,
+                        Err(_) => {
+                            self.reassembler
+                                .expire(std::time::Instant::now(), &mut self.dropped);
+                            self.report_dropped();
+                            continue;
+                        }
+                    }
+                }
+            };
+            let from = match received {
+                Ok((_, from)) => from,
+                Err(e) => {
+                    tracing::debug!(medium = %self.medium, "lcm receive: {e}");
+                    tokio::time::sleep(Duration::from_millis(10)).await;
+                    continue;
+                }
+            };
+            let datagram = buf.split().freeze();
+            if !self.datagram(from, datagram) {
+                return;
+            }
+        }
+    }
+
+    /// Handles one datagram; false once the medium is gone.
+    fn datagram(&mut self, from: SocketAddr, d: Bytes) -> bool {
+        if from.port() == self.own_port && self.local.contains(&from.ip()) {
+            return true;
+        }
+        let (seq, channel, payload) = match wire::parse(&d) {
+            Err(e) => {
+                self.ingress
+                    .reject(e.reason, format_args!("packet from {from}: {e}"));
+                return true;
+            }
+            Ok(Packet::Short {
+                seq,
+                channel,
+                payload,
+            }) => {
+                let start = payload.as_ptr() as usize - d.as_ptr() as usize;
+                (seq, channel.to_string(), d.slice(start..))
+            }
+            Ok(Packet::Fragment(f)) => {
+                let now = std::time::Instant::now();
+                let step = self.reassembler.fragment(now, from, &f, &mut self.dropped);
+                self.reassembler.expire(now, &mut self.dropped);
+                self.report_dropped();
+                match step {
+                    Step::Complete {
+                        seq,
+                        channel,
+                        payload,
+                    } => (seq, channel, payload),
+                    Step::Pending => return true,
+                    Step::Duplicate => {
+                        self.ingress.reject(
+                            "lcm-duplicate-fragment",
+                            format_args!(
+                                "fragment {} of message {} from {from} seen twice",
+                                f.no, f.seq
+                            ),
+                        );
+                        return true;
+                    }
+                }
+            }
+        };
+        self.deliver(from, seq, &channel, payload)
+    }
+
+    fn deliver(&mut self, from: SocketAddr, seq: u32, channel: &str, payload: Bytes) -> bool {
+        if channel == wire::SELF_TEST_CHANNEL
+            || self.channels.as_ref().is_some_and(|c| !c.matches(channel))
+        {
+            return true;
+        }
+        let topic = match self.topics.get(channel) {
+            Some(t) => t.clone(),
+            None => {
+                if self.topics.len() >= MAX_REMEMBERED {
+                    self.topics.clear();
+                }
+                let t = Topic::new(channel).ok();
+                self.topics.insert(channel.into(), t.clone());
+                t
+            }
+        };
+        let Some(topic) = topic else {
+            self.ingress.reject(
+                "lcm-channel-not-topic",
+                format_args!("channel {channel:?} from {from} is not a seabus topic"),
+            );
+            return true;
+        };
+        let (origin, seq) = self.sequence(from, seq);
+        self.ingress.deliver(Message {
+            topic,
+            kind: Kind::Data,
+            provenance: Provenance {
+                origin,
+                seq,
+                hops: 0,
+            },
+            stamp: Stamp::now(),
+            payload: Payload::from(payload),
+        })
+    }
+
+    /// The sender's origin and the sequence number widened to 64 bits; a sender whose numbers
+    /// jump far back started again, and becomes a new origin.
+    fn sequence(&mut self, from: SocketAddr, seq: u32) -> (Arc<Origin>, u64) {
+        if !self.senders.contains_key(&from) && self.senders.len() >= MAX_REMEMBERED {
+            self.senders.clear();
+        }
+        let medium = &self.medium;
+        let s = self.senders.entry(from).or_insert_with(|| Sender {
+            origin: Origin::new(&format!("lcm@{from}"), medium, 1),
+            boot: 1,
+            last: None,
+        });
+        let wide = match s.last {
+            None => u64::from(seq),
+            Some(last) => {
+                let step = i64::from(seq.wrapping_sub(last as u32) as i32);
+                if step < -RESTART_GAP {
+                    s.boot = s.boot.wrapping_add(1);
+                    s.origin = Origin::new(&format!("lcm@{from}"), medium, s.boot);
+                    s.last = None;
+                    u64::from(seq)
+                } else {
+                    last.saturating_add_signed(step)
+                }
+            }
+        };
+        if s.last.is_none_or(|l| wide > l) {
+            s.last = Some(wide);
+        }
+        (s.origin.clone(), wide)
+    }
+
+    fn report_dropped(&mut self) {
+        for d in self.dropped.drain(..) {
+            self.ingress.reject(d.reason, &d);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(url: &str) -> Result<LcmConfig, UrlError> {
+        LcmConfig::from_url(&mut MediumUrl::parse(url).unwrap())
+    }
+
+    #[test]
+    fn urls_read_as_liblcm_reads_them() {
+        let c = cfg("udpm://239.255.76.67:7667?ttl=0&recv_buf_size=2097152").unwrap();
+        assert_eq!(
+            (c.group, c.port, c.ttl, c.recv_buf),
+            (Ipv4Addr::new(239, 255, 76, 67), 7667, 0, 2_097_152)
+        );
+        let c = cfg("udpm://239.1.2.3:9000?iface=lo&channels=POSE.*&frag_timeout=500ms").unwrap();
+        assert_eq!(c.iface, Some(Ipv4Addr::LOCALHOST));
+        assert!(c.channels.unwrap().matches("POSE_EST"));
+        assert_eq!(c.frag_timeout, Duration::from_millis(500));
+        for (url, says) in [
+            ("udpm://10.0.0.1:7667", "not a multicast group"),
+            ("udpm://239.1.1.1:7667?ttl=256", "hop count"),
+            ("udpm://239.1.1.1:7667?channels=(", "option `channels=(`"),
+            ("udpm://239.1.1.1:7667?iface=nosuch0", "no such interface"),
+            (
+                "udpm://239.1.1.1:7667?provider=x",
+                "unknown option `provider`",
+            ),
+        ] {
+            let e = cfg(url).unwrap_err();
+            assert!(e.reason.contains(says), "{url}: {}", e.reason);
+        }
+    }
+
+    #[test]
+    fn an_empty_url_is_the_default() {
+        // the environment variable is read when set; without it the default applies
+        if std::env::var(ENV_URL).is_err() {
+            let c = cfg("udpm://?ttl=1").unwrap();
+            assert_eq!(
+                (c.group, c.port, c.ttl),
+                (Ipv4Addr::new(239, 255, 76, 67), 7667, 1)
+            );
+        }
+    }
+}
