@@ -148,6 +148,9 @@ pub trait Transport: Send + Sync + 'static {
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>>;
     /// Releases the wire (sockets, devices) when the medium is closed.
     fn close(&self) {}
+    /// A local interface subscribed to something: a transport that listens to its wire only
+    /// while someone here wants what it hears (joining a multicast group) starts listening now.
+    fn subscribed(&self) {}
 }
 
 /// A subscription: a topic pattern, for one kind of message or (`None`) both.
@@ -905,6 +908,9 @@ impl Interface {
         if !self.patterns.contains(&sub) {
             self.patterns.push(sub);
             self.publish_patterns();
+            if let Some(t) = self.medium.inner.transport.get() {
+                t.subscribed();
+            }
         }
         Ok(())
     }

@@ -5,14 +5,18 @@
 //!
 //! The peers are installed by `./scripts/test` (Debian `liblcm-dev`, PyPI `lcm`).
 
+#[path = "support/liblcm.rs"]
+mod support;
+
 use seabus_medium::lcm::wire::{self, Packet};
 use seabus_medium::{Medium, Message, Node};
 use socket2::{Domain, Protocol, Socket, Type};
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufRead, BufReader, Write};
 use std::net::{Ipv4Addr, SocketAddr, UdpSocket};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
+use support::Raw;
 use tokio::time::timeout;
 
 const WAIT: Duration = Duration::from_secs(10);
@@ -29,8 +33,7 @@ fn url() -> &'static str {
             fastrand::u8(1..250),
             fastrand::u16(20_000..60_000)
         );
-        // SAFETY: set once, before liblcm is created, to the same value for every test
-        unsafe { std::env::set_var("LCM_DEFAULT_URL", &url) };
+        support::use_url(&url);
         url
     })
 }
@@ -48,32 +51,9 @@ fn pattern(n: usize, salt: u8) -> Vec<u8> {
         .collect()
 }
 
-/// An LCM message as bytes, passed through the `lcm` crate untouched.
-struct Raw(Vec<u8>);
-
-impl lcm::Message for Raw {
-    fn encode_with_hash(&self) -> std::io::Result<Vec<u8>> {
-        Ok(self.0.clone())
-    }
-    fn decode_with_hash(buffer: &mut dyn Read) -> std::io::Result<Self> {
-        let mut v = Vec::new();
-        buffer.read_to_end(&mut v)?;
-        Ok(Raw(v))
-    }
-    fn encode(&self, buffer: &mut dyn Write) -> std::io::Result<()> {
-        buffer.write_all(&self.0)
-    }
-    fn decode(buffer: &mut dyn Read) -> std::io::Result<Self> {
-        Self::decode_with_hash(buffer)
-    }
-    fn size(&self) -> usize {
-        self.0.len()
-    }
-}
-
 fn liblcm() -> lcm::Lcm {
     url();
-    lcm::Lcm::new().expect("liblcm starts (install liblcm-dev, or run ./scripts/test)")
+    support::create()
 }
 
 fn open(name: &str, options: &str) -> Medium {

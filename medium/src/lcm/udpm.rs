@@ -162,27 +162,58 @@ impl LcmConfig {
     }
 }
 
-/// The interfaces a socket joins the group on: the chosen one, or the route's and loopback.
-fn join(s: &Socket, cfg: &LcmConfig) -> std::io::Result<Option<Ipv4Addr>> {
-    if let Some(iface) = cfg.iface {
-        s.join_multicast_v4(&cfg.group, &iface)?;
-        return Ok(Some(iface));
+/// The interface multicast goes out on: the chosen one, the route's (`None`), or loopback on a
+/// host without a route to the group.
+fn send_interface(cfg: &LcmConfig) -> Option<Ipv4Addr> {
+    if cfg.iface.is_some() {
+        return cfg.iface;
     }
-    // the interface the route to the group leads to, as liblcm joins, so its packets are heard
+    let routed = std::net::UdpSocket::bind((Ipv4Addr::UNSPECIFIED, 0))
+        .and_then(|s| s.connect((cfg.group, cfg.port)));
+    routed.is_err().then_some(Ipv4Addr::LOCALHOST)
+}
+
+/// Joins the group on the chosen interface, or on the route's interface (where liblcm joins, so
+/// its packets are heard) and on loopback (where a host without a network, or a peer choosing
+/// it, sends).
+fn join(s: SockRef<'_>, cfg: &LcmConfig) -> std::io::Result<()> {
+    if let Some(iface) = cfg.iface {
+        return s.join_multicast_v4(&cfg.group, &iface);
+    }
     let routed = s.join_multicast_v4(&cfg.group, &Ipv4Addr::UNSPECIFIED);
-    // and loopback, where a host without a network (or a peer choosing it) sends
     let looped = s.join_multicast_v4(&cfg.group, &Ipv4Addr::LOCALHOST);
-    match (routed, looped) {
-        (Ok(()), _) => Ok(None),
-        // no multicast route: loopback alone, and the sender must use it too
-        (Err(_), Ok(())) => Ok(Some(Ipv4Addr::LOCALHOST)),
-        (Err(e), Err(_)) => Err(e),
+    routed.or(looped)
+}
+
+/// Stops a socket from hearing groups it did not join itself (Linux delivers every group any
+/// socket of the host joined to a socket bound to the port, unless told not to).
+fn own_groups_only(s: &Socket) -> std::io::Result<()> {
+    let off: libc::c_int = 0;
+    // SAFETY: setsockopt reads an int from a valid pointer of the stated length
+    let r = unsafe {
+        libc::setsockopt(
+            std::os::fd::AsRawFd::as_raw_fd(s),
+            libc::IPPROTO_IP,
+            libc::IP_MULTICAST_ALL,
+            (&off as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
     }
 }
 
 /// The LCM transport.
 pub struct LcmTransport {
     name: Arc<str>,
+    /// The receive socket, which joins the group when something here first subscribes
+    listen: Arc<UdpSocket>,
+    joined: std::sync::Once,
+    cfg: LcmConfig,
+    ingress: Ingress,
     /// `None` once the medium is closed
     socket: Mutex<Option<Arc<UdpSocket>>>,
     dest: SocketAddr,
@@ -207,10 +238,12 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
             cfg.recv_buf
         );
     }
-    // bound to the group, not to every address: other groups on the same port stay out
+    // bound to the group, not to every address, and deaf to groups it did not join: other
+    // groups on the same port stay out
     rx.bind(&SocketAddr::V4(bind).into())
         .map_err(o.io_error(format!("binding {bind}")))?;
-    let send_iface = join(&rx, &cfg).map_err(o.io_error(format!("joining {}", cfg.group)))?;
+    own_groups_only(&rx).map_err(o.io_error("configuring the receive socket"))?;
+    let send_iface = send_interface(&cfg);
     rx.set_nonblocking(true)
         .map_err(o.io_error("configuring the receive socket"))?;
 
@@ -223,6 +256,8 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
             tx.set_multicast_if_v4(&iface)?;
         }
         tx.bind(&SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0)).into())?;
+        // connected: the route is looked up once, not for every packet
+        tx.connect(&SocketAddr::V4(bind).into())?;
         tx.set_nonblocking(true)
     };
     setup(&tx).map_err(o.io_error("configuring the send socket"))?;
@@ -252,12 +287,16 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
         topics: HashMap::new(),
         dropped: Vec::new(),
     };
-    let task = tokio::spawn(receiver.run(rx));
+    let task = tokio::spawn(receiver.run(rx.clone()));
     o.ingress.own_task(task.abort_handle());
     o.ingress.set_link(LinkState::Up);
     tracing::debug!(medium = %o.name, group = %cfg.group, port = cfg.port, ttl = cfg.ttl, "lcm medium open");
     Ok(Arc::new(LcmTransport {
         name: o.name.clone(),
+        listen: rx,
+        joined: std::sync::Once::new(),
+        cfg,
+        ingress: o.ingress.clone(),
         socket: Mutex::new(Some(tx)),
         dest: SocketAddr::V4(bind),
         seq: AtomicU32::new(0),
@@ -273,10 +312,9 @@ impl LcmTransport {
     }
 
     async fn send(&self, socket: &UdpSocket, parts: &[IoSlice<'_>]) -> Result<(), SendError> {
-        let dest = self.dest.into();
         socket
             .async_io(Interest::WRITABLE, || {
-                SockRef::from(socket).send_to_vectored(parts, &dest)
+                SockRef::from(socket).send_vectored(parts)
             })
             .await
             .map(|_| ())
@@ -357,6 +395,19 @@ impl Transport for LcmTransport {
 
     fn close(&self) {
         self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
+    }
+
+    /// Joins the group: a medium only publishing never makes the kernel copy the group's
+    /// traffic to it.
+    fn subscribed(&self) {
+        self.joined.call_once(|| {
+            if let Err(e) = join(SockRef::from(&*self.listen), &self.cfg) {
+                self.ingress.set_link(LinkState::Down(format!(
+                    "cannot join {} to receive: {e}",
+                    self.cfg.group
+                )));
+            }
+        });
     }
 }
 
