@@ -344,7 +344,8 @@ impl TypeSet {
     /// other than through a variable-length array, then fingerprints every struct.
     pub fn resolve(self) -> Result<ResolvedTypes, FileError> {
         let TypeSet { mut structs, index } = self;
-        // struct members by target, in member order: every value once, and by value only
+        // the struct types of each struct's members, in member order: all of them, and those
+        // held by value (a single value or in fixed-size arrays only)
         let mut edges: Vec<Vec<usize>> = Vec::with_capacity(structs.len());
         let mut by_value: Vec<Vec<usize>> = Vec::with_capacity(structs.len());
         for s in &structs {
@@ -468,15 +469,7 @@ fn unknown_type(structs: &[StructType], s: &StructType, m: &Member, name: &str) 
 /// Refuses a struct that contains itself through members that are single values or fixed-size
 /// arrays (`by_value`): it would have no finite encoding.
 fn check_finite(structs: &[StructType], by_value: &[Vec<usize>]) -> Result<(), FileError> {
-    let mut component = vec![0; structs.len()];
-    let components = components(by_value);
-    for (c, members) in components.iter().enumerate() {
-        for &t in members {
-            if let Some(slot) = component.get_mut(t) {
-                *slot = c;
-            }
-        }
-    }
+    let component = components(by_value).of;
     for (i, s) in structs.iter().enumerate() {
         let mut targets = by_value.get(i).into_iter().flatten();
         let Some(&target) = targets.find(|&&t| component.get(t) == component.get(i)) else {
@@ -499,16 +492,25 @@ fn check_finite(structs: &[StructType], by_value: &[Vec<usize>]) -> Result<(), F
     Ok(())
 }
 
-/// The strongly connected components of the graph whose node `v` has edges `edges[v]`, every
-/// component after the components it reaches.
-fn components(edges: &[Vec<usize>]) -> Vec<Vec<usize>> {
+/// The strongly connected components of a graph.
+struct Components {
+    /// The components, each after the components it reaches.
+    list: Vec<Vec<usize>>,
+    /// The component of each node: its index in `list`.
+    of: Vec<usize>,
+}
+
+/// The strongly connected components of the graph whose node `v` has edges `edges[v]` (Tarjan's
+/// algorithm, with its own stack so that long chains of types take no deep recursion).
+fn components(edges: &[Vec<usize>]) -> Components {
     const UNSEEN: usize = usize::MAX;
     let n = edges.len();
     let mut order = vec![UNSEEN; n];
     let mut low = vec![0; n];
     let mut on_stack = vec![false; n];
     let mut stack: Vec<usize> = Vec::new();
-    let mut out = Vec::new();
+    let mut list = Vec::new();
+    let mut of = vec![0; n];
     let mut next = 0;
     // the depth-first path: a node and how many of its edges it has followed
     let mut path: Vec<(usize, usize)> = Vec::new();
@@ -523,7 +525,7 @@ fn components(edges: &[Vec<usize>]) -> Vec<Vec<usize>> {
         on_stack[root] = true;
         path.push((root, 0));
         while let Some(&(v, followed)) = path.last() {
-            if let Some(&w) = edges[v].get(followed).filter(|&&w| w < n) {
+            if let Some(&w) = edges[v].get(followed) {
                 if let Some(top) = path.last_mut() {
                     top.1 += 1;
                 }
@@ -539,13 +541,6 @@ fn components(edges: &[Vec<usize>]) -> Vec<Vec<usize>> {
                 }
                 continue;
             }
-            if edges[v].get(followed).is_some() {
-                // an edge to no node: skip it
-                if let Some(top) = path.last_mut() {
-                    top.1 += 1;
-                }
-                continue;
-            }
             path.pop();
             if let Some(&(u, _)) = path.last() {
                 low[u] = low[u].min(low[v]);
@@ -554,16 +549,17 @@ fn components(edges: &[Vec<usize>]) -> Vec<Vec<usize>> {
                 let mut component = Vec::new();
                 while let Some(w) = stack.pop() {
                     on_stack[w] = false;
+                    of[w] = list.len();
                     component.push(w);
                     if w == v {
                         break;
                     }
                 }
-                out.push(component);
+                list.push(component);
             }
         }
     }
-    out
+    Components { list, of }
 }
 
 /// The fingerprint of every struct, as lcm-gen's generated code computes it:
@@ -580,15 +576,10 @@ fn fingerprints(structs: &[StructType], edges: &[Vec<usize>]) -> Result<Vec<u64>
         sum: u64,
     }
     let n = structs.len();
-    let components = components(edges);
-    let mut component = vec![0; n];
-    for (c, members) in components.iter().enumerate() {
-        for &t in members {
-            if let Some(slot) = component.get_mut(t) {
-                *slot = c;
-            }
-        }
-    }
+    let Components {
+        list: components,
+        of: component,
+    } = components(edges);
     let base = |t: usize| structs.get(t).map_or(0, |s| s.base_hash);
     let mut fp = vec![0u64; n];
     let mut in_path = vec![false; n];
