@@ -2,6 +2,7 @@
 //! function panics when an input breaks a property and tells whether the input was a valid one.
 
 use bytes::Bytes;
+use seabus_medium::lcm::types::{MemberType, Size, TypeSet};
 use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
 use seabus_medium::udp::wire;
 use seabus_medium::url::MediumUrl;
@@ -235,5 +236,71 @@ pub fn udp_datagram(data: &[u8]) -> bool {
     assert_eq!(back.provenance, msg.provenance, "provenance");
     assert_eq!(back.stamp, msg.stamp, "stamp");
     assert_eq!(back.payload, msg.payload, "payload");
+    true
+}
+
+/// The `.lcm` type reader: any text is read or refused without a panic, every refusal names a
+/// place inside the text, and a set that reads and resolves gives every struct a fingerprint by
+/// which it is found again, member types that are all in the set, and variable array sizes that
+/// name earlier single integer members. True when `data` is UTF-8 text that reads and resolves.
+pub fn lcm_types(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let lines = text.split('\n').count();
+    let check_place = |e: &seabus_medium::xml::FileError| {
+        assert_eq!(&*e.pos.file, "fuzz.lcm", "{e}");
+        assert!(
+            e.pos.line >= 1 && e.pos.line as usize <= lines && e.pos.col >= 1,
+            "{e} is outside a text of {lines} lines"
+        );
+    };
+    let mut set = TypeSet::new();
+    if let Err(e) = set.add_text("fuzz.lcm", text) {
+        check_place(&e);
+        assert!(set.is_empty(), "a refused file added structs");
+        return false;
+    }
+    let read = set.len();
+    let types = match set.resolve() {
+        Ok(types) => types,
+        Err(e) => {
+            check_place(&e);
+            return false;
+        }
+    };
+    assert_eq!(types.len(), read, "resolving changed the number of structs");
+    for s in types.iter() {
+        let found = types.get(s.full_name()).map(|t| t.full_name());
+        assert_eq!(found, Some(s.full_name()), "lookup by name");
+        assert!(
+            types
+                .with_fingerprint(s.fingerprint())
+                .any(|t| t.full_name() == s.full_name()),
+            "`{}` is not found by its fingerprint",
+            s.full_name()
+        );
+        for (i, m) in s.members().iter().enumerate() {
+            if let MemberType::Struct(name) = &m.ty {
+                assert!(types.get(name).is_some(), "member type `{name}` is unknown");
+            }
+            for d in &m.dims {
+                match d.size {
+                    Size::Fixed(n) => assert!(n >= 1, "array size {n}"),
+                    Size::Member(j) => {
+                        assert!(j < i, "`{}` is sized by a later member", m.name);
+                        let sizer = &s.members()[j];
+                        assert!(
+                            sizer.dims.is_empty()
+                                && matches!(sizer.ty, MemberType::Primitive(p) if p.is_integer()),
+                            "`{}` is sized by `{}`, not a single integer",
+                            m.name,
+                            sizer.name
+                        );
+                    }
+                }
+            }
+        }
+    }
     true
 }

@@ -24,4 +24,7 @@ seed_tests! {
     /// NMEA sentences handed out carry a correct checksum and every frame survives an encode/frame
     /// round trip.
     nmea_framer_seeds => nmea_framer,
+    /// `.lcm` files are read or refused without a panic, refusals name a place in the file, and
+    /// resolved structs are found by name and fingerprint, with consistent member types and sizes.
+    lcm_types_seeds => lcm_types,
 }

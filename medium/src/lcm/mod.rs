@@ -6,6 +6,8 @@
 //! Subscriptions, as in LCM, are regular expressions matched against the whole channel name
 //! ([`ChannelRegex`]).
 
+pub mod types;
+
 use std::fmt;
 
 pub mod reassembly;
