@@ -2,7 +2,9 @@
 //! function panics when an input breaks a property and tells whether the input was a valid one.
 
 use bytes::Bytes;
+use seabus_medium::lcm::reassembly::{Reassembler, Step};
 use seabus_medium::lcm::types::{MemberType, Size, TypeSet};
+use seabus_medium::lcm::wire::{self as lcm_wire, Packet};
 use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
 use seabus_medium::udp::wire;
 use seabus_medium::url::MediumUrl;
@@ -303,4 +305,56 @@ pub fn lcm_types(data: &[u8]) -> bool {
         }
     }
     true
+}
+
+/// LCM packets and their reassembly: the input is a series of datagrams, each a u16 big-endian
+/// length and its bytes, from one of two senders (the length's top bit). Every datagram parses or is
+/// refused without a panic; a short message re-encodes to the same datagram; fragments go into a
+/// reassembler with a small memory cap, which never holds more than the cap, and a message it
+/// completes has the size its fragments announced. True when some datagram parsed.
+pub fn lcm_packets(data: &[u8]) -> bool {
+    use std::net::SocketAddr;
+    use std::time::{Duration, Instant};
+    const CAP: usize = 1 << 20;
+    let mut r = Reassembler::new(Duration::from_secs(1), CAP);
+    let start = Instant::now();
+    let mut dropped = Vec::new();
+    let mut parsed = false;
+    let mut rest = data;
+    let mut n = 0u64;
+    while rest.len() >= 2 {
+        let head = u16::from_be_bytes([rest[0], rest[1]]);
+        let len = usize::from(head & 0x7fff).min(rest.len() - 2);
+        let datagram = &rest[2..2 + len];
+        rest = &rest[2 + len..];
+        let sender = SocketAddr::from(([127, 0, 0, 1], if head & 0x8000 != 0 { 2 } else { 1 }));
+        n += 1;
+        let now = start + Duration::from_millis(n * 100);
+        match lcm_wire::parse(datagram) {
+            Err(e) => assert!(e.offset <= datagram.len(), "error offset past the datagram"),
+            Ok(Packet::Short {
+                seq,
+                channel,
+                payload,
+            }) => {
+                parsed = true;
+                let again =
+                    lcm_wire::encode(seq, channel, payload).expect("a parsed message encodes");
+                if lcm_wire::is_short(channel, payload.len()) {
+                    assert_eq!(again, vec![datagram.to_vec()], "short message re-encodes");
+                }
+            }
+            Ok(Packet::Fragment(f)) => {
+                parsed = true;
+                if let Step::Complete { payload, .. } = r.fragment(now, sender, &f, &mut dropped) {
+                    assert_eq!(payload.len(), f.msg_size as usize, "completed size");
+                }
+                assert!(r.held_bytes() <= CAP, "reassembly over its memory cap");
+                r.expire(now, &mut dropped);
+            }
+        }
+    }
+    r.expire(start + Duration::from_secs(3600), &mut dropped);
+    assert_eq!((r.pending(), r.held_bytes()), (0, 0), "everything expires");
+    parsed
 }

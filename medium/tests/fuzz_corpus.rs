@@ -27,4 +27,7 @@ seed_tests! {
     /// `.lcm` files are read or refused without a panic, refusals name a place in the file, and
     /// resolved structs are found by name and fingerprint, with consistent member types and sizes.
     lcm_types_seeds => lcm_types,
+    /// LCM datagrams parse or are refused without a panic, short messages re-encode to the same
+    /// bytes, and reassembly stays within its memory cap and completes messages at their size.
+    lcm_packets_seeds => lcm_packets,
 }

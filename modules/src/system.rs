@@ -58,6 +58,8 @@ pub struct RouteSpec {
     pub kind: Option<Kind>,
     /// Field renames (datamap payloads), `from → to`.
     pub fields: Vec<(String, String)>,
+    /// The LCM type (`package.name_t`) messages have on the route's LCM side.
+    pub lcm: Option<String>,
     /// Where it is written.
     pub pos: Pos,
 }
@@ -88,6 +90,8 @@ pub struct BridgeSpec {
     pub type_name: String,
     /// The two media it joins.
     pub media: [String; 2],
+    /// The URLs of those media, as the system file gives them (empty for one not defined).
+    pub urls: [String; 2],
     /// Hop limit: a message that crossed this many bridges is not forwarded.
     pub hops: u8,
     /// Routes in order; a message takes the first that matches.
@@ -223,6 +227,13 @@ impl SystemSpec {
         if spec.media.is_empty() {
             return Err(root.error("a system needs at least one <medium>"));
         }
+        for b in &mut spec.bridges {
+            for (url, name) in b.urls.iter_mut().zip(&b.media) {
+                if let Some(m) = spec.media.iter().find(|m| &m.name == name) {
+                    url.clone_from(&m.url);
+                }
+            }
+        }
         Ok(spec)
     }
 
@@ -337,7 +348,9 @@ fn bridge_spec(
     let mut routes = Vec::new();
     for r in el.children_named("route") {
         r.only_children(&["field"])?;
-        r.only_attrs(&["from", "to", "topics", "rename", "rate", "format", "kind"])?;
+        r.only_attrs(&[
+            "from", "to", "topics", "rename", "rate", "format", "kind", "lcm",
+        ])?;
         let medium_attr = |key: &str| -> Result<Option<String>, FileError> {
             match r.attr(key) {
                 None => Ok(None),
@@ -410,6 +423,7 @@ fn bridge_spec(
             format,
             kind,
             fields,
+            lcm: r.get("lcm").map(|t| t.trim().to_string()),
             pos: r.pos.clone(),
         });
     }
@@ -427,6 +441,7 @@ fn bridge_spec(
         name,
         type_name: el.get("type").unwrap_or("route").trim().to_string(),
         media,
+        urls: Default::default(),
         hops,
         routes,
         params: Params::new(params, el.pos.clone()),
