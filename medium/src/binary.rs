@@ -92,11 +92,18 @@ pub fn encode(map: &DataMap) -> Result<Vec<u8>, TooDeep> {
 pub fn encode_into(map: &DataMap, out: &mut impl BufMut) -> Result<(), TooDeep> {
     out.put_slice(&MAGIC);
     out.put_u8(VERSION);
-    put_entries(out, map, 0)
+    put_varint(out, map.len() as u64);
+    for (k, v) in map.iter() {
+        put_varint(out, k.len() as u64);
+        out.put_slice(k.as_bytes());
+        put_value(out, v, 0)?;
+    }
+    Ok(())
 }
 
-/// Writes the entry count and entries of `map`, whose values are found inside `depth` lists and
-/// maps.
+/// Writes the entry count and entries of a nested map whose values are found inside `depth` lists
+/// and maps (the top-level loop of [`encode_into`] stays apart, so that it inlines).
+#[inline(never)]
 fn put_entries(out: &mut impl BufMut, map: &DataMap, depth: usize) -> Result<(), TooDeep> {
     put_varint(out, map.len() as u64);
     for (k, v) in map.iter() {
@@ -109,10 +116,18 @@ fn put_entries(out: &mut impl BufMut, map: &DataMap, depth: usize) -> Result<(),
 
 /// The length of the binary form of `map` (counted as if lists and maps could nest without limit).
 pub fn encoded_len(map: &DataMap) -> usize {
-    MAGIC.len() + 1 + entries_len(map)
+    MAGIC.len()
+        + 1
+        + varint_len(map.len() as u64)
+        + map
+            .iter()
+            .map(|(k, v)| varint_len(k.len() as u64) + k.len() + value_len(v))
+            .sum::<usize>()
 }
 
-/// The length of the entry count and entries of `map`.
+/// The length of the entry count and entries of a nested map (apart from [`encoded_len`], so that
+/// its loop inlines).
+#[inline(never)]
 fn entries_len(map: &DataMap) -> usize {
     varint_len(map.len() as u64)
         + map
@@ -222,7 +237,13 @@ pub fn decode(bytes: &[u8]) -> Result<DataMap, DecodeError> {
         return Err(r.err(DecodeErrorKind::Version(version)));
     }
     let count = r.varint()?;
-    let map = r.entries(count, 0, usize::MAX)?;
+    // every entry takes at least two bytes: never reserve more than the input could hold
+    let mut map = DataMap::with_capacity((count as usize).min(r.remaining() / 2));
+    for _ in 0..count {
+        let key = r.text()?;
+        let value = r.value(0)?;
+        map.push(key, value);
+    }
     if r.remaining() > 0 {
         return Err(r.err(DecodeErrorKind::Trailing(r.remaining())));
     }
@@ -301,11 +322,13 @@ impl Reader<'_> {
         }
     }
 
-    /// Reads `count` entries whose values are found inside `depth` lists and maps, reserving room
-    /// for at most `cap` of them up front (every entry takes at least two bytes, so never more than
-    /// the input could hold).
-    fn entries(&mut self, count: u64, depth: usize, cap: usize) -> Result<DataMap, DecodeError> {
-        let mut map = DataMap::with_capacity((count as usize).min(self.remaining() / 2).min(cap));
+    /// Reads the count and entries of a nested map whose values are found inside `depth` lists and
+    /// maps (the top-level loop of [`decode`] stays apart, so that it inlines).
+    #[inline(never)]
+    fn entries(&mut self, depth: usize) -> Result<DataMap, DecodeError> {
+        let count = self.varint()?;
+        // every entry takes at least two bytes; reserve modestly, the map grows as it is read
+        let mut map = DataMap::with_capacity((count as usize).min(self.remaining() / 2).min(64));
         for _ in 0..count {
             let key = self.text()?;
             let value = self.value(depth)?;
@@ -350,9 +373,7 @@ impl Reader<'_> {
                     self.pos -= 1;
                     return Err(self.err(DecodeErrorKind::TooDeep));
                 }
-                let count = self.varint()?;
-                // as for lists, a nested map grows as it is read
-                Value::Map(self.entries(count, depth + 1, 64)?)
+                Value::Map(self.entries(depth + 1)?)
             }
             other => {
                 self.pos -= 1;
