@@ -294,10 +294,7 @@ impl DataMap {
         self.entries.iter().find(|(k, _)| k == key).map(|(_, v)| v)
     }
 
-    /// The value at a dotted path of keys (`pose.position.x`), walking nested maps from this one.
-    ///
-    /// Each segment is one key, so a key that itself holds a dot is reached with [`DataMap::get`]
-    /// instead; lists are not walked.
+    /// The value at a dotted path of keys through nested maps (`pose.position.x`; lists not walked).
     pub fn get_path(&self, path: &str) -> Option<&Value> {
         let mut segments = path.split('.');
         let mut value = self.get(segments.next()?)?;
