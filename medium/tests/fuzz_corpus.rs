@@ -24,4 +24,7 @@ seed_tests! {
     /// NMEA sentences handed out carry a correct checksum and every frame survives an encode/frame
     /// round trip.
     nmea_framer_seeds => nmea_framer,
+    /// LCM event logs read up to their end or damage, the same whole and a few bytes at a time, and
+    /// the events read write back to the same bytes and read back the same.
+    lcm_eventlog_seeds => lcm_eventlog,
 }

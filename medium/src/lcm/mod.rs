@@ -6,6 +6,8 @@
 //! Subscriptions, as in LCM, are regular expressions matched against the whole channel name
 //! ([`ChannelRegex`]).
 
+pub mod eventlog;
+
 use std::fmt;
 
 /// Longest channel name LCM carries, in bytes.
