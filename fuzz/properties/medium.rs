@@ -5,6 +5,7 @@ use bytes::Bytes;
 use seabus_medium::lcm::reassembly::{Reassembler, Step};
 use seabus_medium::lcm::types::{MemberType, Size, TypeSet};
 use seabus_medium::lcm::wire::{self as lcm_wire, Packet};
+use seabus_medium::lcm::eventlog;
 use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
 use seabus_medium::udp::wire;
 use seabus_medium::url::MediumUrl;
@@ -359,4 +360,119 @@ pub fn lcm_packets(data: &[u8]) -> bool {
     r.expire(start + Duration::from_secs(3600), &mut dropped);
     assert_eq!((r.pending(), r.held_bytes()), (0, 0), "everything expires");
     parsed
+/// What reading a whole LCM event log gave: its events and the damage that stopped it, if any.
+type LogRead = (Vec<eventlog::OwnedEvent>, Option<eventlog::Damage>);
+
+/// Reads every event of `reader`, at most one per byte of `len` (and one more for the end).
+fn lcm_read_all<R: std::io::Read>(mut reader: eventlog::Reader<R>, len: usize) -> LogRead {
+    let mut events = Vec::new();
+    for _ in 0..=len {
+        match reader.next_event() {
+            Ok(Some(e)) => events.push(e.into_owned()),
+            Ok(None) => return (events, None),
+            Err(d) => {
+                assert_eq!(
+                    reader.next_event().err().as_ref(),
+                    Some(&d),
+                    "the reader repeats its damage"
+                );
+                return (events, Some(d));
+            }
+        }
+    }
+    panic!("more events than bytes in a log of {len} bytes");
+}
+
+/// An input that hands out a few bytes at a time (1 to 13, varying), as a pipe or socket might.
+struct Trickle<'a> {
+    data: &'a [u8],
+    calls: usize,
+}
+
+impl std::io::Read for Trickle<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.calls += 1;
+        let n = (self.calls * 7 % 13 + 1)
+            .min(buf.len())
+            .min(self.data.len());
+        let (head, tail) = self.data.split_at(n);
+        buf[..n].copy_from_slice(head);
+        self.data = tail;
+        Ok(n)
+    }
+}
+
+/// Writes `events` with a fresh writer (numbering them from 0) and returns the log.
+fn lcm_write_all(events: &[eventlog::OwnedEvent]) -> Vec<u8> {
+    let mut w = eventlog::Writer::new(Vec::new());
+    for e in events {
+        w.write(e.timestamp, &e.channel, &e.data)
+            .unwrap_or_else(|err| panic!("an event read from a log does not write: {err}"));
+    }
+    w.finish()
+        .unwrap_or_else(|err| panic!("a log in memory does not flush: {err}"))
+}
+
+/// The LCM event-log reader and writer: any input reads without a panic, event by event, up to its
+/// end or to the damage that stops it, the same whether its size is known or it arrives a few bytes
+/// at a time; the damage is reported where the last whole event ends; the events read, written
+/// again, are the log's bytes up to the damage (exactly, when the log numbers its events from 0),
+/// and read back identically, stopping at the same damage when the damaged rest follows them. True
+/// when `data` is a whole log without damage.
+pub fn lcm_eventlog(data: &[u8]) -> bool {
+    let (events, damage) = lcm_read_all(
+        eventlog::Reader::with_size(data, data.len() as u64),
+        data.len(),
+    );
+    let trickled = lcm_read_all(
+        eventlog::Reader::new(Trickle { data, calls: 0 }),
+        data.len(),
+    );
+    assert_eq!(trickled.0, events, "events read a few bytes at a time");
+    assert_eq!(
+        trickled.1.as_ref().map(|d| d.offset),
+        damage.as_ref().map(|d| d.offset),
+        "damage found a few bytes at a time: {:?}, size known: {damage:?}",
+        trickled.1
+    );
+    let end: u64 = events.iter().map(|e| e.as_event().encoded_len()).sum();
+    match &damage {
+        Some(d) => assert_eq!(d.offset, end, "damage reported where the last event ends"),
+        None => assert_eq!(end, data.len() as u64, "a clean end after every byte"),
+    }
+    let end = end as usize;
+    let written = lcm_write_all(&events);
+    let numbered = events.iter().zip(0i64..).all(|(e, n)| e.number == n);
+    if numbered {
+        assert_eq!(
+            written,
+            data[..end],
+            "the events written again are the log's bytes"
+        );
+    }
+    assert_eq!(
+        written.len(),
+        end,
+        "the events written again take as many bytes"
+    );
+    let mut again = written;
+    again.extend_from_slice(&data[end..]);
+    let (back, back_damage) = lcm_read_all(
+        eventlog::Reader::with_size(&again[..], again.len() as u64),
+        again.len(),
+    );
+    assert_eq!(back.len(), events.len(), "events read back");
+    for ((b, e), n) in back.iter().zip(&events).zip(0i64..) {
+        assert_eq!(b.number, n, "event numbers count from 0");
+        assert_eq!(
+            (b.timestamp, &b.channel, &b.data),
+            (e.timestamp, &e.channel, &e.data),
+            "event {n} read back"
+        );
+    }
+    assert_eq!(
+        back_damage, damage,
+        "the same damage after the events written again"
+    );
+    damage.is_none()
 }

@@ -30,4 +30,7 @@ seed_tests! {
     /// LCM datagrams parse or are refused without a panic, short messages re-encode to the same
     /// bytes, and reassembly stays within its memory cap and completes messages at their size.
     lcm_packets_seeds => lcm_packets,
+    /// LCM event logs read up to their end or damage, the same whole and a few bytes at a time, and
+    /// the events read write back to the same bytes and read back the same.
+    lcm_eventlog_seeds => lcm_eventlog,
 }

@@ -5,14 +5,20 @@
 //! payload is the LCM message's bytes (an 8-byte type fingerprint, then the encoded fields).
 //! Subscriptions, as in LCM, are regular expressions matched against the whole channel name
 //! ([`ChannelRegex`]).
+//!
+//! - [`wire`] — the LC02 and LC03 packets, byte for byte as liblcm's; [`reassembly`] puts
+//!   fragmented messages together; [`udpm`] is the medium (`udpm://` URLs) built on both.
+//! - [`types`] — `.lcm` files read at run time, with lcm-gen's fingerprints.
+//! - [`eventlog`] — LCM's event-log files, as lcm-logger writes them (`seabus record` and
+//!   `seabus replay`).
 
-pub mod types;
-
-use std::fmt;
-
+pub mod eventlog;
 pub mod reassembly;
+pub mod types;
 pub mod udpm;
 pub mod wire;
+
+use std::fmt;
 
 /// Longest channel name LCM carries, in bytes.
 pub const MAX_CHANNEL_LEN: usize = 63;

@@ -1,0 +1,570 @@
+//! `seabus record` and `seabus replay`: the traffic of any medium to and from LCM event logs, the
+//! files `lcm-logger` writes and `lcm-logplayer` plays.
+//!
+//! Recording writes one event per message: the channel is the topic, the timestamp is when
+//! `seabus record` received the message (microseconds since the Unix epoch, never going back, as
+//! `lcm-logger` stamps events on arrival), and the data is the payload's bytes: a byte payload as
+//! it is (on an LCM medium, the LCM message), a datamap in seabus's binary form, XML as its text.
+//! Kind (data or command) and provenance are not kept: a log has no room for them.
+//!
+//! Replaying publishes each event as data, the channel as topic and the data as a byte payload,
+//! paced by the log's timestamps.
+
+use seabus_medium::lcm::ChannelRegex;
+use seabus_medium::lcm::eventlog::{Damage, Reader, WriteError, Writer};
+use seabus_medium::{
+    Interface, Kind, Medium, Message, Node, Payload, SendError, Stamp, Topic, binary,
+};
+use std::collections::{HashMap, HashSet};
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+use tokio::time::Instant;
+
+/// How often a recording passes what it buffered on to the file.
+const FLUSH_EVERY: Duration = Duration::from_millis(200);
+
+/// `seabus record` exit code when the log could not be written.
+const WRITE_FAILED: u8 = 1;
+
+/// `seabus replay` exit code when the log is damaged: the events before the damage were replayed.
+const DAMAGED: u8 = 1;
+
+/// Exit code for arguments, a file or a medium that cannot be used.
+const USAGE: u8 = 2;
+
+/// `seabus replay` exit code when the medium refused some events.
+const NOT_SENT: u8 = 3;
+
+/// What `seabus record` was asked to do.
+pub struct RecordArgs {
+    /// The medium's URL.
+    pub url: String,
+    /// The log file to write.
+    pub file: PathBuf,
+    /// Stop after this long.
+    pub duration: Option<Duration>,
+    /// The seabus topic pattern to subscribe to.
+    pub topics: String,
+    /// Only topics this regular expression matches whole.
+    pub channels: Option<String>,
+    /// Replace an existing file.
+    pub force: bool,
+}
+
+fn compile_channels(cmd: &str, regex: Option<&str>) -> Result<Option<ChannelRegex>, ExitCode> {
+    regex
+        .map(|r| {
+            ChannelRegex::new(r).map_err(|e| {
+                eprintln!("seabus {cmd}: --channels {r}: {e}");
+                ExitCode::from(USAGE)
+            })
+        })
+        .transpose()
+}
+
+/// `n` and `word`, in the plural unless `n` is 1 (`1 event`, `3 events`).
+fn count(n: impl Into<u64>, word: &str) -> String {
+    match n.into() {
+        1 => format!("1 {word}"),
+        n => format!("{n} {word}s"),
+    }
+}
+
+/// Microseconds since the Unix epoch, now.
+fn now_micros() -> i64 {
+    Stamp::now().0 / 1000
+}
+
+/// Records the traffic on `args.url` to `args.file` until Ctrl-C, SIGTERM or `args.duration`.
+pub async fn record(args: RecordArgs) -> ExitCode {
+    let usage = |msg: String| {
+        eprintln!("seabus record: {msg}");
+        ExitCode::from(USAGE)
+    };
+    let channels = match compile_channels("record", args.channels.as_deref()) {
+        Ok(c) => c,
+        Err(code) => return code,
+    };
+    let node = Node::new(&format!("record-{}", std::process::id()));
+    let medium = match Medium::open("record", &args.url, &node) {
+        Ok(m) => m,
+        Err(e) => return usage(e.to_string()),
+    };
+    let mut port = match medium
+        .attach_with("record", 1 << 16, 1 << 10)
+        .subscribed(&args.topics)
+    {
+        Ok(p) => p,
+        Err(e) => return usage(format!("--topics: {e}")),
+    };
+    let file = args.file.display();
+    let created = if args.force {
+        Writer::create(&args.file)
+    } else {
+        Writer::create_new(&args.file)
+    };
+    let writer = match created {
+        Ok(w) => w,
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            return usage(format!("{file}: the file exists (--force replaces it)"));
+        }
+        Err(e) => return usage(format!("{file}: cannot create: {e}")),
+    };
+    let deadline = args.duration.map(|d| Instant::now() + d);
+    let mut flush = tokio::time::interval(FLUSH_EVERY);
+    let mut unflushed = false;
+    let mut log = Recording {
+        writer,
+        channels,
+        seen: HashSet::new(),
+        last_stamp: i64::MIN,
+        unwritable: 0,
+    };
+    let mut failure = None;
+    let stop = crate::terminated();
+    tokio::pin!(stop);
+    loop {
+        tokio::select! {
+            _ = &mut stop => break,
+            _ = async {
+                match deadline {
+                    Some(d) => tokio::time::sleep_until(d).await,
+                    None => std::future::pending().await,
+                }
+            } => break,
+            _ = flush.tick(), if unflushed => {
+                if let Err(e) = log.writer.flush() {
+                    failure = Some(e.to_string());
+                    break;
+                }
+                unflushed = false;
+            }
+            m = port.recv() => {
+                let Some(m) = m else { break };
+                if let Err(e) = log.take(&m) {
+                    failure = Some(e.to_string());
+                    break;
+                }
+                unflushed = true;
+            }
+        }
+    }
+    if failure.is_none() {
+        // what arrived before the stop is recorded too
+        let pending = port.stats().pending;
+        for _ in 0..pending {
+            let Ok(m) = port.try_recv() else { break };
+            if let Err(e) = log.take(&m) {
+                failure = Some(e.to_string());
+                break;
+            }
+        }
+    }
+    let flushed = log.writer.flush();
+    if failure.is_none()
+        && let Err(e) = flushed
+    {
+        failure = Some(e.to_string());
+    }
+    eprintln!(
+        "seabus record: {}, {}, {} in {file}",
+        count(log.writer.events(), "event"),
+        count(log.writer.bytes(), "byte"),
+        count(log.seen.len() as u64, "channel")
+    );
+    let st = port.stats();
+    if st.dropped_oldest > 0 || log.unwritable > 0 {
+        eprintln!(
+            "seabus record: {} messages dropped (the file was too slow), {} datamaps with no binary form",
+            st.dropped_oldest, log.unwritable
+        );
+    }
+    match failure {
+        Some(e) => {
+            eprintln!("seabus record: {file}: cannot write: {e}");
+            ExitCode::from(WRITE_FAILED)
+        }
+        None => ExitCode::SUCCESS,
+    }
+}
+
+/// A log being recorded.
+struct Recording {
+    writer: Writer<std::fs::File>,
+    /// `--channels`.
+    channels: Option<ChannelRegex>,
+    /// The topics recorded.
+    seen: HashSet<Topic>,
+    /// The last event's timestamp.
+    last_stamp: i64,
+    /// Datamaps with no binary form, not recorded.
+    unwritable: u64,
+}
+
+impl Recording {
+    /// Writes `m` as an event, unless `--channels` leaves it out.
+    fn take(&mut self, m: &Message) -> Result<(), WriteError> {
+        if let Some(c) = &self.channels
+            && !c.matches(&m.topic)
+        {
+            return Ok(());
+        }
+        let encoded;
+        let data: &[u8] = match &m.payload {
+            Payload::Bytes(b) => b,
+            Payload::Xml(x) => x.as_bytes(),
+            Payload::Map(map) => match binary::encode(map) {
+                Ok(v) => {
+                    encoded = v;
+                    &encoded
+                }
+                Err(e) => {
+                    self.unwritable += 1;
+                    tracing::warn!(topic = %m.topic, "not recorded: {e}");
+                    return Ok(());
+                }
+            },
+        };
+        // arrival time, never going back (a log player waits on the differences)
+        self.last_stamp = now_micros().max(self.last_stamp);
+        self.writer.write(self.last_stamp, &m.topic, data)?;
+        if !self.seen.contains(&m.topic) {
+            self.seen.insert(m.topic.clone());
+        }
+        Ok(())
+    }
+}
+
+/// What `seabus replay` was asked to do.
+pub struct ReplayArgs {
+    /// The log file to read.
+    pub file: PathBuf,
+    /// The medium's URL.
+    pub url: String,
+    /// The speed: `max` or `0` for as fast as possible, else a factor above 0.
+    pub speed: String,
+    /// Seconds of the log to skip from its first event.
+    pub from: f64,
+    /// Only channels this regular expression matches whole.
+    pub channels: Option<String>,
+    /// Start again at the end of the log.
+    pub looping: bool,
+}
+
+/// Reads `--speed`: `None` for as fast as possible (`max` or `0`), else the factor.
+fn parse_speed(text: &str) -> Option<Option<f64>> {
+    match text {
+        "max" => Some(None),
+        _ => match text.parse::<f64>() {
+            Ok(0.0) => Some(None),
+            Ok(x) if x.is_finite() && x > 0.0 && x <= 1e6 => Some(Some(x)),
+            _ => None,
+        },
+    }
+}
+
+/// One channel of the log, as replay sees it.
+struct Channel {
+    /// Whether `--channels` lets it through.
+    allowed: bool,
+    /// The topic, when the channel is a valid seabus topic.
+    topic: Option<Topic>,
+    /// Events sent.
+    sent: u64,
+}
+
+/// Counts shown in the summary.
+#[derive(Default)]
+struct Tally {
+    sent: u64,
+    /// Events on channels that are not seabus topics.
+    invalid: u64,
+    /// Events on channels `--channels` leaves out.
+    filtered: u64,
+    /// Events before `--from`.
+    early: u64,
+    /// Events the medium refused, and the first reason.
+    failed: u64,
+    first_failure: Option<String>,
+    passes: u64,
+}
+
+/// How one pass over the log ended.
+enum PassEnd {
+    /// The end of the log.
+    Done,
+    /// Ctrl-C or SIGTERM.
+    Stopped,
+    /// The log is damaged.
+    Damaged(Damage),
+    /// The log could not be opened.
+    Unreadable(std::io::Error),
+    /// The medium was closed.
+    Closed,
+}
+
+/// Replays a log: options checked, pacing and counts kept across passes.
+struct Replay<'a> {
+    file: &'a Path,
+    port: Interface,
+    speed: Option<f64>,
+    from_micros: i64,
+    filter: Option<ChannelRegex>,
+    channels: HashMap<Box<str>, Channel>,
+    tally: Tally,
+    bar: indicatif::ProgressBar,
+}
+
+impl Replay<'_> {
+    /// The channel's entry, made on first sight.
+    fn channel(&mut self, name: &str) -> &mut Channel {
+        if !self.channels.contains_key(name) {
+            let channel = Channel {
+                allowed: self.filter.as_ref().is_none_or(|f| f.matches(name)),
+                topic: Topic::new(name).ok(),
+                sent: 0,
+            };
+            self.channels.insert(name.into(), channel);
+        }
+        // inserted above when missing
+        self.channels
+            .get_mut(name)
+            .unwrap_or_else(|| unreachable!("channel {name} was just inserted"))
+    }
+
+    /// One pass over the log.
+    async fn pass(&mut self, stop: &mut (impl Future<Output = ()> + Unpin)) -> PassEnd {
+        let mut reader = match Reader::open(self.file) {
+            Ok(r) => r,
+            Err(e) => return PassEnd::Unreadable(e),
+        };
+        self.tally.passes += 1;
+        self.bar.set_length(reader.size().unwrap_or(0));
+        self.bar.set_position(0);
+        let mut first: Option<i64> = None;
+        // the log time and the clock time pacing counts from
+        let mut base: Option<(i64, Instant)> = None;
+        let mut previous = i64::MIN;
+        let mut shown = Instant::now();
+        loop {
+            let (timestamp, topic, payload) = {
+                let event = match reader.next_event() {
+                    Ok(Some(e)) => e,
+                    Ok(None) => return PassEnd::Done,
+                    Err(d) => return PassEnd::Damaged(d),
+                };
+                let start = *first.get_or_insert(event.timestamp);
+                if event.timestamp < start.saturating_add(self.from_micros) {
+                    self.tally.early += 1;
+                    continue;
+                }
+                let channel = self.channel(event.channel);
+                if !channel.allowed {
+                    self.tally.filtered += 1;
+                    continue;
+                }
+                let Some(topic) = channel.topic.clone() else {
+                    self.tally.invalid += 1;
+                    continue;
+                };
+                channel.sent += 1;
+                (
+                    event.timestamp,
+                    topic,
+                    Payload::Bytes(bytes::Bytes::copy_from_slice(event.data)),
+                )
+            };
+            if let Some(speed) = self.speed {
+                // a timestamp going back starts the pacing again from this event
+                let (log0, clock0) = match base {
+                    Some(b) if timestamp >= previous => b,
+                    _ => *base.insert((timestamp, Instant::now())),
+                };
+                previous = timestamp;
+                let wait = (timestamp - log0) as f64 / 1e6 / speed;
+                let at = clock0 + Duration::try_from_secs_f64(wait).unwrap_or(Duration::ZERO);
+                if at > Instant::now() {
+                    tokio::select! {
+                        _ = &mut *stop => return PassEnd::Stopped,
+                        _ = tokio::time::sleep_until(at) => {}
+                    }
+                }
+            } else if futures_ready(stop) {
+                return PassEnd::Stopped;
+            }
+            match self.port.publish(Kind::Data, topic, payload).await {
+                Ok(()) => self.tally.sent += 1,
+                Err(SendError::Closed(_)) => return PassEnd::Closed,
+                Err(e) => {
+                    self.tally.failed += 1;
+                    if self.tally.first_failure.is_none() {
+                        self.tally.first_failure = Some(e.to_string());
+                    }
+                }
+            }
+            self.bar.set_position(reader.offset());
+            if shown.elapsed() >= Duration::from_millis(100) {
+                shown = Instant::now();
+                self.bar.set_message(format!("{} sent", self.tally.sent));
+            }
+        }
+    }
+
+    /// The one-line summary.
+    fn summary(&self, elapsed: Duration) -> String {
+        let t = &self.tally;
+        let sent_on = self.channels.values().filter(|c| c.sent > 0).count();
+        let mut line = format!(
+            "seabus replay: {}: {} sent on {} in {:.1} s",
+            self.file.display(),
+            count(t.sent, "event"),
+            count(sent_on as u64, "channel"),
+            elapsed.as_secs_f64()
+        );
+        if t.passes > 1 {
+            line += &format!(" ({} passes)", t.passes);
+        }
+        if t.invalid > 0 {
+            let mut names: Vec<&str> = self
+                .channels
+                .iter()
+                .filter(|(_, c)| c.allowed && c.topic.is_none())
+                .map(|(name, _)| &**name)
+                .collect();
+            names.sort_unstable();
+            let shown: Vec<String> = names.iter().take(3).map(|n| format!("{n:?}")).collect();
+            let more = if names.len() > 3 { ", …" } else { "" };
+            line += &format!(
+                "; {} skipped on {} ({}{more})",
+                t.invalid,
+                match names.len() {
+                    1 => "1 channel that is not a seabus topic".to_string(),
+                    n => format!("{n} channels that are not seabus topics"),
+                },
+                shown.join(", ")
+            );
+        }
+        if t.filtered > 0 {
+            line += &format!("; {} left out by --channels", t.filtered);
+        }
+        if t.early > 0 {
+            line += &format!("; {} before --from", t.early);
+        }
+        if let Some(e) = &t.first_failure {
+            line += &format!("; {} not sent (the medium refused: {e})", t.failed);
+        }
+        line
+    }
+}
+
+/// True when `stop` has completed (polled once, without waiting).
+fn futures_ready(stop: &mut (impl Future<Output = ()> + Unpin)) -> bool {
+    let mut cx = std::task::Context::from_waker(std::task::Waker::noop());
+    std::pin::Pin::new(stop).poll(&mut cx).is_ready()
+}
+
+/// Replays `args.file` on `args.url`.
+pub async fn replay(args: ReplayArgs) -> ExitCode {
+    let usage = |msg: String| {
+        eprintln!("seabus replay: {msg}");
+        ExitCode::from(USAGE)
+    };
+    let Some(speed) = parse_speed(&args.speed) else {
+        return usage(format!(
+            "--speed {}: expected a factor above 0 and at most 1e6, or max (or 0) for as fast as possible",
+            args.speed
+        ));
+    };
+    let Some(from) = seabus_medium::parse::secs(args.from) else {
+        return usage(format!(
+            "--from {}: expected a number of seconds from 0 to 1e9",
+            args.from
+        ));
+    };
+    let filter = match compile_channels("replay", args.channels.as_deref()) {
+        Ok(c) => c,
+        Err(code) => return code,
+    };
+    // the file must be readable before anything is sent
+    if let Err(e) = std::fs::File::open(&args.file) {
+        return usage(format!("{}: cannot open: {e}", args.file.display()));
+    }
+    let node = Node::new(&format!("replay-{}", std::process::id()));
+    let medium = match Medium::open("replay", &args.url, &node) {
+        Ok(m) => m,
+        Err(e) => return usage(e.to_string()),
+    };
+    let bar = if std::io::stderr().is_terminal() {
+        let bar = indicatif::ProgressBar::new(0);
+        let style = indicatif::ProgressStyle::with_template(
+            "{elapsed:>4} [{bar:30}] {bytes}/{total_bytes} {msg}",
+        )
+        .map(|s| s.progress_chars("=> "));
+        if let Ok(style) = style {
+            bar.set_style(style);
+        }
+        bar
+    } else {
+        indicatif::ProgressBar::hidden()
+    };
+    let mut replay = Replay {
+        file: &args.file,
+        port: medium.attach("replay"),
+        speed,
+        from_micros: from.as_micros().min(i64::MAX as u128) as i64,
+        filter,
+        channels: HashMap::new(),
+        tally: Tally::default(),
+        bar,
+    };
+    let started = Instant::now();
+    let stop = crate::terminated();
+    tokio::pin!(stop);
+    let end = loop {
+        let sent_before = replay.tally.sent + replay.tally.failed;
+        match replay.pass(&mut stop).await {
+            // a pass that sent nothing would loop without end
+            PassEnd::Done
+                if args.looping && replay.tally.sent + replay.tally.failed > sent_before => {}
+            end => break end,
+        }
+    };
+    replay.bar.finish_and_clear();
+    eprintln!("{}", replay.summary(started.elapsed()));
+    let file = args.file.display();
+    match end {
+        PassEnd::Damaged(d) => {
+            eprintln!(
+                "seabus replay: {file}: damaged at {d}; the events before it were replayed, nothing after it"
+            );
+            ExitCode::from(DAMAGED)
+        }
+        PassEnd::Unreadable(e) => {
+            eprintln!("seabus replay: {file}: cannot open: {e}");
+            ExitCode::from(USAGE)
+        }
+        PassEnd::Closed => {
+            eprintln!("seabus replay: the medium was closed");
+            ExitCode::from(NOT_SENT)
+        }
+        PassEnd::Done | PassEnd::Stopped if replay.tally.failed > 0 => ExitCode::from(NOT_SENT),
+        PassEnd::Done | PassEnd::Stopped => ExitCode::SUCCESS,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn speeds_read_as_factors_or_unpaced() {
+        assert_eq!(parse_speed("max"), Some(None));
+        assert_eq!(parse_speed("0"), Some(None));
+        assert_eq!(parse_speed("2.5"), Some(Some(2.5)));
+        for bad in ["-1", "nan", "inf", "fast", "1e7", ""] {
+            assert_eq!(parse_speed(bad), None, "{bad}");
+        }
+    }
+}
