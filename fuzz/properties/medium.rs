@@ -2,10 +2,10 @@
 //! function panics when an input breaks a property and tells whether the input was a valid one.
 
 use bytes::Bytes;
+use seabus_medium::lcm::eventlog;
 use seabus_medium::lcm::reassembly::{Reassembler, Step};
 use seabus_medium::lcm::types::{MemberType, Size, TypeSet};
 use seabus_medium::lcm::wire::{self as lcm_wire, Packet};
-use seabus_medium::lcm::eventlog;
 use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
 use seabus_medium::udp::wire;
 use seabus_medium::url::MediumUrl;
@@ -360,6 +360,8 @@ pub fn lcm_packets(data: &[u8]) -> bool {
     r.expire(start + Duration::from_secs(3600), &mut dropped);
     assert_eq!((r.pending(), r.held_bytes()), (0, 0), "everything expires");
     parsed
+}
+
 /// What reading a whole LCM event log gave: its events and the damage that stopped it, if any.
 type LogRead = (Vec<eventlog::OwnedEvent>, Option<eventlog::Damage>);
 
