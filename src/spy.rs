@@ -8,11 +8,13 @@ use std::time::Duration;
 use tokio::time::Instant;
 
 /// One message as a JSON object, keys in this order: topic, kind, origin, seq, hops, stamp
-/// (seconds), format, payload (a datamap's entries in their own order).
+/// (seconds), format, payload (a datamap's entries in their own order; `{"error": …}` for a map
+/// nested too deep for the JSON form).
 pub fn message_json(m: &Message) -> String {
     let text = |s: &str| serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into());
     let payload = match &m.payload {
-        Payload::Map(map) => seabus_medium::json::to_json(map),
+        Payload::Map(map) => seabus_medium::json::to_json(map)
+            .unwrap_or_else(|e| format!("{{\"error\":{}}}", text(&e.to_string()))),
         Payload::Xml(x) => text(x),
         Payload::Bytes(b) => serde_json::to_string(&seabus_medium::Value::Bytes(b.to_vec()))
             .unwrap_or_else(|_| "null".into()),
@@ -159,4 +161,70 @@ pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str
         );
     }
     ExitCode::SUCCESS
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use seabus_medium::message::{Kind, Origin, Provenance, Stamp};
+    use seabus_medium::{DataMap, Value};
+
+    fn message(payload: DataMap) -> Message {
+        Message {
+            topic: Topic::new("nav.pose").unwrap(),
+            kind: Kind::Data,
+            provenance: Provenance {
+                origin: Origin::new("auv1", "bus", 1),
+                seq: 3,
+                hops: 0,
+            },
+            stamp: Stamp(1_500_000_000),
+            payload: Payload::from(payload),
+        }
+    }
+
+    #[test]
+    fn nested_maps_print_in_braces_in_the_table_and_as_objects_in_json() {
+        let m = message(
+            DataMap::new()
+                .with("pose", DataMap::new().with("x", 1i64).with("y", 2i64))
+                .with(
+                    "wps",
+                    Value::List(vec![DataMap::new().with("z", 0.5f64).into()]),
+                ),
+        );
+        let mut rows = BTreeMap::new();
+        rows.insert(
+            m.topic.clone(),
+            Row {
+                count: 1,
+                counted_at_refresh: 0,
+                rate: 0.0,
+                last: m.clone(),
+            },
+        );
+        let mut out = Vec::new();
+        print_table(&rows, &mut out, false);
+        let table = String::from_utf8(out).unwrap();
+        assert!(table.contains("pose={x=1, y=2} wps=[{z=0.5}]"), "{table}");
+        let json: serde_json::Value = serde_json::from_str(&message_json(&m)).unwrap();
+        assert_eq!(
+            json["payload"],
+            serde_json::json!({"pose": {"x": 1, "y": 2}, "wps": [{"z": 0.5}]})
+        );
+    }
+
+    #[test]
+    fn a_map_too_deep_for_json_prints_an_error_object() {
+        let mut v = Value::Int(1);
+        for _ in 0..=seabus_medium::datamap::MAX_DEPTH {
+            v = Value::Map(DataMap::new().with("k", v));
+        }
+        let json: serde_json::Value =
+            serde_json::from_str(&message_json(&message(DataMap::new().with("deep", v)))).unwrap();
+        assert_eq!(
+            json["payload"]["error"],
+            "lists and maps nested deeper than 32"
+        );
+    }
 }

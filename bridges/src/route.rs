@@ -473,4 +473,38 @@ mod tests {
         assert_eq!(report.get_i64("rate_limited"), Some(1));
         assert_eq!(report.get_i64("unrouted"), Some(1));
     }
+
+    #[test]
+    fn nested_maps_cross_in_every_format_and_renames_touch_top_level_fields() {
+        let pose = DataMap::new().with("hdg", 2.5f64).with(
+            "wps",
+            Value::List(vec![DataMap::new().with("hdg", 3i64).into()]),
+        );
+        for format in ["map", "xml", "bytes"] {
+            let mut b = bridge(
+                &format!(
+                    r#"<route from="a" topics="nav.*" format="{format}"><field name="hdg" rename="heading"/></route>"#
+                ),
+                8,
+            );
+            let mut m = msg("nav.pose", "n", "a", 1, 0);
+            m.payload = Payload::from(
+                DataMap::new()
+                    .with("hdg", 1.5f64)
+                    .with("pose", pose.clone()),
+            );
+            let Verdict::Forward(_, out) = b.route("me", 0, m) else {
+                panic!("{format}")
+            };
+            let map = out.payload.to_map().unwrap();
+            assert_eq!(
+                *map,
+                DataMap::new()
+                    .with("heading", 1.5f64)
+                    .with("pose", pose.clone()),
+                "{format}"
+            );
+            assert_eq!(map.get_path("pose.hdg"), Some(&Value::Float(2.5)));
+        }
+    }
 }

@@ -22,11 +22,12 @@ pub fn datamap_binary(data: &[u8]) -> bool {
     true
 }
 
-/// True when `v` is a NaN float or a list holding one at any depth.
+/// True when `v` is a NaN float or a list or map holding one at any depth.
 fn has_nan(v: &Value) -> bool {
     match v {
         Value::Float(f) => f.is_nan(),
         Value::List(items) => items.iter().any(has_nan),
+        Value::Map(map) => map_has_nan(map),
         _ => false,
     }
 }
@@ -47,7 +48,8 @@ pub fn datamap_json(data: &[u8]) -> bool {
     let Ok(map) = json::from_json(text) else {
         return false;
     };
-    let written = json::to_json(&map);
+    let written =
+        json::to_json(&map).unwrap_or_else(|e| panic!("a read datamap has no JSON form: {e}"));
     let back =
         json::from_json(&written).unwrap_or_else(|e| panic!("written JSON does not read: {e}"));
     if !map_has_nan(&map) {

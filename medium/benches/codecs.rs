@@ -27,7 +27,7 @@ fn main() {
     let iters = 200_000;
     let bin_bytes = binary::encode(&map).expect("a ten-field map has a binary form");
     let xml_text = xmlform::to_xml(&map).expect("an XML form");
-    let json_text = json::to_json(&map);
+    let json_text = json::to_json(&map).expect("a JSON form");
 
     let bin = time_per_op(iters, || {
         let b = binary::encode(black_box(&map)).expect("binary form");
@@ -38,14 +38,14 @@ fn main() {
         black_box(xmlform::from_xml(&x).expect("decodes"));
     });
     let json = time_per_op(iters, || {
-        let j = json::to_json(black_box(&map));
+        let j = json::to_json(black_box(&map)).expect("a JSON form");
         black_box(json::from_json(&j).expect("decodes"));
     });
     let xml_enc = time_per_op(iters, || {
         black_box(xmlform::to_xml(black_box(&map)).expect("an XML form"));
     });
     let json_enc = time_per_op(iters, || {
-        black_box(json::to_json(black_box(&map)));
+        black_box(json::to_json(black_box(&map)).expect("a JSON form"));
     });
     println!("  (encode only: xml {xml_enc:.0} ns, json {json_enc:.0} ns)");
     println!("datamap codecs, 10 fields, encode + decode (best of 5 x {iters}):");

@@ -11,10 +11,11 @@
 //!   0x04 varint len, UTF-8   string
 //!   0x05 varint len, bytes   byte string
 //!   0x06 varint count, values  list
+//!   0x07 varint count, entries nested map (entries as above)
 //! ```
-//! Varints are unsigned LEB128, at most 10 bytes, no over-long encodings. Lists nest at most
-//! [`MAX_DEPTH`] deep: the encoder refuses a deeper map, the decoder deeper input. The decoder never
-//! panics and tells a truncated input apart from a malformed one.
+//! Varints are unsigned LEB128, at most 10 bytes, no over-long encodings. Lists and maps nest at
+//! most [`MAX_DEPTH`] deep (counted together): the encoder refuses a deeper map, the decoder deeper
+//! input. The decoder never panics and tells a truncated input apart from a malformed one.
 
 use crate::datamap::{DataMap, MAX_DEPTH, TooDeep, Value};
 use bytes::BufMut;
@@ -32,6 +33,7 @@ const TAG_FLOAT: u8 = 3;
 const TAG_STR: u8 = 4;
 const TAG_BYTES: u8 = 5;
 const TAG_LIST: u8 = 6;
+const TAG_MAP: u8 = 7;
 
 /// Why bytes could not be read as a binary datamap; `offset` is the byte where reading stopped.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -64,8 +66,8 @@ pub enum DecodeErrorKind {
     /// A key or string that is not UTF-8.
     #[error("text is not UTF-8")]
     BadUtf8,
-    /// Lists nested deeper than [`MAX_DEPTH`].
-    #[error("lists nested deeper than {MAX_DEPTH}")]
+    /// Lists and maps nested deeper than [`MAX_DEPTH`].
+    #[error("lists and maps nested deeper than {MAX_DEPTH}")]
     TooDeep,
     /// Bytes left over after the datamap.
     #[error("{0} trailing bytes after the datamap")]
@@ -90,20 +92,29 @@ pub fn encode(map: &DataMap) -> Result<Vec<u8>, TooDeep> {
 pub fn encode_into(map: &DataMap, out: &mut impl BufMut) -> Result<(), TooDeep> {
     out.put_slice(&MAGIC);
     out.put_u8(VERSION);
+    put_entries(out, map, 0)
+}
+
+/// Writes the entry count and entries of `map`, whose values are found inside `depth` lists and
+/// maps.
+fn put_entries(out: &mut impl BufMut, map: &DataMap, depth: usize) -> Result<(), TooDeep> {
     put_varint(out, map.len() as u64);
     for (k, v) in map.iter() {
         put_varint(out, k.len() as u64);
         out.put_slice(k.as_bytes());
-        put_value(out, v, 0)?;
+        put_value(out, v, depth)?;
     }
     Ok(())
 }
 
-/// The length of the binary form of `map` (counted as if lists could nest without limit).
+/// The length of the binary form of `map` (counted as if lists and maps could nest without limit).
 pub fn encoded_len(map: &DataMap) -> usize {
-    MAGIC.len()
-        + 1
-        + varint_len(map.len() as u64)
+    MAGIC.len() + 1 + entries_len(map)
+}
+
+/// The length of the entry count and entries of `map`.
+fn entries_len(map: &DataMap) -> usize {
+    varint_len(map.len() as u64)
         + map
             .iter()
             .map(|(k, v)| varint_len(k.len() as u64) + k.len() + value_len(v))
@@ -120,6 +131,7 @@ fn value_len(v: &Value) -> usize {
         Value::List(items) => {
             varint_len(items.len() as u64) + items.iter().map(value_len).sum::<usize>()
         }
+        Value::Map(m) => entries_len(m),
     }
 }
 
@@ -128,7 +140,8 @@ fn varint_len(v: u64) -> usize {
     1 + (63 - (v | 1).leading_zeros() as usize) / 7
 }
 
-/// Writes `v`, found inside `depth` lists; a list is refused where the decoder would refuse it.
+/// Writes `v`, found inside `depth` lists and maps; a list or map is refused where the decoder would
+/// refuse it.
 fn put_value(out: &mut impl BufMut, v: &Value, depth: usize) -> Result<(), TooDeep> {
     match v {
         Value::Bool(false) => out.put_u8(TAG_FALSE),
@@ -160,6 +173,13 @@ fn put_value(out: &mut impl BufMut, v: &Value, depth: usize) -> Result<(), TooDe
             for item in items {
                 put_value(out, item, depth + 1)?;
             }
+        }
+        Value::Map(m) => {
+            if depth >= MAX_DEPTH {
+                return Err(TooDeep);
+            }
+            out.put_u8(TAG_MAP);
+            put_entries(out, m, depth + 1)?;
         }
     }
     Ok(())
@@ -202,13 +222,7 @@ pub fn decode(bytes: &[u8]) -> Result<DataMap, DecodeError> {
         return Err(r.err(DecodeErrorKind::Version(version)));
     }
     let count = r.varint()?;
-    // every entry takes at least two bytes: never reserve more than the input could hold
-    let mut map = DataMap::with_capacity((count as usize).min(r.remaining() / 2));
-    for _ in 0..count {
-        let key = r.text()?;
-        let value = r.value(0)?;
-        map.push(key, value);
-    }
+    let map = r.entries(count, 0, usize::MAX)?;
     if r.remaining() > 0 {
         return Err(r.err(DecodeErrorKind::Trailing(r.remaining())));
     }
@@ -287,6 +301,20 @@ impl Reader<'_> {
         }
     }
 
+    /// Reads `count` entries whose values are found inside `depth` lists and maps, reserving room
+    /// for at most `cap` of them up front (every entry takes at least two bytes, so never more than
+    /// the input could hold).
+    fn entries(&mut self, count: u64, depth: usize, cap: usize) -> Result<DataMap, DecodeError> {
+        let mut map = DataMap::with_capacity((count as usize).min(self.remaining() / 2).min(cap));
+        for _ in 0..count {
+            let key = self.text()?;
+            let value = self.value(depth)?;
+            map.push(key, value);
+        }
+        Ok(map)
+    }
+
+    /// Reads one value found inside `depth` lists and maps.
     fn value(&mut self, depth: usize) -> Result<Value, DecodeError> {
         let tag = self.byte()?;
         Ok(match tag {
@@ -316,6 +344,15 @@ impl Reader<'_> {
                     items.push(self.value(depth + 1)?);
                 }
                 Value::List(items)
+            }
+            TAG_MAP => {
+                if depth >= MAX_DEPTH {
+                    self.pos -= 1;
+                    return Err(self.err(DecodeErrorKind::TooDeep));
+                }
+                let count = self.varint()?;
+                // as for lists, a nested map grows as it is read
+                Value::Map(self.entries(count, depth + 1, 64)?)
             }
             other => {
                 self.pos -= 1;
@@ -349,11 +386,39 @@ mod tests {
     }
 
     #[test]
+    fn documented_nested_map_bytes() {
+        // the nested-map example in docs/wire-formats.md
+        let map = DataMap::new().with(
+            "pose",
+            DataMap::new()
+                .with("x", 1i64)
+                .with("tags", Value::List(vec![DataMap::new().into()])),
+        );
+        let bytes = encode(&map).unwrap();
+        let expected = [
+            0x53, 0x4D, 0x01, 0x01, // magic, version, 1 entry
+            0x04, b'p', b'o', b's', b'e', 0x07, 0x02, // "pose": map of 2 entries
+            0x01, b'x', 0x02, 0x02, // "x": int 1
+            0x04, b't', b'a', b'g', b's', 0x06, 0x01, 0x07, 0x00, // "tags": [ {} ]
+        ];
+        assert_eq!(bytes, expected);
+        assert_eq!(decode(&bytes).unwrap(), map);
+        assert_eq!(encoded_len(&map), bytes.len());
+    }
+
+    #[test]
     fn every_prefix_is_incomplete_not_malformed() {
         let map = DataMap::new()
             .with(
                 "list",
                 Value::List(vec![1i64.into(), "x".into(), vec![1u8, 2].into()]),
+            )
+            .with(
+                "pose",
+                DataMap::new()
+                    .with("x", 2.5f64)
+                    .with("frame", "utm")
+                    .with("empty", DataMap::new()),
             )
             .with("f", 1.0f64);
         let bytes = encode(&map).unwrap();
@@ -385,6 +450,15 @@ mod tests {
         assert_eq!(e.kind, DecodeErrorKind::Trailing(1));
         let e = decode(b"SM\x01\x80\x00").unwrap_err();
         assert_eq!((e.offset, e.kind), (3, DecodeErrorKind::BadVarint));
+        // inside a nested map: a key that is not UTF-8, an unknown tag, an over-long count
+        let e = decode(b"SM\x01\x01\x01m\x07\x01\x02k\xff\x01").unwrap_err();
+        assert_eq!((e.offset, e.kind), (10, DecodeErrorKind::BadUtf8));
+        let e = decode(b"SM\x01\x01\x01m\x07\x01\x01k\x08").unwrap_err();
+        assert_eq!((e.offset, e.kind), (10, DecodeErrorKind::BadTag(8)));
+        let e = decode(b"SM\x01\x01\x01m\x07\x81\x00").unwrap_err();
+        assert_eq!((e.offset, e.kind), (7, DecodeErrorKind::BadVarint));
+        let e = decode(b"SM\x01\x01\x01m\x07\x00\x00").unwrap_err();
+        assert_eq!(e.kind, DecodeErrorKind::Trailing(1));
     }
 
     #[test]
@@ -392,6 +466,34 @@ mod tests {
         let mut bytes = b"SM\x01\x01\x01k".to_vec();
         for _ in 0..(MAX_DEPTH + 1) {
             bytes.extend_from_slice(&[TAG_LIST, 1]);
+        }
+        bytes.push(TAG_TRUE);
+        assert_eq!(decode(&bytes).unwrap_err().kind, DecodeErrorKind::TooDeep);
+    }
+
+    #[test]
+    fn deep_maps_and_mixed_nesting_are_refused_where_they_pass_the_limit() {
+        // maps only: each `0x07 0x01 0x01 'k'` opens a map of one entry named "k"
+        let mut bytes = b"SM\x01\x01\x01k".to_vec();
+        for _ in 0..(MAX_DEPTH + 1) {
+            bytes.extend_from_slice(&[TAG_MAP, 1, 1, b'k']);
+        }
+        bytes.push(TAG_TRUE);
+        let e = decode(&bytes).unwrap_err();
+        assert_eq!(e.kind, DecodeErrorKind::TooDeep);
+        assert_eq!(
+            e.offset,
+            6 + 4 * MAX_DEPTH,
+            "the offset of the map too many"
+        );
+        // lists and maps alternating count together
+        let mut bytes = b"SM\x01\x01\x01k".to_vec();
+        for i in 0..(MAX_DEPTH + 1) {
+            if i % 2 == 0 {
+                bytes.extend_from_slice(&[TAG_LIST, 1]);
+            } else {
+                bytes.extend_from_slice(&[TAG_MAP, 1, 1, b'k']);
+            }
         }
         bytes.push(TAG_TRUE);
         assert_eq!(decode(&bytes).unwrap_err().kind, DecodeErrorKind::TooDeep);
@@ -406,12 +508,27 @@ mod tests {
         DataMap::new().with("k", v)
     }
 
+    /// A map whose one entry holds `levels` lists and maps, alternating, each inside the one before.
+    fn nested_maps(levels: usize) -> DataMap {
+        let mut v = Value::Int(1);
+        for i in 0..levels {
+            v = if i % 2 == 0 {
+                Value::Map(DataMap::new().with("k", v))
+            } else {
+                Value::List(vec![v])
+            };
+        }
+        DataMap::new().with("k", v)
+    }
+
     #[test]
     fn the_encoder_nests_exactly_as_deep_as_the_decoder() {
-        let deepest = nested(MAX_DEPTH);
-        assert_eq!(decode(&encode(&deepest).unwrap()).unwrap(), deepest);
-        let mut out = Vec::new();
-        assert_eq!(encode_into(&nested(MAX_DEPTH + 1), &mut out), Err(TooDeep));
+        for build in [nested, nested_maps] {
+            let deepest = build(MAX_DEPTH);
+            assert_eq!(decode(&encode(&deepest).unwrap()).unwrap(), deepest);
+            let mut out = Vec::new();
+            assert_eq!(encode_into(&build(MAX_DEPTH + 1), &mut out), Err(TooDeep));
+        }
     }
 
     #[test]
@@ -426,8 +543,19 @@ mod tests {
             .with("b", vec![7u8; 128])
             .with("f", -0.0f64)
             .with("t", true)
-            .with("k".repeat(130), Value::List(vec![]));
-        for m in [DataMap::new(), map, nested(MAX_DEPTH)] {
+            .with("k".repeat(130), Value::List(vec![]))
+            .with(
+                "m",
+                DataMap::new()
+                    .with("i", 300i64)
+                    .with("inner", DataMap::new().with("s", "é".repeat(70))),
+            );
+        for m in [
+            DataMap::new(),
+            map,
+            nested(MAX_DEPTH),
+            nested_maps(MAX_DEPTH),
+        ] {
             assert_eq!(encoded_len(&m), encode(&m).unwrap().len(), "{m}");
         }
         // a map too deep for the binary form still has a length: that of the form without the limit

@@ -1,19 +1,20 @@
 //! The named datamap: an ordered list of `key → value` pairs, the structured payload format.
 //!
 //! Keys keep the order they were inserted in (a dataset's fields read in the order a driver wrote them).
-//! Values are booleans, 64-bit integers, 64-bit floats, UTF-8 strings, byte strings, and lists of values.
+//! Values are booleans, 64-bit integers, 64-bit floats, UTF-8 strings, byte strings, lists of values,
+//! and nested datamaps (a structure inside a dataset: `pose.position.x`).
 
 use std::borrow::Cow;
 use std::fmt;
 use thiserror::Error;
 
-/// Deepest list nesting a datamap can be carried with: every payload form writes and reads lists
-/// this deep, and refuses deeper ones.
+/// Deepest nesting of lists and maps (counted together) a datamap can be carried with: every
+/// payload form writes and reads values inside this many lists and maps, and refuses deeper ones.
 pub const MAX_DEPTH: usize = 32;
 
-/// Why a datamap has no binary or XML form: its lists nest deeper than [`MAX_DEPTH`].
+/// Why a datamap has no binary, XML or JSON form: its lists and maps nest deeper than [`MAX_DEPTH`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
-#[error("lists nested deeper than {MAX_DEPTH}")]
+#[error("lists and maps nested deeper than {MAX_DEPTH}")]
 pub struct TooDeep;
 
 /// One value in a [`DataMap`].
@@ -31,6 +32,8 @@ pub enum Value {
     Bytes(Vec<u8>),
     /// A list of values.
     List(Vec<Value>),
+    /// A nested datamap (a structure inside the payload).
+    Map(DataMap),
 }
 
 impl Value {
@@ -43,6 +46,7 @@ impl Value {
             Value::Str(_) => "string",
             Value::Bytes(_) => "bytes",
             Value::List(_) => "list",
+            Value::Map(_) => "map",
         }
     }
 
@@ -75,6 +79,22 @@ impl Value {
     pub fn as_str(&self) -> Option<&str> {
         match self {
             Value::Str(s) => Some(s),
+            _ => None,
+        }
+    }
+
+    /// The items, when the value is a list.
+    pub fn as_list(&self) -> Option<&[Value]> {
+        match self {
+            Value::List(items) => Some(items),
+            _ => None,
+        }
+    }
+
+    /// The nested datamap, when the value is one.
+    pub fn as_map(&self) -> Option<&DataMap> {
+        match self {
+            Value::Map(m) => Some(m),
             _ => None,
         }
     }
@@ -124,6 +144,7 @@ impl PartialEq for Value {
             (Value::Str(a), Value::Str(b)) => a == b,
             (Value::Bytes(a), Value::Bytes(b)) => a == b,
             (Value::List(a), Value::List(b)) => a == b,
+            (Value::Map(a), Value::Map(b)) => a == b,
             _ => false,
         }
     }
@@ -156,6 +177,16 @@ impl fmt::Display for Value {
                 }
                 write!(f, "]")
             }
+            Value::Map(m) => {
+                write!(f, "{{")?;
+                for (i, (k, v)) in m.iter().enumerate() {
+                    if i > 0 {
+                        write!(f, ", ")?;
+                    }
+                    write!(f, "{k}={v}")?;
+                }
+                write!(f, "}}")
+            }
         }
     }
 }
@@ -180,6 +211,7 @@ value_from! {
     f32 => Float as f64,
     Vec<u8> => Bytes,
     Vec<Value> => List,
+    DataMap => Map,
 }
 
 impl From<&str> for Value {
@@ -262,6 +294,19 @@ impl DataMap {
         self.entries.iter().find(|(k, _)| k == key).map(|(_, v)| v)
     }
 
+    /// The value at a dotted path of keys (`pose.position.x`), walking nested maps from this one.
+    ///
+    /// Each segment is one key, so a key that itself holds a dot is reached with [`DataMap::get`]
+    /// instead; lists are not walked.
+    pub fn get_path(&self, path: &str) -> Option<&Value> {
+        let mut segments = path.split('.');
+        let mut value = self.get(segments.next()?)?;
+        for segment in segments {
+            value = value.as_map()?.get(segment)?;
+        }
+        Some(value)
+    }
+
     /// The numeric value under `key` as a float.
     pub fn get_f64(&self, key: &str) -> Option<f64> {
         self.get(key).and_then(Value::as_f64)
@@ -290,6 +335,9 @@ impl DataMap {
 
     /// Renames `from` to `to` in place, keeping the entry's position; any entry already called `to`
     /// is removed. Returns false when `from` is absent.
+    ///
+    /// Only this map's own (top-level) keys are renamed: `from` is a key, not a path, and the keys of
+    /// nested maps are left as they are.
     pub fn rename(&mut self, from: &str, to: &str) -> bool {
         if from == to {
             return self.get(from).is_some();
@@ -409,6 +457,89 @@ mod tests {
         assert_eq!(Value::parse_loose("nan"), Value::label("nan"));
         assert_eq!(Value::parse_loose("\"12\""), Value::label("12"));
         assert_eq!(Value::parse_loose("N"), Value::label("N"));
+    }
+
+    #[test]
+    fn paths_walk_nested_maps() {
+        let m = DataMap::new().with("depth", 4.5f64).with(
+            "pose",
+            DataMap::new()
+                .with("position", DataMap::new().with("x", 1i64).with("y", 2i64))
+                .with(
+                    "wps",
+                    Value::List(vec![DataMap::new().with("x", 9i64).into()]),
+                ),
+        );
+        assert_eq!(m.get_path("depth"), Some(&Value::Float(4.5)));
+        assert_eq!(m.get_path("pose.position.y"), Some(&Value::Int(2)));
+        assert_eq!(
+            m.get_path("pose.position").and_then(Value::as_map),
+            m.get("pose")
+                .and_then(Value::as_map)
+                .and_then(|p| p.get("position"))
+                .and_then(Value::as_map)
+        );
+        // absent keys, a path through a scalar or a list, empty segments
+        for missing in [
+            "pose.position.z",
+            "depth.x",
+            "pose.wps.0.x",
+            "pose..x",
+            "",
+            "nope",
+        ] {
+            assert_eq!(m.get_path(missing), None, "{missing}");
+        }
+        // a key holding a dot is one key to `get`, two segments to `get_path`
+        let dotted = DataMap::new().with("a.b", 1i64);
+        assert_eq!(dotted.get_path("a.b"), None);
+        assert_eq!(dotted.get_i64("a.b"), Some(1));
+    }
+
+    #[test]
+    fn rename_touches_top_level_keys_only() {
+        let mut m = DataMap::new()
+            .with("x", 1i64)
+            .with("pose", DataMap::new().with("x", 2i64));
+        assert!(m.rename("x", "east"));
+        assert_eq!(m.get_i64("east"), Some(1));
+        assert_eq!(m.get_path("pose.x"), Some(&Value::Int(2)));
+        assert!(!m.rename("pose.x", "pose.east"));
+        assert_eq!(m.get_path("pose.x"), Some(&Value::Int(2)));
+    }
+
+    #[test]
+    fn nested_maps_print_in_braces() {
+        let m = DataMap::new()
+            .with("n", 3i64)
+            .with(
+                "pose",
+                DataMap::new()
+                    .with("x", 1i64)
+                    .with("y", 2.5f64)
+                    .with("frame", "utm"),
+            )
+            .with("wps", Value::List(vec![DataMap::new().into()]));
+        assert_eq!(
+            m.to_string(),
+            "n=3 pose={x=1, y=2.5, frame=\"utm\"} wps=[{}]"
+        );
+        assert_eq!(m.get("pose").map(Value::type_name), Some("map"));
+        assert_eq!(
+            m.get("wps").and_then(Value::as_list).map(<[_]>::len),
+            Some(1)
+        );
+        assert_eq!(Value::Int(1).as_map(), None);
+    }
+
+    #[test]
+    fn maps_compare_by_entries_in_order() {
+        let a = Value::from(DataMap::new().with("x", 1i64).with("y", f64::NAN));
+        let b = Value::from(DataMap::new().with("x", 1i64).with("y", f64::NAN));
+        let swapped = Value::from(DataMap::new().with("y", f64::NAN).with("x", 1i64));
+        assert_eq!(a, b);
+        assert_ne!(a, swapped);
+        assert_ne!(Value::from(DataMap::new()), Value::List(vec![]));
     }
 
     #[test]

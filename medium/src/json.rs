@@ -4,19 +4,33 @@
 //! A datamap is a JSON object with its keys in order. Booleans, strings and lists map directly;
 //! integers are JSON integers; floats are JSON numbers written with a decimal point or exponent
 //! (`2.0`, so they read back as floats); a non-finite float is `{"float": "NaN"}` (`"inf"`,
-//! `"-inf"`); bytes are `{"base64": "…"}`.
+//! `"-inf"`); bytes are `{"base64": "…"}`; a nested map is a JSON object (`{}` when empty).
+//!
+//! An object whose first key is `float`, `base64` or `map` is one of the one-key forms, so a nested
+//! map whose first key is one of those words is written inside `{"map": {…}}`. Lists and maps nest at
+//! most [`MAX_DEPTH`] deep (counted together), writing and reading alike.
 
-use crate::datamap::{DataMap, Value};
+use crate::datamap::{DataMap, MAX_DEPTH, TooDeep, Value};
 use base64::Engine as _;
 use base64::engine::general_purpose::STANDARD as B64;
-use serde::de::{self, MapAccess, SeqAccess, Visitor};
-use serde::ser::{SerializeMap, SerializeSeq};
+use serde::de::{self, DeserializeSeed, MapAccess, SeqAccess, Visitor};
+use serde::ser::{self as ser, SerializeMap, SerializeSeq};
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use std::fmt;
 
-impl Serialize for Value {
+/// The keys that open a one-key form rather than a nested map.
+const FORM_KEYS: [&str; 3] = ["float", "base64", "map"];
+
+/// A value found inside `.1` lists and maps, written with the depth limit.
+struct Nested<'a>(&'a Value, usize);
+
+/// The entries of a map found inside `.1` lists and maps, written as one JSON object.
+struct Entries<'a>(&'a DataMap, usize);
+
+impl Serialize for Nested<'_> {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        match self {
+        let Nested(v, depth) = *self;
+        match v {
             Value::Bool(b) => s.serialize_bool(*b),
             Value::Int(i) => s.serialize_i64(*i),
             Value::Float(f) if f.is_finite() => s.serialize_f64(*f),
@@ -39,33 +53,82 @@ impl Serialize for Value {
                 m.end()
             }
             Value::List(items) => {
+                if depth >= MAX_DEPTH {
+                    return Err(ser::Error::custom(TooDeep));
+                }
                 let mut seq = s.serialize_seq(Some(items.len()))?;
                 for item in items {
-                    seq.serialize_element(item)?;
+                    seq.serialize_element(&Nested(item, depth + 1))?;
                 }
                 seq.end()
+            }
+            Value::Map(map) => {
+                if depth >= MAX_DEPTH {
+                    return Err(ser::Error::custom(TooDeep));
+                }
+                let first = map.iter().next().map(|(k, _)| k);
+                if first.is_some_and(|k| FORM_KEYS.contains(&k)) {
+                    let mut m = s.serialize_map(Some(1))?;
+                    m.serialize_entry("map", &Entries(map, depth + 1))?;
+                    m.end()
+                } else {
+                    Entries(map, depth + 1).serialize(s)
+                }
             }
         }
     }
 }
 
-impl Serialize for DataMap {
+impl Serialize for Entries<'_> {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        let mut m = s.serialize_map(Some(self.len()))?;
-        for (k, v) in self.iter() {
-            m.serialize_entry(k, v)?;
+        let Entries(map, depth) = *self;
+        let mut m = s.serialize_map(Some(map.len()))?;
+        for (k, v) in map.iter() {
+            m.serialize_entry(k, &Nested(v, depth))?;
         }
         m.end()
     }
 }
 
-struct ValueVisitor;
+/// A value on its own is written as if it were an entry of a datamap.
+impl Serialize for Value {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        Nested(self, 0).serialize(s)
+    }
+}
 
-impl<'de> Visitor<'de> for ValueVisitor {
+impl Serialize for DataMap {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        Entries(self, 0).serialize(s)
+    }
+}
+
+/// Reads a value found inside `depth` lists and maps.
+#[derive(Clone, Copy)]
+struct ValueSeed {
+    depth: usize,
+}
+
+impl<'de> DeserializeSeed<'de> for ValueSeed {
+    type Value = Value;
+
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<Value, D::Error> {
+        d.deserialize_any(self)
+    }
+}
+
+/// The error for a list or map that would nest deeper than [`MAX_DEPTH`].
+fn too_deep<E: de::Error>() -> E {
+    E::custom(TooDeep)
+}
+
+impl<'de> Visitor<'de> for ValueSeed {
     type Value = Value;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("a boolean, number, string, list, {\"base64\": …} or {\"float\": …}")
+        f.write_str(
+            "a boolean, number, string, list, object, {\"base64\": …}, {\"float\": …} or {\"map\": …}",
+        )
     }
 
     fn visit_bool<E: de::Error>(self, v: bool) -> Result<Value, E> {
@@ -99,78 +162,146 @@ impl<'de> Visitor<'de> for ValueVisitor {
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Value, A::Error> {
+        if self.depth >= MAX_DEPTH {
+            return Err(too_deep());
+        }
+        let inner = ValueSeed {
+            depth: self.depth + 1,
+        };
         let mut items = Vec::with_capacity(seq.size_hint().unwrap_or(0).min(1024));
-        while let Some(v) = seq.next_element::<Value>()? {
+        while let Some(v) = seq.next_element_seed(inner)? {
             items.push(v);
         }
         Ok(Value::List(items))
     }
 
+    /// An object: a one-key form when its first key is `float`, `base64` or `map`, a nested map
+    /// otherwise.
     fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<Value, A::Error> {
         let Some(key) = map.next_key::<String>()? else {
-            return Err(de::Error::custom("an empty object is not a datamap value"));
+            return self.nested(map, None);
         };
-        let text: String = map.next_value()?;
-        if map.next_key::<String>()?.is_some() {
-            return Err(de::Error::custom(
-                "objects inside a datamap have one key, `base64` or `float`",
-            ));
+        let value = match key.as_str() {
+            "base64" => {
+                let text: String = map.next_value()?;
+                B64.decode(text.as_bytes())
+                    .map(Value::Bytes)
+                    .map_err(|e| de::Error::custom(format!("bad base64: {e}")))?
+            }
+            "float" => {
+                let text: String = map.next_value()?;
+                match text.as_str() {
+                    "NaN" | "nan" => Value::Float(f64::NAN),
+                    "inf" | "Infinity" => Value::Float(f64::INFINITY),
+                    "-inf" | "-Infinity" => Value::Float(f64::NEG_INFINITY),
+                    other => other
+                        .parse()
+                        .map(Value::Float)
+                        .map_err(|_| de::Error::custom(format!("`{other}` is not a float")))?,
+                }
+            }
+            "map" => {
+                if self.depth >= MAX_DEPTH {
+                    return Err(too_deep());
+                }
+                Value::Map(map.next_value_seed(EntriesSeed {
+                    depth: self.depth + 1,
+                })?)
+            }
+            _ => return self.nested(map, Some(key)),
+        };
+        if let Some(other) = map.next_key::<String>()? {
+            return Err(de::Error::custom(format!(
+                "unexpected key `{other}` after `{key}`: an object whose first key is `{key}` has \
+                 that one key (write a map starting with `{key}` as {{\"map\": {{…}}}})"
+            )));
         }
-        match key.as_str() {
-            "base64" => B64
-                .decode(text.as_bytes())
-                .map(Value::Bytes)
-                .map_err(|e| de::Error::custom(format!("bad base64: {e}"))),
-            "float" => match text.as_str() {
-                "NaN" | "nan" => Ok(Value::Float(f64::NAN)),
-                "inf" | "Infinity" => Ok(Value::Float(f64::INFINITY)),
-                "-inf" | "-Infinity" => Ok(Value::Float(f64::NEG_INFINITY)),
-                other => other
-                    .parse()
-                    .map(Value::Float)
-                    .map_err(|_| de::Error::custom(format!("`{other}` is not a float"))),
-            },
-            other => Err(de::Error::custom(format!(
-                "unexpected object key `{other}`: objects inside a datamap are {{\"base64\": …}} or {{\"float\": …}}"
-            ))),
-        }
+        Ok(value)
     }
+}
+
+impl ValueSeed {
+    /// Reads the rest of an object as a nested map whose first key, already read, is `first`.
+    fn nested<'de, A: MapAccess<'de>>(
+        self,
+        mut map: A,
+        first: Option<String>,
+    ) -> Result<Value, A::Error> {
+        if self.depth >= MAX_DEPTH {
+            return Err(too_deep());
+        }
+        let inner = ValueSeed {
+            depth: self.depth + 1,
+        };
+        let mut out = DataMap::with_capacity(map.size_hint().unwrap_or(0).min(256));
+        if let Some(key) = first {
+            let value = map.next_value_seed(inner)?;
+            out.push(key, value);
+        }
+        read_entries(&mut out, map, inner)?;
+        Ok(Value::Map(out))
+    }
+}
+
+/// Reads the remaining entries of an object into `out`, each value with `seed`; entries are kept as
+/// written, a repeated key included, as the other forms do.
+fn read_entries<'de, A: MapAccess<'de>>(
+    out: &mut DataMap,
+    mut map: A,
+    seed: ValueSeed,
+) -> Result<(), A::Error> {
+    while let Some(k) = map.next_key::<String>()? {
+        let v = map.next_value_seed(seed)?;
+        out.push(k, v);
+    }
+    Ok(())
 }
 
 impl<'de> Deserialize<'de> for Value {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Value, D::Error> {
-        d.deserialize_any(ValueVisitor)
+        ValueSeed { depth: 0 }.deserialize(d)
     }
 }
 
-struct MapVisitor;
+/// Reads a JSON object as the entries of a map whose values are found inside `depth` lists and
+/// maps.
+#[derive(Clone, Copy)]
+struct EntriesSeed {
+    depth: usize,
+}
 
-impl<'de> Visitor<'de> for MapVisitor {
+impl<'de> DeserializeSeed<'de> for EntriesSeed {
+    type Value = DataMap;
+
+    fn deserialize<D: Deserializer<'de>>(self, d: D) -> Result<DataMap, D::Error> {
+        d.deserialize_map(self)
+    }
+}
+
+impl<'de> Visitor<'de> for EntriesSeed {
     type Value = DataMap;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str("a JSON object")
     }
 
-    fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<DataMap, A::Error> {
+    fn visit_map<A: MapAccess<'de>>(self, map: A) -> Result<DataMap, A::Error> {
         let mut out = DataMap::with_capacity(map.size_hint().unwrap_or(0).min(256));
-        // entries are kept as written, a repeated key included, as the other forms do
-        while let Some((k, v)) = map.next_entry::<String, Value>()? {
-            out.push(k, v);
-        }
+        read_entries(&mut out, map, ValueSeed { depth: self.depth })?;
         Ok(out)
     }
 }
 
 impl<'de> Deserialize<'de> for DataMap {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<DataMap, D::Error> {
-        d.deserialize_map(MapVisitor)
+        EntriesSeed { depth: 0 }.deserialize(d)
     }
 }
 
-/// Writes `map` as JSON text.
-pub fn to_json(map: &DataMap) -> String {
-    serde_json::to_string(map).unwrap_or_else(|e| format!("{{\"error\":{:?}}}", e.to_string()))
+/// Writes `map` as JSON text; a map whose lists and maps nest deeper than [`MAX_DEPTH`] is refused.
+pub fn to_json(map: &DataMap) -> Result<String, TooDeep> {
+    // writing to memory fails only where the depth limit refuses a value
+    serde_json::to_string(map).map_err(|_| TooDeep)
 }
 
 /// Reads a datamap from JSON text; the error names line and column.
@@ -192,11 +323,15 @@ mod tests {
             .with("inf", f64::NEG_INFINITY)
             .with("s", "x\"y")
             .with("raw", vec![1u8, 2])
-            .with("l", Value::List(vec![1i64.into(), 0.5f64.into()]));
-        let text = to_json(&m);
+            .with("l", Value::List(vec![1i64.into(), 0.5f64.into()]))
+            .with(
+                "m",
+                DataMap::new().with("x", 1i64).with("e", DataMap::new()),
+            );
+        let text = to_json(&m).unwrap();
         assert_eq!(
             text,
-            r#"{"b":true,"i":-3,"f":2.0,"nan":{"float":"NaN"},"inf":{"float":"-inf"},"s":"x\"y","raw":{"base64":"AQI="},"l":[1,0.5]}"#
+            r#"{"b":true,"i":-3,"f":2.0,"nan":{"float":"NaN"},"inf":{"float":"-inf"},"s":"x\"y","raw":{"base64":"AQI="},"l":[1,0.5],"m":{"x":1,"e":{}}}"#
         );
         assert_eq!(from_json(&text).unwrap(), m);
     }
@@ -211,18 +346,93 @@ mod tests {
             1.1111111111111111e110,
         ] {
             let m = DataMap::new().with("x", x);
-            assert_eq!(from_json(&to_json(&m)).unwrap(), m, "{x:e}");
+            assert_eq!(from_json(&to_json(&m).unwrap()).unwrap(), m, "{x:e}");
         }
         let m = from_json(r#"{"min":-922337230685223372063854775807}"#).unwrap();
-        assert_eq!(from_json(&to_json(&m)).unwrap(), m);
+        assert_eq!(from_json(&to_json(&m).unwrap()).unwrap(), m);
+    }
+
+    #[test]
+    fn maps_that_start_like_a_one_key_form_are_wrapped() {
+        let inner = |k: &'static str| DataMap::new().with(k, "AQI=").with("x", 1i64);
+        let m = DataMap::new()
+            .with("a", inner("base64"))
+            .with("b", DataMap::new().with("float", "NaN"))
+            .with(
+                "c",
+                DataMap::new().with("map", DataMap::new().with("y", 2i64)),
+            )
+            .with("d", inner("id"))
+            // at the top level every key is just a key
+            .with("float", "NaN");
+        let text = to_json(&m).unwrap();
+        assert_eq!(
+            text,
+            r#"{"a":{"map":{"base64":"AQI=","x":1}},"b":{"map":{"float":"NaN"}},"c":{"map":{"map":{"y":2}}},"d":{"id":"AQI=","x":1},"float":"NaN"}"#
+        );
+        assert_eq!(from_json(&text).unwrap(), m);
+        // the one-key forms still read as before
+        let m = from_json(r#"{"a":{"base64":"AQI="},"b":{"float":"inf"},"c":{"map":{}},"d":{}}"#)
+            .unwrap();
+        assert_eq!(m.get("a"), Some(&Value::Bytes(vec![1, 2])));
+        assert_eq!(m.get_f64("b"), Some(f64::INFINITY));
+        assert_eq!(m.get("c"), Some(&Value::Map(DataMap::new())));
+        assert_eq!(m.get("d"), Some(&Value::Map(DataMap::new())));
+    }
+
+    /// A map whose one entry holds `levels` maps and lists, alternating, each inside the one before.
+    fn nested(levels: usize) -> DataMap {
+        let mut v = Value::Int(1);
+        for i in 0..levels {
+            v = if i % 2 == 0 {
+                Value::Map(DataMap::new().with("k", v))
+            } else {
+                Value::List(vec![v])
+            };
+        }
+        DataMap::new().with("k", v)
+    }
+
+    #[test]
+    fn deep_maps_are_refused_by_writer_and_reader_alike() {
+        let deepest = nested(MAX_DEPTH);
+        assert_eq!(from_json(&to_json(&deepest).unwrap()).unwrap(), deepest);
+        assert_eq!(to_json(&nested(MAX_DEPTH + 1)), Err(TooDeep));
+        // one map too many, wrapped or not, and one list too many
+        for (open, close) in [(r#"{"k":"#, "}"), (r#"{"map":{"map":"#, "}}"), ("[", "]")] {
+            let text = format!(
+                "{{\"k\":{}1{}}}",
+                open.repeat(MAX_DEPTH + 1),
+                close.repeat(MAX_DEPTH + 1)
+            );
+            let e = from_json(&text).unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("lists and maps nested deeper than 32"),
+                "{e}"
+            );
+            let fits = format!(
+                "{{\"k\":{}1{}}}",
+                open.repeat(MAX_DEPTH),
+                close.repeat(MAX_DEPTH)
+            );
+            assert!(from_json(&fits).is_ok(), "{fits}");
+        }
     }
 
     #[test]
     fn bad_json_is_explained() {
         let e = from_json("{\"a\": null}").unwrap_err();
         assert!(e.to_string().contains("null is not a datamap value"), "{e}");
-        let e = from_json("{\"a\": {\"x\": \"1\"}}").unwrap_err();
-        assert!(e.to_string().contains("unexpected object key `x`"), "{e}");
+        let e = from_json("{\"a\": {\"base64\": \"AQI=\", \"x\": 1}}").unwrap_err();
+        assert!(
+            e.to_string().contains("unexpected key `x` after `base64`"),
+            "{e}"
+        );
+        let e = from_json("{\"a\": {\"map\": 1}}").unwrap_err();
+        assert!(e.to_string().contains("a JSON object"), "{e}");
+        let e = from_json("{\"a\": {\"float\": 1.5}}").unwrap_err();
+        assert!(e.to_string().contains("expected a string"), "{e}");
         let e = from_json("[1]").unwrap_err();
         assert!(e.to_string().contains("a JSON object"), "{e}");
         let e = from_json("{\"a\": 1").unwrap_err();

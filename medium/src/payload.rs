@@ -7,8 +7,9 @@
 //! | XML | via datamap | XML form read | as is |
 //!
 //! Datamap ↔ XML ↔ binary is lossless. Bytes that are not a binary datamap, and XML that is not a
-//! `<datamap>` document, cannot become a datamap, and a datamap whose lists nest deeper than
-//! [`crate::datamap::MAX_DEPTH`] cannot become bytes: the conversion fails with a [`ConvertError`].
+//! `<datamap>` document, cannot become a datamap, and a datamap whose lists and maps nest deeper
+//! than [`crate::datamap::MAX_DEPTH`] cannot become bytes or XML: the conversion fails with a
+//! [`ConvertError`].
 //! Payloads are cheap to clone: their contents are shared, never copied.
 
 use crate::binary::{self, DecodeError};
@@ -78,8 +79,8 @@ pub enum ConvertError {
     /// The XML text is not a datamap document.
     #[error("XML is not a datamap document: {0}")]
     NotXmlMap(#[from] XmlFormError),
-    /// The datamap's lists nest too deep for the binary form.
-    #[error("datamap has no binary form: {0}")]
+    /// The datamap's lists and maps nest too deep for the binary and XML forms.
+    #[error("datamap has no binary or XML form: {0}")]
     TooDeep(#[from] TooDeep),
 }
 
@@ -223,7 +224,13 @@ mod tests {
     fn every_format_reaches_every_other() {
         let map = DataMap::new()
             .with("a", 1i64)
-            .with("b", Value::List(vec![true.into()]));
+            .with("b", Value::List(vec![true.into()]))
+            .with(
+                "pose",
+                DataMap::new()
+                    .with("x", 1.5f64)
+                    .with("wps", Value::List(vec![DataMap::new().into()])),
+            );
         let start = Payload::from(map.clone());
         for via in [Format::Bytes, Format::Xml, Format::Map] {
             let p = start.convert(via).unwrap();
@@ -258,24 +265,31 @@ mod tests {
 
     #[test]
     fn a_map_too_deep_to_decode_does_not_become_bytes() {
-        let nested = |lists| {
+        // lists, maps, and the two alternating, nested `levels` deep
+        let nested = |levels, maps: fn(usize) -> bool| {
             let mut v = Value::Int(1);
-            for _ in 0..lists {
-                v = Value::List(vec![v]);
+            for i in 0..levels {
+                v = if maps(i) {
+                    Value::Map(DataMap::new().with("k", v))
+                } else {
+                    Value::List(vec![v])
+                };
             }
             DataMap::new().with("deep", v)
         };
-        let deep = Payload::from(nested(crate::datamap::MAX_DEPTH + 1));
-        assert_eq!(
-            deep.convert(Format::Bytes),
-            Err(ConvertError::TooDeep(TooDeep))
-        );
-        // the deepest map the binary form carries converts and reads back
-        let deepest = nested(crate::datamap::MAX_DEPTH);
-        let bytes = Payload::from(deepest.clone())
-            .convert(Format::Bytes)
-            .unwrap();
-        assert_eq!(*bytes.to_map().unwrap(), deepest);
+        let kinds: [fn(usize) -> bool; 3] = [|_| false, |_| true, |i| i % 2 == 0];
+        for maps in kinds {
+            let deep = Payload::from(nested(crate::datamap::MAX_DEPTH + 1, maps));
+            for to in [Format::Bytes, Format::Xml] {
+                assert_eq!(deep.convert(to), Err(ConvertError::TooDeep(TooDeep)));
+            }
+            // the deepest map the binary and XML forms carry converts and reads back
+            let deepest = nested(crate::datamap::MAX_DEPTH, maps);
+            for to in [Format::Bytes, Format::Xml] {
+                let p = Payload::from(deepest.clone()).convert(to).unwrap();
+                assert_eq!(*p.to_map().unwrap(), deepest);
+            }
+        }
     }
 
     #[test]

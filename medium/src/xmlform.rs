@@ -8,8 +8,11 @@
 //!   <string name="id">a</string>
 //!   <bytes name="raw">AQI=</bytes>
 //!   <list name="xs"><int>1</int><string>two</string></list>
+//!   <map name="pose"><float name="x">1.5</float><map name="empty"></map></map>
 //! </datamap>
 //! ```
+//! A `<map>` holds named entries as `<datamap>` does; lists and maps nest at most [`MAX_DEPTH`] deep
+//! (counted together).
 //! The form is lossless: floats are written in the shortest form that reads back to the same bits
 //! (a NaN with a payload as `NaN:0x…`), carriage returns and attribute whitespace as character
 //! references, and a string or name holding a character XML 1.0 cannot carry (C0 controls other than
@@ -48,7 +51,7 @@ pub enum XmlFormErrorKind {
     #[error("root element is <{0}>, expected <datamap>")]
     NotADataMap(String),
     /// An element that is not a value element.
-    #[error("unexpected element <{0}>, expected one of bool, int, float, string, bytes, list")]
+    #[error("unexpected element <{0}>, expected one of bool, int, float, string, bytes, list, map")]
     UnknownElement(String),
     /// A datamap entry without a `name` attribute.
     #[error("<{0}> has no name attribute")]
@@ -61,14 +64,14 @@ pub enum XmlFormErrorKind {
         /// The offending text.
         text: String,
     },
-    /// Text directly inside `<datamap>` or `<list>`.
+    /// Text directly inside `<datamap>`, `<list>` or `<map>`.
     #[error("unexpected text {0:?} between elements")]
     StrayText(String),
     /// Content after the root element.
     #[error("content after </datamap>")]
     Trailing,
-    /// Lists nested deeper than [`MAX_DEPTH`].
-    #[error("lists nested deeper than {MAX_DEPTH}")]
+    /// Lists and maps nested deeper than [`MAX_DEPTH`].
+    #[error("lists and maps nested deeper than {MAX_DEPTH}")]
     TooDeep,
 }
 
@@ -90,14 +93,15 @@ pub fn to_xml(map: &DataMap) -> Result<String, TooDeep> {
     Ok(out)
 }
 
-/// Writes `v`, found inside `depth` lists; a list is refused where the reader would refuse it.
+/// Writes `v`, found inside `depth` lists and maps; a list or map is refused where the reader would
+/// refuse it.
 fn write_value(
     out: &mut String,
     name: Option<&str>,
     v: &Value,
     depth: usize,
 ) -> Result<(), TooDeep> {
-    if matches!(v, Value::List(_)) && depth >= MAX_DEPTH {
+    if matches!(v, Value::List(_) | Value::Map(_)) && depth >= MAX_DEPTH {
         return Err(TooDeep);
     }
     let tag = v.type_name();
@@ -143,6 +147,12 @@ fn write_value(
             out.push('>');
             for item in items {
                 write_value(out, None, item, depth + 1)?;
+            }
+        }
+        Value::Map(m) => {
+            out.push('>');
+            for (k, item) in m.iter() {
+                write_value(out, Some(k), item, depth + 1)?;
             }
         }
     }
@@ -252,6 +262,7 @@ enum Tag {
     Str,
     Bytes,
     List,
+    Map,
 }
 
 impl Tag {
@@ -263,6 +274,7 @@ impl Tag {
             "string" => Tag::Str,
             "bytes" => Tag::Bytes,
             "list" => Tag::List,
+            "map" => Tag::Map,
             _ => return None,
         })
     }
@@ -275,6 +287,7 @@ impl Tag {
             Tag::Str => "string",
             Tag::Bytes => "bytes",
             Tag::List => "list",
+            Tag::Map => "map",
         }
     }
 }
@@ -343,8 +356,9 @@ impl<'a> Parser<'a> {
         }
     }
 
-    /// Reads the next child value of `<datamap>` (whose children are named) or of a `<list>`
-    /// (`parent` is `None`); `None` at the parent's end tag.
+    /// Reads the next child value of `<datamap>` or `<map>` (`parent` names it: its children are
+    /// named) or of a `<list>` (`parent` is `None`), found inside `depth` lists and maps; `None` at
+    /// the parent's end tag.
     fn child(
         &mut self,
         parent: Option<&str>,
@@ -435,24 +449,36 @@ impl<'a> Parser<'a> {
             if parent.is_some() && name.is_none() {
                 return Err(self.err(at, XmlFormErrorKind::MissingName(tag.name().to_string())));
             }
-            let value = if tag == Tag::List {
-                if depth >= MAX_DEPTH {
-                    return Err(self.err(at, XmlFormErrorKind::TooDeep));
-                }
-                let mut items = Vec::new();
-                if !empty {
-                    while let Some((_, v)) = self.child(None, depth + 1)? {
-                        items.push(v);
+            if matches!(tag, Tag::List | Tag::Map) && depth >= MAX_DEPTH {
+                return Err(self.err(at, XmlFormErrorKind::TooDeep));
+            }
+            let value = match tag {
+                Tag::List => {
+                    let mut items = Vec::new();
+                    if !empty {
+                        while let Some((_, v)) = self.child(None, depth + 1)? {
+                            items.push(v);
+                        }
                     }
+                    Value::List(items)
                 }
-                Value::List(items)
-            } else {
-                let text = if empty {
-                    Cow::Borrowed("")
-                } else {
-                    self.text(tag)?
-                };
-                self.scalar(tag, text, base64, at)?
+                Tag::Map => {
+                    let mut entries = DataMap::new();
+                    if !empty {
+                        while let Some((name, v)) = self.child(Some("map"), depth + 1)? {
+                            entries.push(name.unwrap_or_default(), v);
+                        }
+                    }
+                    Value::Map(entries)
+                }
+                _ => {
+                    let text = if empty {
+                        Cow::Borrowed("")
+                    } else {
+                        self.text(tag)?
+                    };
+                    self.scalar(tag, text, base64, at)?
+                }
             };
             return Ok(Some((name, value)));
         }
@@ -539,7 +565,7 @@ impl<'a> Parser<'a> {
                 B64.decode(strip_ws(&text))
                     .map_err(|_| bad("base64 bytes", &text))?,
             ),
-            Tag::List => return Err(bad("list", &text)),
+            Tag::List | Tag::Map => return Err(bad(tag.name(), &text)),
         })
     }
 }
@@ -588,6 +614,17 @@ mod tests {
             .with("id", "a<b & \"c\"\r\n\t")
             .with("raw", vec![1u8, 2])
             .with("xs", Value::List(vec![1i64.into(), "two".into()]))
+            .with(
+                "pose",
+                DataMap::new()
+                    .with("x", 1.5f64)
+                    .with("k\u{1}ey", "a<b")
+                    .with(
+                        "wps",
+                        Value::List(vec![DataMap::new().with("n", 1i64).into()]),
+                    )
+                    .with("empty", DataMap::new()),
+            )
     }
 
     #[test]
@@ -605,6 +642,49 @@ mod tests {
              <bool name=\"ok\">true</bool><string name=\"id\">a</string>\
              <bytes name=\"raw\">AQI=</bytes><list name=\"xs\"><int>1</int><string>two</string></list></datamap>"
         );
+    }
+
+    #[test]
+    fn documented_nested_map() {
+        let map = DataMap::new().with(
+            "pose",
+            DataMap::new()
+                .with("x", 1.5f64)
+                .with("empty", DataMap::new())
+                .with(
+                    "wps",
+                    Value::List(vec![DataMap::new().with("n", 1i64).into()]),
+                ),
+        );
+        let xml = to_xml(&map).unwrap();
+        assert_eq!(
+            xml,
+            "<datamap><map name=\"pose\"><float name=\"x\">1.5</float><map name=\"empty\"></map>\
+             <list name=\"wps\"><map><int name=\"n\">1</int></map></list></map></datamap>"
+        );
+        assert_eq!(from_xml(&xml).unwrap(), map);
+    }
+
+    #[test]
+    fn nested_maps_read_as_written_by_hand() {
+        let text = "<datamap>\n  <map name=\"pose\">\n    <int name=\"x\">1</int>\n    \
+                    <map name=\"e\"/>\n  </map>\n  <list name=\"l\"><map/><map></map></list>\n</datamap>";
+        let m = from_xml(text).unwrap();
+        assert_eq!(m.get_path("pose.x"), Some(&Value::Int(1)));
+        assert_eq!(m.get_path("pose.e"), Some(&Value::Map(DataMap::new())));
+        let empty = Value::Map(DataMap::new());
+        assert_eq!(m.get("l"), Some(&Value::List(vec![empty.clone(), empty])));
+        // entries of a map are named; a map ends with </map>
+        let e = from_xml("<datamap><map name=\"m\"><int>1</int></map></datamap>").unwrap_err();
+        assert_eq!(
+            (e.offset, e.kind),
+            (23, XmlFormErrorKind::MissingName("int".into()))
+        );
+        let e = from_xml("<datamap><map name=\"m\"></list></datamap>").unwrap_err();
+        assert_eq!(e.offset, 23);
+        assert!(matches!(e.kind, XmlFormErrorKind::Syntax(_)), "{e}");
+        let e = from_xml("<datamap><map name=\"m\">1</map></datamap>").unwrap_err();
+        assert_eq!(e.kind, XmlFormErrorKind::StrayText("1".into()));
     }
 
     #[test]
@@ -684,5 +764,37 @@ mod tests {
         }
         xml.push_str("</list></datamap>");
         assert_eq!(from_xml(&xml).unwrap_err().kind, XmlFormErrorKind::TooDeep);
+    }
+
+    /// A map whose one entry holds `levels` maps and lists, alternating, each inside the one before.
+    fn nested(levels: usize) -> DataMap {
+        let mut v = Value::Int(1);
+        for i in 0..levels {
+            v = if i % 2 == 0 {
+                Value::Map(DataMap::new().with("k", v))
+            } else {
+                Value::List(vec![v])
+            };
+        }
+        DataMap::new().with("k", v)
+    }
+
+    #[test]
+    fn deep_maps_are_refused_by_writer_and_reader_alike() {
+        let deepest = nested(MAX_DEPTH);
+        assert_eq!(from_xml(&to_xml(&deepest).unwrap()).unwrap(), deepest);
+        assert_eq!(to_xml(&nested(MAX_DEPTH + 1)), Err(TooDeep));
+        // maps only, one level too many: refused at the start tag of the map too many
+        let mut xml = String::from("<datamap>");
+        for _ in 0..=MAX_DEPTH {
+            xml.push_str("<map name=\"m\">");
+        }
+        let too_many = xml.len() - "<map name=\"m\">".len();
+        for _ in 0..=MAX_DEPTH {
+            xml.push_str("</map>");
+        }
+        xml.push_str("</datamap>");
+        let e = from_xml(&xml).unwrap_err();
+        assert_eq!((e.offset, e.kind), (too_many, XmlFormErrorKind::TooDeep));
     }
 }

@@ -1,13 +1,14 @@
-//! Property tests: every conversion between the three payload formats round-trips, no decoder
-//! panics on any input, topic matching agrees with segment-by-segment matching, and duplicate
+//! Property tests: every conversion between the three payload formats (and the JSON form)
+//! round-trips, nested lists and maps included, no decoder panics on any input, topic matching agrees with segment-by-segment matching, and duplicate
 //! detection agrees with a plain model.
 
 use bytes::Bytes;
 use proptest::prelude::*;
+use seabus_medium::datamap::MAX_DEPTH;
 use seabus_medium::dedup::{Dedup, Seen, WINDOW};
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::udp::wire;
-use seabus_medium::{DataMap, Format, Pattern, Payload, Topic, Value, binary, xmlform};
+use seabus_medium::{DataMap, Format, Pattern, Payload, Topic, Value, binary, json, xmlform};
 use std::collections::BTreeSet;
 
 fn scalar() -> impl Strategy<Value = Value> {
@@ -23,10 +24,40 @@ fn scalar() -> impl Strategy<Value = Value> {
     ]
 }
 
+/// Scalars, and lists and nested maps of values (maps may repeat a key, as decoders keep them).
 fn value() -> impl Strategy<Value = Value> {
-    scalar().prop_recursive(3, 24, 6, |inner| {
-        proptest::collection::vec(inner, 0..6).prop_map(Value::List)
+    scalar().prop_recursive(4, 32, 6, |inner| {
+        prop_oneof![
+            proptest::collection::vec(inner.clone(), 0..6).prop_map(Value::List),
+            proptest::collection::vec((key(), inner), 0..6).prop_map(|entries| {
+                Value::Map(DataMap::from_entries(
+                    entries.into_iter().map(|(k, v)| (k.into(), v)).collect(),
+                ))
+            }),
+        ]
     })
+}
+
+/// A value inside a chain of lists and maps as deep as the payload forms carry.
+fn deep_value() -> impl Strategy<Value = Value> {
+    chain(0..=MAX_DEPTH)
+}
+
+/// A scalar inside a chain of `levels` lists and maps, each picked at random.
+fn chain(levels: std::ops::RangeInclusive<usize>) -> impl Strategy<Value = Value> {
+    (
+        scalar(),
+        proptest::collection::vec((any::<bool>(), key()), levels),
+    )
+        .prop_map(|(leaf, chain)| {
+            chain.into_iter().rev().fold(leaf, |v, (map, k)| {
+                if map {
+                    Value::Map(DataMap::new().with(k, v))
+                } else {
+                    Value::List(vec![v])
+                }
+            })
+        })
 }
 
 fn key() -> impl Strategy<Value = String> {
@@ -34,12 +65,34 @@ fn key() -> impl Strategy<Value = String> {
         "[a-z_][a-z0-9_]{0,12}",
         ".{0,10}",
         "[\\x00-\\x1f \t\n\r\"<>&]{1,5}",
+        // the words that open JSON's one-key forms
+        prop_oneof![Just("float"), Just("base64"), Just("map")].prop_map(String::from),
     ]
 }
 
 fn datamap() -> impl Strategy<Value = DataMap> {
-    proptest::collection::vec((key(), value()), 0..10)
+    let entry = prop_oneof![4 => value(), 1 => deep_value()];
+    proptest::collection::vec((key(), entry), 0..10)
         .prop_map(|entries| entries.into_iter().collect())
+}
+
+/// `v` with every NaN made the default NaN: the JSON form writes each NaN as `{"float": "NaN"}`.
+fn nan_as_json_reads_it(v: &Value) -> Value {
+    match v {
+        Value::Float(f) if f.is_nan() => Value::Float(f64::NAN),
+        Value::List(items) => Value::List(items.iter().map(nan_as_json_reads_it).collect()),
+        Value::Map(m) => Value::Map(map_as_json_reads_it(m)),
+        other => other.clone(),
+    }
+}
+
+/// `map` with every NaN made the default NaN, at any depth.
+fn map_as_json_reads_it(map: &DataMap) -> DataMap {
+    DataMap::from_entries(
+        map.iter()
+            .map(|(k, v)| (k.to_string().into(), nan_as_json_reads_it(v)))
+            .collect(),
+    )
 }
 
 proptest! {
@@ -56,6 +109,21 @@ proptest! {
     fn xml_round_trips(m in datamap()) {
         let xml = xmlform::to_xml(&m).unwrap();
         prop_assert_eq!(xmlform::from_xml(&xml).unwrap(), m);
+    }
+
+    #[test]
+    fn json_round_trips(m in datamap()) {
+        let text = json::to_json(&m).unwrap();
+        prop_assert_eq!(json::from_json(&text).unwrap(), map_as_json_reads_it(&m), "{}", text);
+    }
+
+    #[test]
+    fn one_level_past_the_limit_has_no_form(v in chain(MAX_DEPTH + 1..=MAX_DEPTH + 1), k in key()) {
+        let m = DataMap::new().with(k, v);
+        prop_assert!(binary::encode(&m).is_err());
+        prop_assert!(xmlform::to_xml(&m).is_err());
+        prop_assert!(json::to_json(&m).is_err());
+        prop_assert!(Payload::from(m).convert(Format::Bytes).is_err());
     }
 
     #[test]

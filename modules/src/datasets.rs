@@ -29,6 +29,8 @@ pub enum FieldType {
     Bytes,
     /// A list.
     List,
+    /// A nested datamap.
+    Map,
 }
 
 impl FieldType {
@@ -40,6 +42,7 @@ impl FieldType {
             "string" => FieldType::Str,
             "bytes" => FieldType::Bytes,
             "list" => FieldType::List,
+            "map" => FieldType::Map,
             _ => return None,
         })
     }
@@ -53,6 +56,7 @@ impl FieldType {
             FieldType::Str => "string",
             FieldType::Bytes => "bytes",
             FieldType::List => "list",
+            FieldType::Map => "map",
         }
     }
 
@@ -65,6 +69,7 @@ impl FieldType {
                 | (FieldType::Str, Value::Str(_))
                 | (FieldType::Bytes, Value::Bytes(_))
                 | (FieldType::List, Value::List(_))
+                | (FieldType::Map, Value::Map(_))
         )
     }
 }
@@ -246,7 +251,7 @@ impl Catalogue {
                 let ty_attr = f.required("type")?;
                 let ty = FieldType::parse(&ty_attr.value).ok_or_else(|| {
                     ty_attr.error(format!(
-                        "`{}` is not one of float, int, bool, string, bytes, list",
+                        "`{}` is not one of float, int, bool, string, bytes, list, map",
                         ty_attr.value
                     ))
                 })?;
@@ -410,11 +415,30 @@ mod tests {
     }
 
     #[test]
+    fn map_fields_admit_nested_maps_only() {
+        let c = Catalogue::parse(
+            "d.xml",
+            "<datasets><dataset name=\"pose\" topic=\"nav.pose\">\
+             <field name=\"position\" type=\"map\" required=\"true\"/></dataset></datasets>",
+        )
+        .unwrap();
+        assert_eq!(c.get("pose").unwrap().fields[0].ty, FieldType::Map);
+        let ok = DataMap::new().with("position", DataMap::new().with("x", 1.0));
+        assert_eq!(c.validate("pose", &ok), Ok(()));
+        let flat = DataMap::new().with("position", Value::List(vec![]));
+        let err = c.validate("pose", &flat).unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "not a valid `pose`: field `position` is list, expected map"
+        );
+    }
+
+    #[test]
     fn catalogue_file_errors_are_placed() {
         let e = Catalogue::parse("d.xml", "<datasets>\n <dataset name=\"x\" topic=\"a.b\">\n  <field name=\"f\" type=\"real\"/>\n </dataset>\n</datasets>").unwrap_err();
         assert_eq!(
             e.to_string(),
-            "d.xml:3:19: attribute `type`: `real` is not one of float, int, bool, string, bytes, list"
+            "d.xml:3:19: attribute `type`: `real` is not one of float, int, bool, string, bytes, list, map"
         );
         let e = Catalogue::parse("d.xml", "<datasets><dataset name=\"x\" topic=\"a.b\"><field name=\"f\" type=\"int\"/></dataset></datasets>").unwrap_err();
         assert!(e.message.contains("no required field"), "{e}");

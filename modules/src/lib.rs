@@ -6,7 +6,7 @@
 //! - [`module`] — a [`Module`] declares what it produces, consumes and accepts ([`Declaration`]) and
 //!   gets its messages and timer ticks through handlers; its [`Context`] holds one interface ("port")
 //!   per medium it is placed on.
-//! - [`registry`] — module and bridge types by name; each builds fresh modules from a
+//! - [`registry`](mod@registry) — module and bridge types by name; each builds fresh modules from a
 //!   [`ModuleConfig`] (a system file's `<module>`) or a [`system::BridgeSpec`].
 //! - [`system`] — system files: parsing, checking against a registry, route-cycle detection.
 //! - [`runtime`] — the container: opens media, supervises modules (restart with back-off), shuts

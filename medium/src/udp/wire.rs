@@ -130,7 +130,7 @@ pub fn encode(msg: &Message, sender: u64) -> Result<Bytes, &'static str> {
         Payload::Bytes(b) => buf.put_slice(b),
         Payload::Xml(x) => buf.put_slice(x.as_bytes()),
         Payload::Map(m) => binary::encode_into(m, &mut buf)
-            .map_err(|_| "datamap lists nest deeper than receivers read")?,
+            .map_err(|_| "datamap lists and maps nest deeper than receivers read")?,
     }
     Ok(buf.freeze())
 }
@@ -323,13 +323,19 @@ mod tests {
     }
 
     #[test]
-    fn lists_too_deep_for_receivers_are_refused_at_send() {
-        let mut v = Value::Int(1);
-        for _ in 0..=crate::datamap::MAX_DEPTH {
-            v = Value::List(vec![v]);
+    fn lists_and_maps_too_deep_for_receivers_are_refused_at_send() {
+        for maps in [false, true] {
+            let mut v = Value::Int(1);
+            for _ in 0..=crate::datamap::MAX_DEPTH {
+                v = if maps {
+                    Value::Map(DataMap::new().with("k", v))
+                } else {
+                    Value::List(vec![v])
+                };
+            }
+            let m = msg(Payload::from(DataMap::new().with("deep", v)));
+            assert!(encode(&m, 1).is_err());
         }
-        let m = msg(Payload::from(DataMap::new().with("deep", v)));
-        assert!(encode(&m, 1).is_err());
     }
 
     #[test]
@@ -338,6 +344,14 @@ mod tests {
         for p in [
             Payload::from(vec![0u8, 255, 3]),
             Payload::from(DataMap::new().with("depth", 12.5f64)),
+            Payload::from(
+                DataMap::new().with(
+                    "pose",
+                    DataMap::new()
+                        .with("x", 1.0f64)
+                        .with("tags", Value::List(vec![DataMap::new().into()])),
+                ),
+            ),
             crate::payload::xml("<a>é</a>"),
         ] {
             let m = msg(p);
