@@ -27,4 +27,7 @@ seed_tests! {
     /// `.lcm` files are read or refused without a panic, refusals name a place in the file, and
     /// resolved structs are found by name and fingerprint, with consistent member types and sizes.
     lcm_types_seeds => lcm_types,
+    /// LCM messages decode or are refused without a panic, and those that decode encode back to
+    /// the same bytes.
+    lcm_codec_seeds => lcm_codec,
 }

@@ -1,11 +1,12 @@
 //! LCM (Lightweight Communications and Marshalling): its UDP multicast medium, its message types
-//! read at run time, and its event-log files.
+//! read at run time, its messages to and from datamaps ([`codec`]), and its event-log files.
 //!
 //! LCM names a message by its channel; on an LCM medium the channel is the seabus topic and the
 //! payload is the LCM message's bytes (an 8-byte type fingerprint, then the encoded fields).
 //! Subscriptions, as in LCM, are regular expressions matched against the whole channel name
 //! ([`ChannelRegex`]).
 
+pub mod codec;
 pub mod types;
 
 use std::fmt;
