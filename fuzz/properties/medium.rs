@@ -2,14 +2,16 @@
 //! function panics when an input breaks a property and tells whether the input was a valid one.
 
 use bytes::Bytes;
+use seabus_medium::lcm::codec;
 use seabus_medium::lcm::eventlog;
 use seabus_medium::lcm::reassembly::{Reassembler, Step};
-use seabus_medium::lcm::types::{MemberType, Size, TypeSet};
+use seabus_medium::lcm::types::{MemberType, ResolvedTypes, Size, TypeSet};
 use seabus_medium::lcm::wire::{self as lcm_wire, Packet};
 use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, Output, check_nmea, encode};
 use seabus_medium::udp::wire;
 use seabus_medium::url::MediumUrl;
 use seabus_medium::{DataMap, Medium, Value, binary, json, xmlform};
+use std::sync::OnceLock;
 
 /// The compact binary datamap decoder: any input decodes or is refused without a panic, and every
 /// map it accepts encodes back to bytes that decode to the same map. True when `data` decodes.
@@ -477,4 +479,79 @@ pub fn lcm_eventlog(data: &[u8]) -> bool {
         "the same damage after the events written again"
     );
     damage.is_none()
+}
+
+/// The LCM types the codec property decodes against: every primitive, fixed, variable and
+/// two-dimensional arrays, byte vectors and matrices, a struct that encodes to nothing, and
+/// recursive types (one directly, two through each other).
+pub const LCM_CODEC_TYPES: &str = "package fz;\n\
+    struct point_t { double x; float y; int8_t a; int16_t b; int32_t c; int64_t d; byte e;\n\
+                     boolean f; string s; }\n\
+    struct node_t { int8_t n; node_t children[n]; string name; }\n\
+    struct empty_t { }\n\
+    struct all_t {\n\
+        byte raw[3]; int8_t n; byte blob[n]; int16_t rows; int64_t cols;\n\
+        float grid[rows][cols]; point_t pts[2]; string names[n]; boolean flags[n][2];\n\
+        byte planes[2][n]; empty_t nothing[n][n]; node_t tree;\n\
+    }\n\
+    struct even_t { int8_t n; odd_t next[n]; }\n\
+    struct odd_t { int16_t n; even_t next[n]; byte tag; }\n";
+
+/// The structs of [`LCM_CODEC_TYPES`] an input picks from, by full name.
+pub const LCM_CODEC_PICKS: [&str; 5] = [
+    "fz.all_t",
+    "fz.node_t",
+    "fz.point_t",
+    "fz.even_t",
+    "fz.empty_t",
+];
+
+/// [`LCM_CODEC_TYPES`], read once.
+fn lcm_codec_types() -> &'static ResolvedTypes {
+    static TYPES: OnceLock<ResolvedTypes> = OnceLock::new();
+    TYPES.get_or_init(|| {
+        let mut set = TypeSet::new();
+        set.add_text("fuzz.lcm", LCM_CODEC_TYPES)
+            .unwrap_or_else(|e| panic!("the codec's types do not read: {e}"));
+        set.resolve()
+            .unwrap_or_else(|e| panic!("the codec's types do not resolve: {e}"))
+    })
+}
+
+/// The LCM message codec: any bytes decode or are refused without a panic, and every message that
+/// decodes encodes back to the same bytes.
+///
+/// Input: the first byte picks the type (`b % 5` in [`LCM_CODEC_PICKS`]); when below 0x80 the
+/// message is that type's fingerprint followed by the rest of the input, else the rest of the
+/// input alone (its own fingerprint, usually wrong). True when the message decodes.
+pub fn lcm_codec(data: &[u8]) -> bool {
+    let Some((&sel, rest)) = data.split_first() else {
+        return false;
+    };
+    let types = lcm_codec_types();
+    let name = LCM_CODEC_PICKS[usize::from(sel) % LCM_CODEC_PICKS.len()];
+    let ty = types
+        .get(name)
+        .unwrap_or_else(|| panic!("no struct {name}"));
+    let message = if sel < 0x80 {
+        let mut m = ty.fingerprint().to_be_bytes().to_vec();
+        m.extend_from_slice(rest);
+        m
+    } else {
+        rest.to_vec()
+    };
+    let map = match codec::decode(types, ty, &message) {
+        Ok(map) => map,
+        Err(e) => {
+            assert!(!e.to_string().is_empty(), "an error without a message");
+            return false;
+        }
+    };
+    let bytes = codec::encode(types, ty, &map)
+        .unwrap_or_else(|e| panic!("a decoded {name} does not encode: {e}"));
+    assert!(
+        bytes == message,
+        "{name} decodes and encodes to other bytes"
+    );
+    true
 }

@@ -33,4 +33,7 @@ seed_tests! {
     /// LCM event logs read up to their end or damage, the same whole and a few bytes at a time, and
     /// the events read write back to the same bytes and read back the same.
     lcm_eventlog_seeds => lcm_eventlog,
+    /// LCM messages decode or are refused without a panic, and those that decode encode back to
+    /// the same bytes.
+    lcm_codec_seeds => lcm_codec,
 }

@@ -1,5 +1,5 @@
 //! LCM (Lightweight Communications and Marshalling): its UDP multicast medium, its message types
-//! read at run time, and its event-log files.
+//! read at run time, its messages to and from datamaps ([`codec`]), and its event-log files.
 //!
 //! LCM names a message by its channel; on an LCM medium the channel is the seabus topic and the
 //! payload is the LCM message's bytes (an 8-byte type fingerprint, then the encoded fields).
@@ -12,6 +12,7 @@
 //! - [`eventlog`] — LCM's event-log files, as lcm-logger writes them (`seabus record` and
 //!   `seabus replay`).
 
+pub mod codec;
 pub mod eventlog;
 pub mod reassembly;
 pub mod types;
