@@ -4,8 +4,12 @@
 //!   field renames, rate limits and the payload format of the far side; loop-safe through provenance
 //!   (duplicate windows, hop limit, never back to the origin medium).
 //!
-//! Typed mappings (LCM types, MOOS strings, DSAAV sentuators, CAN signals) build on the same routes.
+//! - [`lcm`] — LCM types on routes: a route with `lcm="package.type_t"` decodes LCM messages from
+//!   an LCM medium into datamaps, or encodes datamaps for one, checking type fingerprints.
+//!
+//! Other typed mappings (MOOS strings, DSAAV sentuators, CAN signals) build on the same routes.
 
+pub mod lcm;
 pub mod route;
 
 use seabus_modules::Registry;

@@ -12,8 +12,11 @@
 //! Every second (the `report` parameter) it publishes its counters and latency on
 //! `seabus.bridge.<name>` on both its media.
 
+use crate::lcm::Problem;
 use async_trait::async_trait;
 use seabus_medium::dedup::{Dedup, Seen};
+use seabus_medium::lcm::types::ResolvedTypes;
+use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Format, Kind, Message, Pattern, Payload, Stamp, Topic, Value};
 use seabus_modules::Catalogue;
@@ -50,6 +53,7 @@ struct Leg {
     format: Option<Format>,
     kind: Option<Kind>,
     fields: Vec<(String, String)>,
+    lcm: Option<crate::lcm::Mapping>,
 }
 
 #[derive(Default, Clone, Copy)]
@@ -82,6 +86,12 @@ pub struct RouteBridge {
     last_sent: HashMap<(usize, Topic), Instant>,
     report: Option<Duration>,
     report_topic: Topic,
+    /// The ports reports go out on: not LCM media, which carry typed LCM messages only.
+    report_ports: Vec<usize>,
+    /// LCM types, when a route has one.
+    types: Option<Arc<ResolvedTypes>>,
+    /// Messages not carried across, by reason (logged without flooding).
+    problems: Tally,
 }
 
 fn build(spec: &BridgeSpec, _: &Catalogue) -> Result<Built, FileError> {
@@ -100,6 +110,13 @@ impl RouteBridge {
         let mut decl = Declaration::new(ModuleKind::Bridge)
             .format(0, None)
             .format(1, None);
+        let types = if spec.routes.iter().any(|r| r.lcm.is_some())
+            || spec.params.get("lcm_types").is_some()
+        {
+            Some(crate::lcm::load(spec)?)
+        } else {
+            None
+        };
         for r in &spec.routes {
             for (from, to) in r.legs(&spec.media[0], &spec.media[1]) {
                 let (from, to) = (port_of(from), port_of(to));
@@ -120,6 +137,10 @@ impl RouteBridge {
                     format: r.format,
                     kind: r.kind,
                     fields: r.fields.clone(),
+                    lcm: match &types {
+                        Some(t) => crate::lcm::Mapping::new(spec, r, t, from, to)?,
+                        None => None,
+                    },
                 });
             }
         }
@@ -136,6 +157,11 @@ impl RouteBridge {
             last_sent: HashMap::new(),
             report: (!report.is_zero()).then_some(report),
             report_topic,
+            report_ports: (0..2)
+                .filter(|&i| !crate::lcm::is_lcm(&spec.urls[i]))
+                .collect(),
+            types,
+            problems: Tally::new(),
         };
         Ok((bridge, decl))
     }
@@ -217,11 +243,19 @@ impl RouteBridge {
         }
         // the payload is taken out of the message, so a datamap no one else holds is renamed in place
         let taken = std::mem::replace(&mut msg.payload, Payload::from(Vec::new()));
-        let payload = match convert(taken, &leg.fields, leg.format) {
+        let converted = match (&leg.lcm, &self.types) {
+            (Some(lcm), Some(types)) => {
+                convert_lcm(taken, leg, lcm, types, &msg.topic, &topic, msg.stamp)
+            }
+            _ => convert(taken, &leg.fields, leg.format)
+                .map_err(|e| Problem::new("conversion", format!("topic `{}`: {e}", msg.topic))),
+        };
+        let payload = match converted {
             Ok(p) => p,
-            Err(e) => {
+            Err(p) => {
                 self.counters.errors += 1;
-                tracing::warn!(topic = %msg.topic, "bridge cannot convert the payload: {e}");
+                self.problems
+                    .record(self.report_topic.as_str(), p.reason, p.detail);
                 return Verdict::Drop("conversion");
             }
         };
@@ -292,6 +326,33 @@ fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[L
     });
 }
 
+/// Carries a payload across a route with an LCM type: decoded from LCM bytes read on `from`, field
+/// renames applied, then encoded for the LCM channel `to` (or put in the far side's format).
+fn convert_lcm(
+    p: Payload,
+    leg: &Leg,
+    lcm: &crate::lcm::Mapping,
+    types: &ResolvedTypes,
+    from: &Topic,
+    to: &Topic,
+    stamp: Stamp,
+) -> Result<Payload, Problem> {
+    let p = if lcm.decode {
+        Payload::from(lcm.decode(types, from.as_str(), &p)?)
+    } else {
+        p
+    };
+    let conversion =
+        |e: seabus_medium::ConvertError| Problem::new("conversion", format!("topic `{from}`: {e}"));
+    if !lcm.encode {
+        return convert(p, &leg.fields, leg.format).map_err(conversion);
+    }
+    let map = convert(p, &leg.fields, None)
+        .and_then(|p| p.to_map())
+        .map_err(conversion)?;
+    lcm.encode(types, to.as_str(), &map, stamp)
+}
+
 /// Applies field renames (which need a datamap) and the far side's format.
 fn convert(
     p: Payload,
@@ -343,9 +404,9 @@ impl Module for RouteBridge {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
-        // both media hear about the bridge between them
+        // both media hear about the bridge between them (but an LCM bus, which only carries types)
         let map = self.report_map();
-        for port in 0..ctx.ports() {
+        for &port in &self.report_ports {
             // a report that cannot go out is counted, never a reason to stop forwarding
             if let Err(e) = ctx
                 .publish_on(port, Kind::Data, &self.report_topic, map.clone())
@@ -506,5 +567,83 @@ mod tests {
             );
             assert_eq!(map.get_path("pose.hdg"), Some(&Value::Float(2.5)));
         }
+    }
+
+    fn lcm_bridge(routes: &str) -> Result<RouteBridge, String> {
+        let text = format!(
+            "<seabus><medium name=\"a\" url=\"inproc://\"/>\
+             <medium name=\"l\" url=\"udpm://239.255.76.67:7667\"/>\
+             <bridge name=\"x\" media=\"a l\">{routes}</bridge></seabus>"
+        );
+        let spec = SystemSpec::parse("t.xml", &text).unwrap();
+        RouteBridge::new(&spec.bridges[0])
+            .map(|(b, _)| b)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn lcm_routes_encode_for_lcm_and_decode_from_it_checking_the_type() {
+        let mut b = lcm_bridge(
+            r#"<route from="a" topics="nav.position" rename="NAV_POSITION" lcm="seabus.position_t">
+                 <field name="latitude" rename="lat"/></route>
+               <route from="l" topics="NAV_POSITION" lcm="seabus.position_t"/>"#,
+        )
+        .unwrap();
+        let mut m = msg("nav.position", "n", "a", 1, 0);
+        m.payload = Payload::from(
+            DataMap::new()
+                .with("latitude", 43.5f64)
+                .with("lon", 16.4f64)
+                .with("utime", 7i64),
+        );
+        let Verdict::Forward(1, out) = b.route("me", 0, m) else {
+            panic!("forwarded to the LCM side")
+        };
+        let bytes = out.payload.as_bytes().expect("LCM bytes").clone();
+        let types = b.types.clone().unwrap();
+        let ty = types.get("seabus.position_t").unwrap();
+        assert_eq!(bytes[..8], ty.fingerprint().to_be_bytes());
+        // and back: decoded, with the fields of the type
+        let mut back = msg("NAV_POSITION", "lcm@x", "l", 1, 0);
+        back.payload = Payload::from(bytes.to_vec());
+        let Verdict::Forward(0, out) = b.route("me", 1, back) else {
+            panic!("forwarded from the LCM side")
+        };
+        let map = out.payload.as_map().expect("a datamap");
+        assert_eq!(map.get_f64("lat"), Some(43.5));
+        assert_eq!(map.get_i64("utime"), Some(7));
+        assert!(
+            map.get_f64("hdop").is_some_and(f64::is_nan),
+            "missing is NaN"
+        );
+        // another type on the channel is refused and counted
+        let heading = types.get("seabus.heading_t").unwrap();
+        let other = seabus_medium::lcm::codec::encode(&types, heading, &DataMap::new()).unwrap();
+        let mut wrong = msg("NAV_POSITION", "lcm@x", "l", 2, 0);
+        wrong.payload = Payload::from(other);
+        assert_eq!(b.route("me", 1, wrong), Verdict::Drop("conversion"));
+        assert_eq!(
+            b.problems.counts().get("lcm-type-mismatch").copied(),
+            Some(1)
+        );
+    }
+
+    #[test]
+    fn lcm_routes_name_unknown_types_and_need_an_lcm_medium() {
+        let e = lcm_bridge(r#"<route topics="x" lcm="seabus.nope_t"/>"#)
+            .err()
+            .unwrap();
+        assert!(
+            e.contains("unknown LCM type `seabus.nope_t`") && e.contains("seabus.position_t"),
+            "{e}"
+        );
+        let text = "<seabus><medium name=\"a\" url=\"inproc://\"/><medium name=\"b\" url=\"inproc://\"/>\
+             <bridge name=\"x\" media=\"a b\"><route topics=\"x\" lcm=\"seabus.position_t\"/></bridge></seabus>";
+        let spec = SystemSpec::parse("t.xml", text).unwrap();
+        let e = RouteBridge::new(&spec.bridges[0])
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("needs an LCM medium"), "{e}");
     }
 }

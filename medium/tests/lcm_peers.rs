@@ -312,9 +312,18 @@ for g in sorted(got):
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn fragments_in_any_order_repeated_missing_and_interleaved() {
-    let m = open("lcm", "&frag_timeout=300ms");
+    // a group of its own: its repeated and missing fragments are counted by every medium hearing them
+    let (group, port) = (
+        Ipv4Addr::new(239, 255, 77, fastrand::u8(1..250)),
+        fastrand::u16(20_000..60_000),
+    );
+    let m = Medium::open(
+        "lcm",
+        &format!("udpm://{group}:{port}?ttl=0&recv_buf_size=4194304&frag_timeout=300ms"),
+        &Node::new("t"),
+    )
+    .expect("lcm medium opens");
     let mut iface = m.attach("t").subscribed("**").unwrap();
-    let (group, port) = group_port();
     let to = SocketAddr::from((group, port));
     let sender = || {
         let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).unwrap();

@@ -8,7 +8,8 @@
 //!
 //! - [`wire`] — the LC02 and LC03 packets, byte for byte as liblcm's; [`reassembly`] puts
 //!   fragmented messages together; [`udpm`] is the medium (`udpm://` URLs) built on both.
-//! - [`types`] — `.lcm` files read at run time, with lcm-gen's fingerprints.
+//! - [`types`] — `.lcm` files read at run time, with lcm-gen's fingerprints; [`codec`] encodes and
+//!   decodes LCM messages of those types to and from datamaps.
 //! - [`eventlog`] — LCM's event-log files, as lcm-logger writes them (`seabus record` and
 //!   `seabus replay`).
 

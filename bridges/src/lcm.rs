@@ -1,0 +1,172 @@
+//! LCM types on bridge routes: `<route … lcm="seabus.position_t"/>` between an LCM medium
+//! (`udpm://`) and any other.
+//!
+//! A route leading to the LCM medium encodes each message's datamap (after field renames) as the
+//! type; one leading from it decodes the LCM bytes as the type, after checking their fingerprint,
+//! and hands on a datamap. The types are the built-in ones for the standard datasets
+//! (`configs/lcm/seabus.lcm`, package `seabus`) and those of the `.lcm` files or directories the
+//! bridge's `lcm_types` parameter lists (space-separated, relative to the system file). A type with
+//! an `int64_t utime` member gets the message's stamp there (microseconds) when the map has none.
+
+use seabus_medium::lcm::codec::{self, CodecError};
+use seabus_medium::lcm::types::{MemberType, Primitive, ResolvedTypes, TypeSet};
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Payload, Stamp, Value};
+use seabus_modules::system::{BridgeSpec, RouteSpec};
+use std::path::Path;
+use std::sync::Arc;
+
+/// The LCM types of the standard datasets, built in.
+pub const BUILT_IN: &str = include_str!("../../configs/lcm/seabus.lcm");
+/// The name the built-in types' file is known by in messages.
+pub const BUILT_IN_FILE: &str = "configs/lcm/seabus.lcm";
+
+/// The LCM types a bridge can use: the built-in ones and those its `lcm_types` parameter names.
+pub fn load(spec: &BridgeSpec) -> Result<Arc<ResolvedTypes>, FileError> {
+    let mut set = TypeSet::new();
+    set.add_text(BUILT_IN_FILE, BUILT_IN)?;
+    if let Some(p) = spec.params.get("lcm_types") {
+        let base = Path::new(&*spec.pos.file)
+            .parent()
+            .unwrap_or_else(|| Path::new(""));
+        for item in p.value.split_whitespace() {
+            let path = base.join(item);
+            if !path.exists() {
+                return Err(p.pos.error(format!(
+                    "parameter `lcm_types`: `{}` does not exist",
+                    path.display()
+                )));
+            }
+            set.add_path(&path)?;
+        }
+    }
+    set.resolve().map(Arc::new)
+}
+
+/// What a route does with LCM: decode on the way in, encode on the way out, or both.
+#[derive(Debug, Clone)]
+pub struct Mapping {
+    /// The type's full name.
+    pub ty: String,
+    /// Messages come from an LCM medium and are decoded.
+    pub decode: bool,
+    /// Messages go to an LCM medium and are encoded.
+    pub encode: bool,
+    /// The type has an `int64_t utime` member, filled from the stamp when missing.
+    utime: bool,
+}
+
+/// True for the URL of an LCM medium.
+pub fn is_lcm(url: &str) -> bool {
+    url.starts_with("udpm:")
+}
+
+impl Mapping {
+    /// Compiles a route's `lcm` attribute for the leg from medium `from` to medium `to` (0 or 1).
+    pub fn new(
+        spec: &BridgeSpec,
+        route: &RouteSpec,
+        types: &ResolvedTypes,
+        from: usize,
+        to: usize,
+    ) -> Result<Option<Mapping>, FileError> {
+        let Some(name) = &route.lcm else {
+            return Ok(None);
+        };
+        let Some(ty) = types.get(name) else {
+            let mut known: Vec<&str> = types.iter().map(|t| t.full_name()).collect();
+            known.sort_unstable();
+            return Err(route.pos.error(format!(
+                "unknown LCM type `{name}`; known types: {} (more with the bridge's `lcm_types`)",
+                known.join(", ")
+            )));
+        };
+        let (decode, encode) = (is_lcm(&spec.urls[from]), is_lcm(&spec.urls[to]));
+        if !decode && !encode {
+            return Err(route.pos.error(format!(
+                "`lcm=\"{name}\"` needs an LCM medium (udpm://) on one side of the bridge; \
+                 `{}` and `{}` are not",
+                spec.media[0], spec.media[1]
+            )));
+        }
+        let utime = ty.members().iter().any(|m| {
+            m.name == "utime"
+                && m.dims.is_empty()
+                && m.ty == MemberType::Primitive(Primitive::Int64)
+        });
+        Ok(Some(Mapping {
+            ty: name.clone(),
+            decode,
+            encode,
+            utime,
+        }))
+    }
+
+    /// Decodes LCM bytes read on `channel` into a datamap.
+    pub fn decode(
+        &self,
+        types: &ResolvedTypes,
+        channel: &str,
+        payload: &Payload,
+    ) -> Result<DataMap, Problem> {
+        let Some(ty) = types.get(&self.ty) else {
+            return Err(Problem::new("lcm-type", format!("no LCM type {}", self.ty)));
+        };
+        let Some(bytes) = payload.as_bytes() else {
+            return Err(Problem::new(
+                "lcm-decode",
+                format!(
+                    "channel `{channel}`: a {} payload is not an LCM message",
+                    payload.format().name()
+                ),
+            ));
+        };
+        codec::decode(types, ty, bytes).map_err(|e| Problem::codec(channel, e))
+    }
+
+    /// Encodes a datamap as this type, for `channel`; `stamp` fills a missing `utime`.
+    pub fn encode(
+        &self,
+        types: &ResolvedTypes,
+        channel: &str,
+        map: &DataMap,
+        stamp: Stamp,
+    ) -> Result<Payload, Problem> {
+        let Some(ty) = types.get(&self.ty) else {
+            return Err(Problem::new("lcm-type", format!("no LCM type {}", self.ty)));
+        };
+        let bytes = if self.utime && map.get("utime").is_none() {
+            let mut with = map.clone();
+            with.insert("utime", Value::Int(stamp.0 / 1_000));
+            codec::encode(types, ty, &with)
+        } else {
+            codec::encode(types, ty, map)
+        }
+        .map_err(|e| Problem::codec(channel, e))?;
+        Ok(Payload::from(bytes))
+    }
+}
+
+/// Why a message could not be carried across: a reason to count it under, and what happened.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problem {
+    /// The key it is counted under.
+    pub reason: &'static str,
+    /// What happened, naming the channel.
+    pub detail: String,
+}
+
+impl Problem {
+    /// A problem of `reason`.
+    pub fn new(reason: &'static str, detail: String) -> Problem {
+        Problem { reason, detail }
+    }
+
+    fn codec(channel: &str, e: CodecError) -> Problem {
+        let reason = match e {
+            CodecError::Fingerprint { .. } => "lcm-type-mismatch",
+            _ => "lcm-codec",
+        };
+        Problem::new(reason, format!("channel `{channel}`: {e}"))
+    }
+}
