@@ -12,6 +12,7 @@ mod common;
 #[path = "../tests/support/liblcm.rs"]
 mod liblcm;
 
+use seabus_medium::lcm::wire;
 use seabus_medium::{Medium, Node, Payload, Stamp, Topic};
 use std::cell::RefCell;
 use std::rc::Rc;
@@ -173,6 +174,66 @@ fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
     seen
 }
 
+/// A seabus LCM medium receiving what plain sockets send (`senders` threads sharing `rate`): LC02
+/// datagrams made beforehand, so that the offered rate is the kernel's, not a sender library's.
+fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) -> Seen {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let rx_url = url.to_string();
+    let receiver = std::thread::spawn(move || {
+        runtime().block_on(async move {
+            let m = Medium::open("lcm", &rx_url, &Node::new("rx")).expect("opens");
+            let mut port = m
+                .attach_with("rx", n, 16)
+                .subscribed("**")
+                .expect("pattern");
+            let _ = ready_tx.send(());
+            let mut seen = Seen::default();
+            while let Ok(Some(msg)) = tokio::time::timeout(QUIET, port.recv()).await {
+                seen.take(msg.payload.as_bytes().map_or(&[][..], |b| &b[..]));
+                if seen.count == n {
+                    break;
+                }
+            }
+            seen
+        })
+    });
+    let _ = ready_rx.recv();
+    let rest = url.trim_start_matches("udpm://");
+    let group_port = rest.split('?').next().unwrap_or(rest);
+    let start = Instant::now();
+    let per = n / senders;
+    let threads: Vec<_> = (0..senders)
+        .map(|_| {
+            let group_port = group_port.to_string();
+            std::thread::spawn(move || {
+                let sock = std::net::UdpSocket::bind("0.0.0.0:0").expect("bind");
+                sock.set_multicast_ttl_v4(0).expect("ttl");
+                sock.connect(group_port).expect("connect");
+                let datagrams: Vec<Vec<u8>> = (0..per)
+                    .map(|i| {
+                        let mut d =
+                            wire::encode(i as u32, "BENCH", &vec![0u8; size]).expect("encodes");
+                        d.swap_remove(0)
+                    })
+                    .collect();
+                let start = Instant::now();
+                let each = rate / senders as f64;
+                for (i, d) in datagrams.iter().enumerate() {
+                    pace(start + Duration::from_secs_f64(i as f64 / each));
+                    let _ = sock.send(d);
+                }
+            })
+        })
+        .collect();
+    for t in threads {
+        let _ = t.join();
+    }
+    let offered = (per * senders) as f64 / start.elapsed().as_secs_f64();
+    let mut seen = receiver.join().expect("receiver");
+    seen.offered = offered;
+    seen
+}
+
 fn main() {
     let c_url = url();
     liblcm::use_url(&c_url);
@@ -209,11 +270,20 @@ fn main() {
     );
     let paced = seabus(&sb_url, 64, n, Some(300_000.0));
     println!(
-        "  64 B paced at 300k msg/s (sender reached {}): seabus delivered {} of {n}, lost {} (target: none)",
+        "  64 B paced at 300k msg/s from a seabus sender (it reached {}): seabus delivered {} of {n}, lost {}",
         common::rate(paced.offered),
         paced.count,
         n - paced.count
     );
+    for senders in [1, 2] {
+        let raw = seabus_from_raw(&sb_url, 64, n, 300_000.0, senders);
+        println!(
+            "  64 B paced at 300k msg/s from {senders} plain socket(s) (they reached {}): seabus delivered {} of {n}, lost {} (target: none)",
+            common::rate(raw.offered),
+            raw.count,
+            n - raw.count
+        );
+    }
 
     let n = 20_000;
     let (mut c_mb, mut s_mb) = (Vec::new(), Vec::new());
