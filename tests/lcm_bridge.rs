@@ -234,3 +234,38 @@ fn lcm_programs_see_the_demo_vehicle() {
     );
     assert_eq!(seen["control"], "in-control", "{seen}");
 }
+
+#[test]
+fn udpm_alone_is_the_lcm_default_url() {
+    let url = format!("udpm://{}:{}?ttl=0", group(), free_port());
+    let mut spy = seabus()
+        .args(["spy", "udpm://", "--json", "--for", "10"])
+        .env("LCM_DEFAULT_URL", &url)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spy starts");
+    // Python publishes until the spy has had time to start listening
+    let mut publisher = Command::new("python3")
+        .arg("-c")
+        .arg(
+            "import lcm, sys, time\n\
+             lc = lcm.LCM(sys.argv[1])\n\
+             for i in range(40):\n    lc.publish('DEFAULT_URL', b'hello'); time.sleep(0.1)\n",
+        )
+        .arg(&url)
+        .spawn()
+        .expect("python3 runs");
+    let mut line = String::new();
+    BufReader::new(spy.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let _ = spy.kill();
+    let _ = spy.wait();
+    let _ = publisher.kill();
+    let _ = publisher.wait();
+    let msg: serde_json::Value = serde_json::from_str(&line)
+        .unwrap_or_else(|e| panic!("spy printed a message as JSON ({e}): {line}"));
+    assert_eq!(msg["topic"], "DEFAULT_URL");
+    assert_eq!(msg["payload"]["base64"], "aGVsbG8=");
+}
