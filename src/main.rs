@@ -91,58 +91,14 @@ enum Command {
     /// The log is the file lcm-logger writes: one event per message, channel = topic, timestamp =
     /// arrival, data = the payload's bytes (datamaps in the binary form, XML as text). Exit 0; 1 when
     /// the file could not be written; 2 when the arguments, file or medium cannot be used.
-    Record {
-        /// The medium, for example udp://239.255.42.1:47800.
-        url: String,
-        /// The log file to write.
-        file: PathBuf,
-        /// Stop after this many seconds.
-        #[arg(long = "for", value_name = "SECS")]
-        duration: Option<f64>,
-        /// Only topics matching this seabus pattern.
-        #[arg(long, default_value = "**")]
-        topics: String,
-        /// Only topics this regular expression matches whole (as LCM channels are matched).
-        #[arg(long, value_name = "REGEX")]
-        channels: Option<String>,
-        /// Replace the file if it exists.
-        #[arg(long)]
-        force: bool,
-    },
+    Record(record::RecordArgs),
     /// Publish the events of an LCM event log on a medium, paced by their timestamps.
     ///
     /// Each event is sent as data: channel = topic, data = bytes payload; channels that are not
     /// seabus topics are skipped and counted. Exit 0; 1 when the log is damaged (the events before
     /// the damage are sent, and its byte offset is shown); 2 when the arguments, file or medium
     /// cannot be used; 3 when the medium refused events.
-    Replay {
-        /// The log file (written by seabus record, lcm-logger or any LCM event-log writer).
-        file: PathBuf,
-        /// The medium, for example udp://239.255.42.1:47800.
-        url: String,
-        /// Speed factor: 2 plays twice as fast; max (or 0) sends as fast as possible.
-        #[arg(
-            long,
-            default_value = "1",
-            value_name = "X",
-            allow_negative_numbers = true
-        )]
-        speed: String,
-        /// Skip the events of the first SECS seconds of the log.
-        #[arg(
-            long,
-            default_value_t = 0.0,
-            value_name = "SECS",
-            allow_negative_numbers = true
-        )]
-        from: f64,
-        /// Only channels this regular expression matches whole.
-        #[arg(long, value_name = "REGEX")]
-        channels: Option<String>,
-        /// Start again from the beginning at the end of the log, until Ctrl-C or SIGTERM.
-        #[arg(long = "loop")]
-        looping: bool,
-    },
+    Replay(record::ReplayArgs),
     /// List the module types, bridge types, medium schemes and standard datasets.
     Types,
 }
@@ -231,45 +187,8 @@ fn main() -> ExitCode {
                 command,
                 format,
             } => publish(&url, &topic, &fields, count, rate, command, &format).await,
-            Command::Record {
-                url,
-                file,
-                duration,
-                topics,
-                channels,
-                force,
-            } => match seconds(duration) {
-                Ok(duration) => {
-                    record::record(record::RecordArgs {
-                        url,
-                        file,
-                        duration,
-                        topics,
-                        channels,
-                        force,
-                    })
-                    .await
-                }
-                Err(code) => code,
-            },
-            Command::Replay {
-                file,
-                url,
-                speed,
-                from,
-                channels,
-                looping,
-            } => {
-                record::replay(record::ReplayArgs {
-                    file,
-                    url,
-                    speed,
-                    from,
-                    channels,
-                    looping,
-                })
-                .await
-            }
+            Command::Record(args) => record::record(args).await,
+            Command::Replay(args) => record::replay(args).await,
             Command::Types => {
                 types();
                 ExitCode::SUCCESS

@@ -38,18 +38,23 @@ const USAGE: u8 = 2;
 const NOT_SENT: u8 = 3;
 
 /// What `seabus record` was asked to do.
+#[derive(clap::Args)]
 pub struct RecordArgs {
-    /// The medium's URL.
+    /// The medium, for example udp://239.255.42.1:47800.
     pub url: String,
     /// The log file to write.
     pub file: PathBuf,
-    /// Stop after this long.
-    pub duration: Option<Duration>,
-    /// The seabus topic pattern to subscribe to.
+    /// Stop after this many seconds.
+    #[arg(long = "for", value_name = "SECS")]
+    pub duration: Option<f64>,
+    /// Only topics matching this seabus pattern.
+    #[arg(long, default_value = "**")]
     pub topics: String,
-    /// Only topics this regular expression matches whole.
+    /// Only topics this regular expression matches whole (as LCM channels are matched).
+    #[arg(long, value_name = "REGEX")]
     pub channels: Option<String>,
-    /// Replace an existing file.
+    /// Replace the file if it exists.
+    #[arg(long)]
     pub force: bool,
 }
 
@@ -83,6 +88,10 @@ pub async fn record(args: RecordArgs) -> ExitCode {
         eprintln!("seabus record: {msg}");
         ExitCode::from(USAGE)
     };
+    let duration = match crate::seconds(args.duration) {
+        Ok(d) => d,
+        Err(code) => return code,
+    };
     let channels = match compile_channels("record", args.channels.as_deref()) {
         Ok(c) => c,
         Err(code) => return code,
@@ -112,7 +121,7 @@ pub async fn record(args: RecordArgs) -> ExitCode {
         }
         Err(e) => return usage(format!("{file}: cannot create: {e}")),
     };
-    let deadline = args.duration.map(|d| Instant::now() + d);
+    let deadline = duration.map(|d| Instant::now() + d);
     let mut flush = tokio::time::interval(FLUSH_EVERY);
     let mut unflushed = false;
     let mut log = Recording {
@@ -238,18 +247,33 @@ impl Recording {
 }
 
 /// What `seabus replay` was asked to do.
+#[derive(clap::Args)]
 pub struct ReplayArgs {
-    /// The log file to read.
+    /// The log file (written by seabus record, lcm-logger or any LCM event-log writer).
     pub file: PathBuf,
-    /// The medium's URL.
+    /// The medium, for example udp://239.255.42.1:47800.
     pub url: String,
-    /// The speed: `max` or `0` for as fast as possible, else a factor above 0.
+    /// Speed factor: 2 plays twice as fast; max (or 0) sends as fast as possible.
+    #[arg(
+        long,
+        default_value = "1",
+        value_name = "X",
+        allow_negative_numbers = true
+    )]
     pub speed: String,
-    /// Seconds of the log to skip from its first event.
+    /// Skip the events of the first SECS seconds of the log.
+    #[arg(
+        long,
+        default_value_t = 0.0,
+        value_name = "SECS",
+        allow_negative_numbers = true
+    )]
     pub from: f64,
     /// Only channels this regular expression matches whole.
+    #[arg(long, value_name = "REGEX")]
     pub channels: Option<String>,
-    /// Start again at the end of the log.
+    /// Start again from the beginning at the end of the log, until Ctrl-C or SIGTERM.
+    #[arg(long = "loop")]
     pub looping: bool,
 }
 

@@ -2,7 +2,7 @@
 #![allow(dead_code)]
 
 use seabus_medium::DataMap;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// A ten-field datamap shaped like a navigation message.
 pub fn ten_fields() -> DataMap {
@@ -40,5 +40,20 @@ pub fn rate(r: f64) -> String {
         format!("{:.2} M msg/s", r / 1e6)
     } else {
         format!("{:.0} k msg/s", r / 1e3)
+    }
+}
+
+/// Waits until `deadline`, sleeping while far and spinning when near (for exact pacing).
+pub fn pace(deadline: Instant) {
+    loop {
+        let now = Instant::now();
+        if now >= deadline {
+            return;
+        }
+        if deadline - now > Duration::from_micros(200) {
+            std::thread::sleep(Duration::from_micros(100));
+        } else {
+            std::hint::spin_loop();
+        }
     }
 }

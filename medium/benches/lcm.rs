@@ -31,21 +31,6 @@ fn url() -> String {
     )
 }
 
-/// Waits until `deadline`, sleeping while far and spinning when near (for exact pacing).
-fn pace(deadline: Instant) {
-    loop {
-        let now = Instant::now();
-        if now >= deadline {
-            return;
-        }
-        if deadline - now > Duration::from_micros(200) {
-            std::thread::sleep(Duration::from_micros(100));
-        } else {
-            std::hint::spin_loop();
-        }
-    }
-}
-
 /// What a receiver saw: count, bytes, time from first to last, one-way latencies.
 #[derive(Default)]
 struct Seen {
@@ -116,7 +101,7 @@ fn c_lcm(size: usize, n: usize, rate: Option<f64>) -> Seen {
     let start = Instant::now();
     for i in 0..n {
         if let Some(r) = rate {
-            pace(start + Duration::from_secs_f64(i as f64 / r));
+            common::pace(start + Duration::from_secs_f64(i as f64 / r));
         }
         let _ = lc.publish("BENCH", &liblcm::Raw(stamped(size)));
     }
@@ -133,13 +118,14 @@ fn runtime() -> tokio::runtime::Runtime {
         .expect("runtime")
 }
 
-/// Two seabus LCM media, sender and receiver, each on its own thread.
-fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
+/// A seabus LCM medium on its own thread, taking up to `n` messages until the bus goes quiet;
+/// returns once it listens.
+fn seabus_receiver(url: &str, n: usize) -> std::thread::JoinHandle<Seen> {
     let (ready_tx, ready_rx) = mpsc::channel();
-    let rx_url = url.to_string();
+    let url = url.to_string();
     let receiver = std::thread::spawn(move || {
         runtime().block_on(async move {
-            let m = Medium::open("lcm", &rx_url, &Node::new("rx")).expect("opens");
+            let m = Medium::open("lcm", &url, &Node::new("rx")).expect("opens");
             let mut port = m
                 .attach_with("rx", n, 16)
                 .subscribed("**")
@@ -156,6 +142,12 @@ fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
         })
     });
     let _ = ready_rx.recv();
+    receiver
+}
+
+/// Two seabus LCM media, sender and receiver, each on its own thread.
+fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
+    let receiver = seabus_receiver(url, n);
     let offered = runtime().block_on(async move {
         let m = Medium::open("lcm", url, &Node::new("tx")).expect("opens");
         let port = m.attach("tx");
@@ -163,7 +155,7 @@ fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
         let start = Instant::now();
         for i in 0..n {
             if let Some(r) = rate {
-                pace(start + Duration::from_secs_f64(i as f64 / r));
+                common::pace(start + Duration::from_secs_f64(i as f64 / r));
             }
             let _ = port.send(&topic, Payload::from(stamped(size))).await;
         }
@@ -177,27 +169,7 @@ fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
 /// A seabus LCM medium receiving what plain sockets send (`senders` threads sharing `rate`): LC02
 /// datagrams made beforehand, so that the offered rate is the kernel's, not a sender library's.
 fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) -> Seen {
-    let (ready_tx, ready_rx) = mpsc::channel();
-    let rx_url = url.to_string();
-    let receiver = std::thread::spawn(move || {
-        runtime().block_on(async move {
-            let m = Medium::open("lcm", &rx_url, &Node::new("rx")).expect("opens");
-            let mut port = m
-                .attach_with("rx", n, 16)
-                .subscribed("**")
-                .expect("pattern");
-            let _ = ready_tx.send(());
-            let mut seen = Seen::default();
-            while let Ok(Some(msg)) = tokio::time::timeout(QUIET, port.recv()).await {
-                seen.take(msg.payload.as_bytes().map_or(&[][..], |b| &b[..]));
-                if seen.count == n {
-                    break;
-                }
-            }
-            seen
-        })
-    });
-    let _ = ready_rx.recv();
+    let receiver = seabus_receiver(url, n);
     let rest = url.trim_start_matches("udpm://");
     let group_port = rest.split('?').next().unwrap_or(rest);
     let start = Instant::now();
@@ -219,7 +191,7 @@ fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) 
                 let start = Instant::now();
                 let each = rate / senders as f64;
                 for (i, d) in datagrams.iter().enumerate() {
-                    pace(start + Duration::from_secs_f64(i as f64 / each));
+                    common::pace(start + Duration::from_secs_f64(i as f64 / each));
                     let _ = sock.send(d);
                 }
             })

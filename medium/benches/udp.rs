@@ -22,21 +22,6 @@ fn free_port() -> u16 {
         .expect("an ephemeral port")
 }
 
-/// Waits until `deadline`, sleeping while far and spinning when near (for exact pacing).
-fn pace(deadline: Instant) {
-    loop {
-        let now = Instant::now();
-        if now >= deadline {
-            return;
-        }
-        if deadline - now > Duration::from_micros(200) {
-            std::thread::sleep(Duration::from_micros(100));
-        } else {
-            std::hint::spin_loop();
-        }
-    }
-}
-
 /// What a receiver saw: count, time from first to last, one-way latencies.
 struct Seen {
     count: usize,
@@ -93,7 +78,7 @@ fn raw(size: usize, n: usize, rate: Option<f64>) -> Seen {
     let start = Instant::now();
     for i in 0..n {
         if let Some(r) = rate {
-            pace(start + Duration::from_secs_f64(i as f64 / r));
+            common::pace(start + Duration::from_secs_f64(i as f64 / r));
         }
         payload[..8].copy_from_slice(&now_nanos().to_le_bytes());
         let _ = tx.send_to(&payload, dest);
@@ -158,7 +143,7 @@ fn seabus(size: usize, n: usize, rate: Option<f64>) -> Seen {
         let start = Instant::now();
         for i in 0..n {
             if let Some(r) = rate {
-                pace(start + Duration::from_secs_f64(i as f64 / r));
+                common::pace(start + Duration::from_secs_f64(i as f64 / r));
             }
             let _ = port.send(&topic, payload.clone()).await;
         }
