@@ -64,6 +64,9 @@ enum Command {
         /// Only topics matching this pattern.
         #[arg(long, default_value = "**")]
         topics: String,
+        /// .lcm files or directories whose types are shown decoded (besides the built-in ones).
+        #[arg(long = "lcm-types", value_name = "PATH")]
+        lcm_types: Vec<PathBuf>,
     },
     /// Publish a datamap on a medium.
     Pub {
@@ -174,8 +177,9 @@ fn main() -> ExitCode {
                 duration,
                 json,
                 topics,
+                lcm_types,
             } => match seconds(duration) {
-                Ok(d) => spy::spy(&url, d, json, &topics).await,
+                Ok(d) => spy::spy(&url, d, json, &topics, &lcm_types).await,
                 Err(code) => code,
             },
             Command::Pub {

@@ -1,5 +1,7 @@
 //! `seabus spy`: a live table of the topics on a medium, or one JSON object per message.
 
+use seabus_bridges::lcm::recognise;
+use seabus_medium::lcm::types::ResolvedTypes;
 use seabus_medium::{Medium, Message, Node, Payload, Topic};
 use std::collections::BTreeMap;
 use std::io::{IsTerminal, Write};
@@ -8,9 +10,21 @@ use std::time::Duration;
 use tokio::time::Instant;
 
 /// One message as a JSON object, keys in this order: topic, kind, origin, seq, hops, stamp
-/// (seconds), format, payload (a datamap's entries in their own order; `{"error": …}` for a map
-/// nested too deep for the JSON form).
-pub fn message_json(m: &Message) -> String {
+/// (seconds), format, then `lcm_type` for an LCM message of a known type (its payload shown
+/// decoded), then payload (a datamap's entries in their own order; `{"error": …}` for a map nested
+/// too deep for the JSON form).
+pub fn message_json(m: &Message, types: &ResolvedTypes) -> String {
+    match recognise(types, &m.payload) {
+        Some((name, map)) => {
+            let mut m = m.clone();
+            m.payload = Payload::from(map);
+            message_json_as(&m, Some(name))
+        }
+        None => message_json_as(m, None),
+    }
+}
+
+fn message_json_as(m: &Message, lcm_type: Option<&str>) -> String {
     let text = |s: &str| serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into());
     let payload = match &m.payload {
         Payload::Map(map) => seabus_medium::json::to_json(map)
@@ -20,8 +34,9 @@ pub fn message_json(m: &Message) -> String {
             .unwrap_or_else(|_| "null".into()),
     };
     let stamp = serde_json::to_string(&m.stamp.as_secs_f64()).unwrap_or_else(|_| "null".into());
+    let lcm_type = lcm_type.map_or(String::new(), |t| format!(",\"lcm_type\":{}", text(t)));
     format!(
-        "{{\"topic\":{},\"kind\":\"{}\",\"origin\":{},\"seq\":{},\"hops\":{},\"stamp\":{},\"format\":\"{}\",\"payload\":{}}}",
+        "{{\"topic\":{},\"kind\":\"{}\",\"origin\":{},\"seq\":{},\"hops\":{},\"stamp\":{},\"format\":\"{}\"{lcm_type},\"payload\":{}}}",
         text(&m.topic),
         m.kind.name(),
         text(&m.origin().to_string()),
@@ -50,7 +65,12 @@ fn shorten(text: String, max: usize) -> String {
     s
 }
 
-fn print_table(rows: &BTreeMap<Topic, Row>, out: &mut impl Write, clear: bool) {
+fn print_table(
+    rows: &BTreeMap<Topic, Row>,
+    types: &ResolvedTypes,
+    out: &mut impl Write,
+    clear: bool,
+) {
     if clear {
         let _ = write!(out, "\x1b[2J\x1b[H");
     }
@@ -67,14 +87,34 @@ fn print_table(rows: &BTreeMap<Topic, Row>, out: &mut impl Write, clear: bool) {
             r.count,
             r.rate,
             shorten(r.last.origin().to_string(), 22),
-            shorten(r.last.payload.to_string(), 70)
+            shorten(
+                match recognise(types, &r.last.payload) {
+                    Some((name, map)) => format!("{name} {map}"),
+                    None => r.last.payload.to_string(),
+                },
+                70
+            )
         );
     }
     let _ = out.flush();
 }
 
-/// Runs the spy until `duration` passes (or Ctrl-C).
-pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str) -> ExitCode {
+/// Runs the spy until `duration` passes (or Ctrl-C). LCM messages of the built-in types or those
+/// of `lcm_types` are shown decoded.
+pub async fn spy(
+    url: &str,
+    duration: Option<Duration>,
+    json: bool,
+    topics: &str,
+    lcm_types: &[std::path::PathBuf],
+) -> ExitCode {
+    let types = match seabus_bridges::lcm::types_with(lcm_types) {
+        Ok(t) => t,
+        Err(e) => {
+            eprintln!("seabus spy: --lcm-types: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let node = Node::new(&format!("spy-{}", std::process::id()));
     let medium = match Medium::open("spy", url, &node) {
         Ok(m) => m,
@@ -118,14 +158,14 @@ pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str
                     r.counted_at_refresh = r.count;
                 }
                 if live {
-                    print_table(&rows, &mut stdout.lock(), true);
+                    print_table(&rows, &types, &mut stdout.lock(), true);
                 }
             }
             m = port.recv() => {
                 let Some(m) = m else { break };
                 if json {
                     let mut out = stdout.lock();
-                    if writeln!(out, "{}", message_json(&m)).is_err() {
+                    if writeln!(out, "{}", message_json(&m, &types)).is_err() {
                         break;
                     }
                 } else {
@@ -149,7 +189,7 @@ pub async fn spy(url: &str, duration: Option<Duration>, json: bool, topics: &str
         }
     }
     if !json {
-        print_table(&rows, &mut stdout.lock(), false);
+        print_table(&rows, &types, &mut stdout.lock(), false);
     }
     let st = port.stats();
     if st.dropped_oldest > 0 || medium.stats().rejected_total() > 0 {
@@ -168,6 +208,55 @@ mod tests {
     use super::*;
     use seabus_medium::message::{Kind, Origin, Provenance, Stamp};
     use seabus_medium::{DataMap, Value};
+
+    fn built_in() -> ResolvedTypes {
+        seabus_bridges::lcm::types_with(&[]).unwrap()
+    }
+
+    #[test]
+    fn lcm_messages_of_known_types_show_decoded() {
+        let types = built_in();
+        let ty = types.get("seabus.depth_t").unwrap();
+        let bytes = seabus_medium::lcm::codec::encode(
+            &types,
+            ty,
+            &DataMap::new().with("utime", 1i64).with("depth", 12.5f64),
+        )
+        .unwrap();
+        let m = message(DataMap::new());
+        let m = Message {
+            payload: Payload::from(bytes),
+            ..m
+        };
+        let json: serde_json::Value = serde_json::from_str(&message_json(&m, &types)).unwrap();
+        assert_eq!(json["lcm_type"], "seabus.depth_t");
+        assert_eq!(json["payload"]["depth"], 12.5);
+        let mut rows = BTreeMap::new();
+        rows.insert(
+            m.topic.clone(),
+            Row {
+                count: 1,
+                counted_at_refresh: 0,
+                rate: 0.0,
+                last: m,
+            },
+        );
+        let mut out = Vec::new();
+        print_table(&rows, &types, &mut out, false);
+        let text = String::from_utf8(out).unwrap();
+        assert!(
+            text.contains("seabus.depth_t") && text.contains("depth=12.5"),
+            "{text}"
+        );
+        // bytes that are not a known type stay bytes
+        let plain = Message {
+            payload: Payload::from(b"12345678 not lcm".to_vec()),
+            ..message(DataMap::new())
+        };
+        let json: serde_json::Value = serde_json::from_str(&message_json(&plain, &types)).unwrap();
+        assert!(json.get("lcm_type").is_none());
+        assert_eq!(json["format"], "bytes");
+    }
 
     fn message(payload: DataMap) -> Message {
         Message {
@@ -204,10 +293,10 @@ mod tests {
             },
         );
         let mut out = Vec::new();
-        print_table(&rows, &mut out, false);
+        print_table(&rows, &built_in(), &mut out, false);
         let table = String::from_utf8(out).unwrap();
         assert!(table.contains("pose={x=1, y=2} wps=[{z=0.5}]"), "{table}");
-        let json: serde_json::Value = serde_json::from_str(&message_json(&m)).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&message_json(&m, &built_in())).unwrap();
         assert_eq!(
             json["payload"],
             serde_json::json!({"pose": {"x": 1, "y": 2}, "wps": [{"z": 0.5}]})
@@ -220,8 +309,11 @@ mod tests {
         for _ in 0..=seabus_medium::datamap::MAX_DEPTH {
             v = Value::Map(DataMap::new().with("k", v));
         }
-        let json: serde_json::Value =
-            serde_json::from_str(&message_json(&message(DataMap::new().with("deep", v)))).unwrap();
+        let json: serde_json::Value = serde_json::from_str(&message_json(
+            &message(DataMap::new().with("deep", v)),
+            &built_in(),
+        ))
+        .unwrap();
         assert_eq!(
             json["payload"]["error"],
             "lists and maps nested deeper than 32"

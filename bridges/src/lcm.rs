@@ -13,7 +13,7 @@ use seabus_medium::lcm::types::{MemberType, Primitive, ResolvedTypes, TypeSet};
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Payload, Stamp, Value};
 use seabus_modules::system::{BridgeSpec, RouteSpec};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// The LCM types of the standard datasets, built in.
@@ -21,10 +21,19 @@ pub const BUILT_IN: &str = include_str!("../../configs/lcm/seabus.lcm");
 /// The name the built-in types' file is known by in messages.
 pub const BUILT_IN_FILE: &str = "configs/lcm/seabus.lcm";
 
-/// The LCM types a bridge can use: the built-in ones and those its `lcm_types` parameter names.
-pub fn load(spec: &BridgeSpec) -> Result<Arc<ResolvedTypes>, FileError> {
+/// The built-in LCM types and those of `paths` (`.lcm` files, or directories of them).
+pub fn types_with(paths: &[PathBuf]) -> Result<ResolvedTypes, FileError> {
     let mut set = TypeSet::new();
     set.add_text(BUILT_IN_FILE, BUILT_IN)?;
+    for path in paths {
+        set.add_path(path)?;
+    }
+    set.resolve()
+}
+
+/// The LCM types a bridge can use: the built-in ones and those its `lcm_types` parameter names.
+pub fn load(spec: &BridgeSpec) -> Result<Arc<ResolvedTypes>, FileError> {
+    let mut paths = Vec::new();
     if let Some(p) = spec.params.get("lcm_types") {
         let base = Path::new(&*spec.pos.file)
             .parent()
@@ -37,10 +46,20 @@ pub fn load(spec: &BridgeSpec) -> Result<Arc<ResolvedTypes>, FileError> {
                     path.display()
                 )));
             }
-            set.add_path(&path)?;
+            paths.push(path);
         }
     }
-    set.resolve().map(Arc::new)
+    types_with(&paths).map(Arc::new)
+}
+
+/// Decodes a payload that is an LCM message of a type in `types` (found by its fingerprint):
+/// the type and the datamap, or `None` when it is not one.
+pub fn recognise<'t>(types: &'t ResolvedTypes, payload: &Payload) -> Option<(&'t str, DataMap)> {
+    let bytes = payload.as_bytes()?;
+    let fingerprint = u64::from_be_bytes(bytes.get(..8)?.try_into().ok()?);
+    let ty = types.by_fingerprint(fingerprint)?;
+    let map = codec::decode(types, ty, bytes).ok()?;
+    Some((ty.full_name(), map))
 }
 
 /// What a route does with LCM: decode on the way in, encode on the way out, or both.
