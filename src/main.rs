@@ -69,26 +69,7 @@ enum Command {
         lcm_types: Vec<PathBuf>,
     },
     /// Publish a datamap on a medium.
-    Pub {
-        /// The medium, for example udp://239.255.42.1:47800.
-        url: String,
-        /// The topic.
-        topic: String,
-        /// Fields as key=value (true/false, integers and numbers are typed; "quoted" is a string).
-        fields: Vec<String>,
-        /// How many messages to send.
-        #[arg(long, default_value_t = 1)]
-        count: u64,
-        /// Messages per second when sending several.
-        #[arg(long, default_value_t = 1.0)]
-        rate: f64,
-        /// Send as a command rather than data.
-        #[arg(long)]
-        command: bool,
-        /// Payload format: map, xml or bytes.
-        #[arg(long, default_value = "map")]
-        format: String,
-    },
+    Pub(PubArgs),
     /// Record the traffic on a medium to an LCM event log, until Ctrl-C, SIGTERM or --for.
     ///
     /// The log is the file lcm-logger writes: one event per message, channel = topic, timestamp =
@@ -104,6 +85,35 @@ enum Command {
     Replay(record::ReplayArgs),
     /// List the module types, bridge types, medium schemes and standard datasets.
     Types,
+}
+
+/// What `seabus pub` sends.
+#[derive(clap::Args)]
+struct PubArgs {
+    /// The medium, for example udp://239.255.42.1:47800.
+    url: String,
+    /// The topic.
+    topic: String,
+    /// Fields as key=value (true/false, integers and numbers are typed; "quoted" is a string).
+    fields: Vec<String>,
+    /// How many messages to send.
+    #[arg(long, default_value_t = 1)]
+    count: u64,
+    /// Messages per second when sending several.
+    #[arg(long, default_value_t = 1.0)]
+    rate: f64,
+    /// Send as a command rather than data.
+    #[arg(long)]
+    command: bool,
+    /// Payload format: map, xml or bytes.
+    #[arg(long, default_value = "map")]
+    format: String,
+    /// Send an LCM message of this type (package.name_t) made from the fields, for LCM programs.
+    #[arg(long, value_name = "TYPE")]
+    lcm: Option<String>,
+    /// .lcm files or directories with the type (besides the built-in ones).
+    #[arg(long = "lcm-types", value_name = "PATH")]
+    lcm_types: Vec<PathBuf>,
 }
 
 fn registry() -> Registry {
@@ -182,15 +192,7 @@ fn main() -> ExitCode {
                 Ok(d) => spy::spy(&url, d, json, &topics, &lcm_types).await,
                 Err(code) => code,
             },
-            Command::Pub {
-                url,
-                topic,
-                fields,
-                count,
-                rate,
-                command,
-                format,
-            } => publish(&url, &topic, &fields, count, rate, command, &format).await,
+            Command::Pub(args) => publish(args).await,
             Command::Record(args) => record::record(args).await,
             Command::Replay(args) => record::replay(args).await,
             Command::Types => {
@@ -320,24 +322,27 @@ fn fields_map(fields: &[String]) -> Result<DataMap, String> {
     Ok(map)
 }
 
-async fn publish(
-    url: &str,
-    topic: &str,
-    fields: &[String],
-    count: u64,
-    rate: f64,
-    command: bool,
-    format: &str,
-) -> ExitCode {
+async fn publish(args: PubArgs) -> ExitCode {
     let usage = |msg: String| {
         eprintln!("seabus pub: {msg}");
         ExitCode::from(2)
     };
-    let map = match fields_map(fields) {
+    let PubArgs {
+        url,
+        topic,
+        fields,
+        count,
+        rate,
+        command,
+        format,
+        lcm,
+        lcm_types,
+    } = args;
+    let map = match fields_map(&fields) {
         Ok(m) => m,
         Err(e) => return usage(e),
     };
-    let Some(format) = Format::parse(format) else {
+    let Some(format) = Format::parse(&format) else {
         return usage(format!("`{format}` is not a format: map, xml or bytes"));
     };
     let Some(period) = seabus_medium::parse::rate_period(rate) else {
@@ -345,12 +350,18 @@ async fn publish(
             "--rate {rate}: expected above 0 and at most a million per second"
         ));
     };
-    let payload = match Payload::from(map).convert(format) {
-        Ok(p) => p,
-        Err(e) => return usage(e.to_string()),
+    let payload = match &lcm {
+        Some(name) => match lcm_message(name, &lcm_types, &map) {
+            Ok(p) => p,
+            Err(e) => return usage(e),
+        },
+        None => match Payload::from(map).convert(format) {
+            Ok(p) => p,
+            Err(e) => return usage(e.to_string()),
+        },
     };
     let node = Node::new(&format!("pub-{}", std::process::id()));
-    let medium = match Medium::open("pub", url, &node) {
+    let medium = match Medium::open("pub", &url, &node) {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };
@@ -359,11 +370,31 @@ async fn publish(
     let mut ticker = tokio::time::interval(period);
     for _ in 0..count {
         ticker.tick().await;
-        if let Err(e) = port.publish(kind, topic, payload.clone()).await {
+        if let Err(e) = port.publish(kind, topic.as_str(), payload.clone()).await {
             return usage(e.to_string());
         }
     }
     ExitCode::SUCCESS
+}
+
+/// The LCM message of type `name` made from `map` (a missing `utime` is now).
+fn lcm_message(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<Payload, String> {
+    let types = seabus_bridges::lcm::types_with(paths).map_err(|e| format!("--lcm-types: {e}"))?;
+    let Some(ty) = types.get(name) else {
+        let mut known: Vec<&str> = types.iter().map(|t| t.full_name()).collect();
+        known.sort_unstable();
+        return Err(format!(
+            "--lcm {name}: no such LCM type; known types: {}",
+            known.join(", ")
+        ));
+    };
+    let mut map = map.clone();
+    if ty.member("utime").is_some() && map.get("utime").is_none() {
+        map.insert("utime", Value::Int(seabus_medium::Stamp::now().0 / 1_000));
+    }
+    seabus_medium::lcm::codec::encode(&types, ty, &map)
+        .map(Payload::from)
+        .map_err(|e| format!("--lcm {name}: {e}"))
 }
 
 fn types() {

@@ -269,3 +269,67 @@ fn udpm_alone_is_the_lcm_default_url() {
     assert_eq!(msg["topic"], "DEFAULT_URL");
     assert_eq!(msg["payload"]["base64"], "aGVsbG8=");
 }
+
+#[test]
+fn pub_sends_typed_lcm_messages_that_lcm_programs_read() {
+    let dir = tempfile::tempdir().unwrap();
+    lcm_gen(
+        dir.path(),
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/lcm/seabus.lcm"),
+    );
+    let url = format!("udpm://{}:{}?ttl=0", group(), free_port());
+    let mut reader = python(
+        dir.path(),
+        "import json, sys, time\n\
+         import lcm\n\
+         from seabus import depth_t\n\
+         lc = lcm.LCM(sys.argv[1])\n\
+         got = []\n\
+         lc.subscribe('NAV_DEPTH', lambda c, d: got.append(depth_t.decode(d)))\n\
+         print('ready', flush=True)\n\
+         end = time.time() + 10\n\
+         while not got and time.time() < end:\n    lc.handle_timeout(100)\n\
+         m = got[0]\n\
+         print(json.dumps(dict(depth=m.depth, utime=m.utime, unknown=m.pressure != m.pressure)))\n",
+        &[&url],
+    );
+    let mut lines = BufReader::new(reader.stdout.take().unwrap()).lines();
+    assert_eq!(lines.next().unwrap().unwrap(), "ready");
+    let sent = seabus()
+        .args([
+            "pub",
+            &url,
+            "NAV_DEPTH",
+            "depth=3.5",
+            "--lcm",
+            "seabus.depth_t",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        sent.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sent.stderr)
+    );
+    let line = lines.next().unwrap().unwrap();
+    let _ = reader.wait();
+    let got: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(got["depth"], 3.5);
+    assert_eq!(got["unknown"], true, "a field not given is NaN");
+    let now_us = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_micros() as i64;
+    assert!((now_us - got["utime"].as_i64().unwrap()).abs() < 10_000_000);
+
+    let bad = seabus()
+        .args(["pub", &url, "X", "depth=1", "--lcm", "seabus.nope_t"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        err.contains("--lcm seabus.nope_t: no such LCM type") && err.contains("seabus.depth_t"),
+        "{err}"
+    );
+}
