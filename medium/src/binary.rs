@@ -386,6 +386,7 @@ impl Reader<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::datamap::nested_maps;
 
     #[test]
     fn documented_example_bytes() {
@@ -525,19 +526,6 @@ mod tests {
         let mut v = Value::Int(1);
         for _ in 0..lists {
             v = Value::List(vec![v]);
-        }
-        DataMap::new().with("k", v)
-    }
-
-    /// A map whose one entry holds `levels` lists and maps, alternating, each inside the one before.
-    fn nested_maps(levels: usize) -> DataMap {
-        let mut v = Value::Int(1);
-        for i in 0..levels {
-            v = if i % 2 == 0 {
-                Value::Map(DataMap::new().with("k", v))
-            } else {
-                Value::List(vec![v])
-            };
         }
         DataMap::new().with("k", v)
     }

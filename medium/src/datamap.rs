@@ -390,6 +390,20 @@ impl<K: Into<Key>, V: Into<Value>> FromIterator<(K, V)> for DataMap {
     }
 }
 
+/// A map whose one entry holds `levels` maps and lists, alternating, each inside the one before.
+#[cfg(test)]
+pub(crate) fn nested_maps(levels: usize) -> DataMap {
+    let mut v = Value::Int(1);
+    for i in 0..levels {
+        v = if i % 2 == 0 {
+            Value::Map(DataMap::new().with("k", v))
+        } else {
+            Value::List(vec![v])
+        };
+    }
+    DataMap::new().with("k", v)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -312,6 +312,7 @@ pub fn from_json(text: &str) -> Result<DataMap, serde_json::Error> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::datamap::nested_maps;
 
     #[test]
     fn json_round_trips_every_value() {
@@ -380,24 +381,11 @@ mod tests {
         assert_eq!(m.get("d"), Some(&Value::Map(DataMap::new())));
     }
 
-    /// A map whose one entry holds `levels` maps and lists, alternating, each inside the one before.
-    fn nested(levels: usize) -> DataMap {
-        let mut v = Value::Int(1);
-        for i in 0..levels {
-            v = if i % 2 == 0 {
-                Value::Map(DataMap::new().with("k", v))
-            } else {
-                Value::List(vec![v])
-            };
-        }
-        DataMap::new().with("k", v)
-    }
-
     #[test]
     fn deep_maps_are_refused_by_writer_and_reader_alike() {
-        let deepest = nested(MAX_DEPTH);
+        let deepest = nested_maps(MAX_DEPTH);
         assert_eq!(from_json(&to_json(&deepest).unwrap()).unwrap(), deepest);
-        assert_eq!(to_json(&nested(MAX_DEPTH + 1)), Err(TooDeep));
+        assert_eq!(to_json(&nested_maps(MAX_DEPTH + 1)), Err(TooDeep));
         // one map too many, wrapped or not, and one list too many
         for (open, close) in [(r#"{"k":"#, "}"), (r#"{"map":{"map":"#, "}}"), ("[", "]")] {
             let text = format!(

@@ -605,6 +605,7 @@ fn parse_float(t: &str) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::datamap::nested_maps;
 
     fn sample() -> DataMap {
         DataMap::new()
@@ -766,24 +767,11 @@ mod tests {
         assert_eq!(from_xml(&xml).unwrap_err().kind, XmlFormErrorKind::TooDeep);
     }
 
-    /// A map whose one entry holds `levels` maps and lists, alternating, each inside the one before.
-    fn nested(levels: usize) -> DataMap {
-        let mut v = Value::Int(1);
-        for i in 0..levels {
-            v = if i % 2 == 0 {
-                Value::Map(DataMap::new().with("k", v))
-            } else {
-                Value::List(vec![v])
-            };
-        }
-        DataMap::new().with("k", v)
-    }
-
     #[test]
     fn deep_maps_are_refused_by_writer_and_reader_alike() {
-        let deepest = nested(MAX_DEPTH);
+        let deepest = nested_maps(MAX_DEPTH);
         assert_eq!(from_xml(&to_xml(&deepest).unwrap()).unwrap(), deepest);
-        assert_eq!(to_xml(&nested(MAX_DEPTH + 1)), Err(TooDeep));
+        assert_eq!(to_xml(&nested_maps(MAX_DEPTH + 1)), Err(TooDeep));
         // maps only, one level too many: refused at the start tag of the map too many
         let mut xml = String::from("<datamap>");
         for _ in 0..=MAX_DEPTH {

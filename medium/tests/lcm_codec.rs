@@ -3,12 +3,15 @@
 //! reading compared through a JSON view of the message. Every lcm-gen found is checked: the one on
 //! PATH and Debian's `/usr/bin/lcm-gen`.
 
+#[path = "support/lcm_gen.rs"]
+mod support;
+
 use seabus_medium::lcm::codec::{decode, encode};
 use seabus_medium::lcm::types::{ResolvedTypes, TypeSet};
 use seabus_medium::{DataMap, Value};
 use serde_json::json;
-use std::path::{Path, PathBuf};
 use std::process::Command;
+use support::generators;
 
 /// Structs of another package, used by the ones below.
 const GEO: &str = "package geo;\n\
@@ -118,25 +121,6 @@ struct Setup {
     types: ResolvedTypes,
 }
 
-/// The executable `name` names: on PATH, or as given when it holds a `/`.
-fn executable(name: &str) -> Option<PathBuf> {
-    if name.contains('/') {
-        return Path::new(name).canonicalize().ok();
-    }
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .map(|dir| dir.join(name))
-        .find(|p| p.is_file())
-        .and_then(|p| p.canonicalize().ok())
-}
-
-/// The version line an lcm-gen prints, if it runs.
-fn version(exe: &Path) -> Option<String> {
-    let out = Command::new(exe).arg("--version").output().ok()?;
-    let text = String::from_utf8_lossy(&out.stdout).trim().to_string();
-    (out.status.success() && !text.is_empty()).then_some(text)
-}
-
 /// Every lcm-gen found, one per version, each with its Python code generated; fails, saying how
 /// to install them, when there is none or Python is missing.
 fn setups() -> Vec<Setup> {
@@ -145,32 +129,20 @@ fn setups() -> Vec<Setup> {
         python.is_ok_and(|o| o.status.success()),
         "python3 is not installed: run ./scripts/test"
     );
-    let mut versions = Vec::new();
     let mut out = Vec::new();
-    for name in ["lcm-gen", "/usr/bin/lcm-gen"] {
-        let Some(exe) = executable(name) else {
-            continue;
-        };
-        let Some(v) = version(&exe) else {
-            continue;
-        };
-        if versions.contains(&v) {
-            continue;
-        }
-        versions.push(v.clone());
+    for generator in generators(false) {
         let dir = tempfile::tempdir().expect("a temporary directory");
         std::fs::write(dir.path().join("geo.lcm"), GEO).expect("a written file");
         std::fs::write(dir.path().join("interop.lcm"), INTEROP).expect("a written file");
         std::fs::write(dir.path().join("view.py"), PYTHON).expect("a written file");
-        let gen_out = Command::new(&exe)
-            .args(["-p", "--ppath", "py", "geo.lcm", "interop.lcm"])
-            .current_dir(dir.path())
-            .output()
-            .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+        let gen_out = generator.run(
+            dir.path(),
+            &["-p", "--ppath", "py", "geo.lcm", "interop.lcm"],
+        );
         assert!(
             gen_out.status.success(),
             "{} -p failed:\n{}{}",
-            exe.display(),
+            generator.name(),
             String::from_utf8_lossy(&gen_out.stdout),
             String::from_utf8_lossy(&gen_out.stderr)
         );
@@ -180,16 +152,11 @@ fn setups() -> Vec<Setup> {
             .unwrap_or_else(|e| panic!("{e}"));
         let types = set.resolve().unwrap_or_else(|e| panic!("{e}"));
         out.push(Setup {
-            name: format!("{} ({v})", exe.display()),
+            name: generator.name(),
             dir,
             types,
         });
     }
-    assert!(
-        !out.is_empty(),
-        "lcm-gen is not installed: run ./scripts/test, or install Debian's liblcm-bin or Python's \
-         lcm package (pip install lcm)"
-    );
     out
 }
 

@@ -3,10 +3,14 @@
 //! (`lcm-gen -p`), and files lcm-gen refuses are refused. Every lcm-gen found is checked: the one on
 //! PATH, Debian's `/usr/bin/lcm-gen` and the one of the Python package `lcm`.
 
+#[path = "support/lcm_gen.rs"]
+mod support;
+
 use seabus_medium::lcm::types::{ResolvedTypes, TypeSet};
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
+use std::process::Command;
+use support::{Generator, generators};
 
 /// Files for every lcm-gen, in the order given to it (lcm-gen carries a `package` line on into the
 /// files after it, so the file without one comes first).
@@ -107,93 +111,6 @@ const REFUSED: &[&str] = &[
     "package p struct a { }",
     "struct a { int32_t c/* a comment needs white space before it */; }",
 ];
-
-/// An lcm-gen to run: the command and its version.
-struct Generator {
-    command: Vec<String>,
-    version: (u32, u32, u32),
-}
-
-impl Generator {
-    fn run(&self, dir: &Path, args: &[&str]) -> Output {
-        let (program, first) = self.command.split_first().expect("a command");
-        Command::new(program)
-            .args(first)
-            .args(args)
-            .current_dir(dir)
-            .output()
-            .unwrap_or_else(|e| panic!("cannot run {:?}: {e}", self.command))
-    }
-
-    fn name(&self) -> String {
-        let (a, b, c) = self.version;
-        format!("{} ({a}.{b}.{c})", self.command.join(" "))
-    }
-}
-
-/// The version an lcm-gen reports (`lcm-gen 1.5.3`), if it runs.
-fn version(command: &[String]) -> Option<(u32, u32, u32)> {
-    let (program, first) = command.split_first()?;
-    let out = Command::new(program)
-        .args(first)
-        .arg("--version")
-        .output()
-        .ok()?;
-    let text = String::from_utf8_lossy(&out.stdout);
-    let v = text.split_whitespace().nth(1)?;
-    let mut parts = v.split('.').map(|p| p.parse().ok());
-    Some((parts.next()??, parts.next()??, parts.next()??))
-}
-
-/// The executable `name` names: on PATH, or as given when it holds a `/`.
-fn executable(name: &str) -> Option<PathBuf> {
-    if name.contains('/') {
-        return Path::new(name).canonicalize().ok();
-    }
-    let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path)
-        .map(|dir| dir.join(name))
-        .find(|p| p.is_file())
-        .and_then(|p| p.canonicalize().ok())
-}
-
-/// Every lcm-gen found, one per version; fails, saying how to install one, when there is none.
-fn generators() -> Vec<Generator> {
-    let mut seen = Vec::new();
-    let mut out: Vec<Generator> = Vec::new();
-    for name in ["lcm-gen", "/usr/bin/lcm-gen"] {
-        let Some(exe) = executable(name) else {
-            continue;
-        };
-        if seen.contains(&exe) {
-            continue;
-        }
-        let command = vec![exe.display().to_string()];
-        if let Some(version) = version(&command).filter(|v| out.iter().all(|g| g.version != *v)) {
-            seen.push(exe);
-            out.push(Generator { command, version });
-        }
-    }
-    let python = [
-        "python3",
-        "-c",
-        "import sys; from lcm import run_gen; sys.argv[0] = 'lcm-gen'; run_gen()",
-    ]
-    .map(String::from)
-    .to_vec();
-    if let Some(version) = version(&python).filter(|v| out.iter().all(|g| g.version != *v)) {
-        out.push(Generator {
-            command: python,
-            version,
-        });
-    }
-    assert!(
-        !out.is_empty(),
-        "lcm-gen is not installed: run ./scripts/test, or install Debian's liblcm-bin or Python's \
-         lcm package (pip install lcm)"
-    );
-    out
-}
 
 /// The files for `generator`, in order.
 fn files_for(generator: &Generator) -> Vec<(String, String)> {
@@ -307,7 +224,7 @@ fn seabus(dir: &Path, files: &[&str]) -> ResolvedTypes {
 
 #[test]
 fn hashes_and_fingerprints_match_lcm_gen() {
-    for generator in generators() {
+    for generator in generators(true) {
         eprintln!("checking against {}", generator.name());
         let dir = tempfile::tempdir().expect("a temporary directory");
         let files = files_for(&generator);
@@ -342,7 +259,7 @@ fn hashes_and_fingerprints_match_lcm_gen() {
 
 #[test]
 fn files_lcm_gen_refuses_are_refused() {
-    for generator in generators() {
+    for generator in generators(true) {
         let dir = tempfile::tempdir().expect("a temporary directory");
         for (i, text) in REFUSED.iter().enumerate() {
             let name = format!("bad{i}.lcm");

@@ -67,6 +67,28 @@ async fn next(iface: &mut seabus_medium::Interface) -> Message {
         .expect("medium open")
 }
 
+/// The topics and payloads of the first `n` messages whose topic starts with `prefix`, sorted;
+/// fewer if [`WAIT`] passes first.
+async fn receive(
+    iface: &mut seabus_medium::Interface,
+    n: usize,
+    prefix: &str,
+) -> Vec<(String, Vec<u8>)> {
+    let mut got = Vec::new();
+    let deadline = Instant::now() + WAIT;
+    while got.len() < n && Instant::now() < deadline {
+        let msg = next(iface).await;
+        if msg.topic.as_str().starts_with(prefix) {
+            got.push((
+                msg.topic.to_string(),
+                msg.payload.as_bytes().unwrap().to_vec(),
+            ));
+        }
+    }
+    got.sort();
+    got
+}
+
 fn python(script: &str) -> std::process::Child {
     Command::new("python3")
         .arg("-c")
@@ -97,18 +119,7 @@ async fn liblcm_messages_reach_seabus() {
         lc.publish("C_SHORT", &Raw(s)).expect("liblcm publishes");
         lc.publish("C_BIG", &Raw(b)).expect("liblcm publishes");
     });
-    let mut got = Vec::new();
-    let deadline = Instant::now() + WAIT;
-    while got.len() < 2 && Instant::now() < deadline {
-        let msg = next(&mut iface).await;
-        if msg.topic.as_str().starts_with("C_") {
-            got.push((
-                msg.topic.to_string(),
-                msg.payload.as_bytes().unwrap().to_vec(),
-            ));
-        }
-    }
-    got.sort();
+    let got = receive(&mut iface, 2, "C_").await;
     assert_eq!(
         got,
         vec![("C_BIG".to_string(), big), ("C_SHORT".to_string(), short)]
@@ -239,19 +250,8 @@ lc.publish('PY_TO_SB_SHORT', bytes(range(64)))
 lc.publish('PY_TO_SB_BIG', bytes(i % 251 for i in range({BIG})))
 "
     ));
-    let mut got = Vec::new();
-    let deadline = Instant::now() + WAIT;
-    while got.len() < 2 && Instant::now() < deadline {
-        let msg = next(&mut iface).await;
-        if msg.topic.as_str().starts_with("PY_TO_SB_") {
-            got.push((
-                msg.topic.to_string(),
-                msg.payload.as_bytes().unwrap().to_vec(),
-            ));
-        }
-    }
+    let got = receive(&mut iface, 2, "PY_TO_SB_").await;
     assert!(publisher.wait().unwrap().success());
-    got.sort();
     assert_eq!(
         got,
         vec![
@@ -362,16 +362,7 @@ async fn fragments_in_any_order_repeated_missing_and_interleaved() {
         }
         std::thread::sleep(Duration::from_millis(2));
     }
-    let mut got = Vec::new();
-    let deadline = Instant::now() + WAIT;
-    while got.len() < 2 && Instant::now() < deadline {
-        let msg = next(&mut iface).await;
-        got.push((
-            msg.topic.to_string(),
-            msg.payload.as_bytes().unwrap().to_vec(),
-        ));
-    }
-    got.sort();
+    let got = receive(&mut iface, 2, "").await;
     assert_eq!(
         got,
         vec![("FRAG_A".to_string(), pa), ("FRAG_B".to_string(), pb)]

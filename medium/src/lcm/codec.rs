@@ -1506,66 +1506,31 @@ mod tests {
     #[test]
     fn numbers_out_of_range_are_refused_naming_the_field() {
         let t = types(PRIMITIVES);
-        let cases: Vec<(&str, Value, &str)> = vec![
-            (
-                "a",
-                Value::Int(128),
-                "field `a` (int8_t) cannot take 128: not an integer from -128 to 127",
-            ),
-            (
-                "a",
-                Value::Int(-129),
-                "field `a` (int8_t) cannot take -129: not an integer from -128 to 127",
-            ),
-            (
-                "b",
-                Value::Int(32768),
-                "field `b` (int16_t) cannot take 32768: not an integer from -32768 to 32767",
-            ),
-            (
-                "c",
-                Value::Int(1 << 31),
-                "field `c` (int32_t) cannot take 2147483648: not an integer from -2147483648 to 2147483647",
-            ),
-            (
-                "c",
-                Value::Float(1.5),
-                "field `c` (int32_t) cannot take 1.5: not an integer from -2147483648 to 2147483647",
-            ),
-            (
-                "d",
-                Value::Float(9.3e18),
-                "field `d` (int64_t) cannot take 9.3e18: not an integer from -9223372036854775808 to 9223372036854775807",
-            ),
-            (
-                "d",
-                Value::Float(f64::NAN),
-                "field `d` (int64_t) cannot take NaN: not an integer from",
-            ),
-            (
-                "e",
-                Value::Int(256),
-                "field `e` (byte) cannot take 256: not an integer from 0 to 255",
-            ),
-            (
-                "e",
-                Value::Int(-1),
-                "field `e` (byte) cannot take -1: not an integer from 0 to 255",
-            ),
-            (
-                "f",
-                Value::Int(2),
-                "field `f` (boolean) cannot take 2: a boolean is true, false, 0 or 1",
-            ),
-            (
-                "g",
-                Value::Float(1e39),
-                "field `g` (float) cannot take 1e39: beyond the range of float",
-            ),
+        let int8 = "not an integer from -128 to 127";
+        let int16 = "not an integer from -32768 to 32767";
+        let int32 = "not an integer from -2147483648 to 2147483647";
+        let int64 = "not an integer from -9223372036854775808 to 9223372036854775807";
+        let byte = "not an integer from 0 to 255";
+        let boolean = "a boolean is true, false, 0 or 1";
+        let float = "beyond the range of float";
+        // field, its type, a value, that value as printed, and what the error says of the type
+        let cases = [
+            ("a", "int8_t", Value::Int(128), "128", int8),
+            ("a", "int8_t", Value::Int(-129), "-129", int8),
+            ("b", "int16_t", Value::Int(32768), "32768", int16),
+            ("c", "int32_t", Value::Int(1 << 31), "2147483648", int32),
+            ("c", "int32_t", Value::Float(1.5), "1.5", int32),
+            ("d", "int64_t", Value::Float(9.3e18), "9.3e18", int64),
+            ("d", "int64_t", Value::Float(f64::NAN), "NaN", int64),
+            ("e", "byte", Value::Int(256), "256", byte),
+            ("e", "byte", Value::Int(-1), "-1", byte),
+            ("f", "boolean", Value::Int(2), "2", boolean),
+            ("g", "float", Value::Float(1e39), "1e39", float),
         ];
-        for (field, value, want) in cases {
+        for (field, ty, value, shown, why) in cases {
+            let want = format!("field `{field}` ({ty}) cannot take {shown}: {why}");
             let e = enc_err(&t, "prim_t", &DataMap::new().and(field, value));
-            assert!(e.starts_with(want), "got {e:?}, wanted {want:?}");
+            assert!(e.starts_with(&want), "got {e:?}, wanted {want:?}");
         }
         // infinities are floats too
         let inf = DataMap::new()

@@ -896,6 +896,17 @@ impl<'a> Parser<'a> {
         Ok(false)
     }
 
+    /// After a member or constant: true when a `,` announces another name, false when a `;` ends
+    /// the declaration; `what` names what may stand there, for the error.
+    fn another_name(&mut self, what: &str) -> Result<bool, FileError> {
+        let t = self.expect("`,` or `;`")?;
+        match t.text {
+            "," => Ok(true),
+            ";" => Ok(false),
+            _ => Err(self.unexpected(t, what)),
+        }
+    }
+
     /// A struct, after its `struct` keyword.
     fn parse_struct(&mut self) -> Result<StructType, FileError> {
         let name = self.expect("a struct name")?;
@@ -1009,11 +1020,8 @@ impl<'a> Parser<'a> {
                 pos: self.pos(name),
                 type_pos: self.pos(ty),
             });
-            let t = self.expect("`,` or `;`")?;
-            match t.text {
-                "," => {}
-                ";" => return Ok(()),
-                _ => return Err(self.unexpected(t, "`[`, `,` or `;`")),
+            if !self.another_name("`[`, `,` or `;`")? {
+                return Ok(());
             }
         }
     }
@@ -1145,11 +1153,8 @@ impl<'a> Parser<'a> {
                 text: v.text.to_string(),
                 pos: self.pos(name),
             });
-            let t = self.expect("`,` or `;`")?;
-            match t.text {
-                "," => {}
-                ";" => return Ok(()),
-                _ => return Err(self.unexpected(t, "`,` or `;`")),
+            if !self.another_name("`,` or `;`")? {
+                return Ok(());
             }
         }
     }

@@ -91,6 +91,15 @@ fn error(reason: &'static str, offset: usize, detail: impl Into<String>) -> Pack
     }
 }
 
+/// The error for datagram `d`, shorter than `header`.
+fn too_short(d: &[u8], header: &str) -> PacketError {
+    error(
+        "lcm-short-packet",
+        d.len(),
+        format!("{} bytes, shorter than {header}", d.len()),
+    )
+}
+
 fn u32_at(d: &[u8], at: usize) -> u32 {
     u32::from_be_bytes([d[at], d[at + 1], d[at + 2], d[at + 3]])
 }
@@ -132,11 +141,7 @@ fn channel_at(d: &[u8], at: usize) -> Result<(&str, usize), PacketError> {
 /// Reads one datagram.
 pub fn parse(d: &[u8]) -> Result<Packet<'_>, PacketError> {
     if d.len() < SHORT_HEADER {
-        return Err(error(
-            "lcm-short-packet",
-            d.len(),
-            format!("{} bytes, shorter than any LCM header", d.len()),
-        ));
+        return Err(too_short(d, "any LCM header"));
     }
     let seq = u32_at(d, 4);
     match u32_at(d, 0) {
@@ -150,11 +155,7 @@ pub fn parse(d: &[u8]) -> Result<Packet<'_>, PacketError> {
         }
         MAGIC_FRAGMENT => {
             if d.len() < FRAGMENT_HEADER {
-                return Err(error(
-                    "lcm-short-packet",
-                    d.len(),
-                    format!("{} bytes, shorter than a fragment header", d.len()),
-                ));
+                return Err(too_short(d, "a fragment header"));
             }
             let msg_size = u32_at(d, 8);
             let offset = u32_at(d, 12);
