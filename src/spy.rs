@@ -231,19 +231,7 @@ mod tests {
         let json: serde_json::Value = serde_json::from_str(&message_json(&m, &types)).unwrap();
         assert_eq!(json["lcm_type"], "seabus.depth_t");
         assert_eq!(json["payload"]["depth"], 12.5);
-        let mut rows = BTreeMap::new();
-        rows.insert(
-            m.topic.clone(),
-            Row {
-                count: 1,
-                counted_at_refresh: 0,
-                rate: 0.0,
-                last: m,
-            },
-        );
-        let mut out = Vec::new();
-        print_table(&rows, &types, &mut out, false);
-        let text = String::from_utf8(out).unwrap();
+        let text = table_of(&m, &types);
         assert!(
             text.contains("seabus.depth_t") && text.contains("depth=12.5"),
             "{text}"
@@ -256,6 +244,23 @@ mod tests {
         let json: serde_json::Value = serde_json::from_str(&message_json(&plain, &types)).unwrap();
         assert!(json.get("lcm_type").is_none());
         assert_eq!(json["format"], "bytes");
+    }
+
+    /// The table `seabus spy` prints after seeing `m` once.
+    fn table_of(m: &Message, types: &ResolvedTypes) -> String {
+        let mut rows = BTreeMap::new();
+        rows.insert(
+            m.topic.clone(),
+            Row {
+                count: 1,
+                counted_at_refresh: 0,
+                rate: 0.0,
+                last: m.clone(),
+            },
+        );
+        let mut out = Vec::new();
+        print_table(&rows, types, &mut out, false);
+        String::from_utf8(out).unwrap()
     }
 
     fn message(payload: DataMap) -> Message {
@@ -282,19 +287,7 @@ mod tests {
                     Value::List(vec![DataMap::new().with("z", 0.5f64).into()]),
                 ),
         );
-        let mut rows = BTreeMap::new();
-        rows.insert(
-            m.topic.clone(),
-            Row {
-                count: 1,
-                counted_at_refresh: 0,
-                rate: 0.0,
-                last: m.clone(),
-            },
-        );
-        let mut out = Vec::new();
-        print_table(&rows, &built_in(), &mut out, false);
-        let table = String::from_utf8(out).unwrap();
+        let table = table_of(&m, &built_in());
         assert!(table.contains("pose={x=1, y=2} wps=[{z=0.5}]"), "{table}");
         let json: serde_json::Value = serde_json::from_str(&message_json(&m, &built_in())).unwrap();
         assert_eq!(
