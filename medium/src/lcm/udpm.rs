@@ -435,20 +435,89 @@ struct Receiver {
     dropped: Vec<Dropped>,
 }
 
+/// Bytes of received messages gathered in one allocation (shared by the payloads cut from it).
 const RECV_CHUNK: usize = 1 << 20;
+/// Datagrams taken from the socket in one recvmmsg(2) call.
+const RECV_BATCH: usize = 32;
+/// Room for the largest UDP datagram.
+const SLOT: usize = 1 << 16;
+
+/// Where one recvmmsg(2) call puts its datagrams: a slot of the largest datagram's size each,
+/// with the sender's address and the length received.
+struct Batch {
+    slots: Vec<u8>,
+    addrs: Vec<libc::sockaddr_in>,
+    lens: Vec<usize>,
+}
+
+impl Batch {
+    fn new() -> Batch {
+        Batch {
+            slots: vec![0; RECV_BATCH * SLOT],
+            // SAFETY: sockaddr_in is plain data, all zeroes is a valid value
+            addrs: vec![unsafe { std::mem::zeroed() }; RECV_BATCH],
+            lens: vec![0; RECV_BATCH],
+        }
+    }
+
+    /// Takes the datagrams waiting on `socket`, up to a batch; `WouldBlock` when there are none.
+    fn receive(&mut self, socket: &UdpSocket) -> std::io::Result<usize> {
+        use std::os::fd::AsRawFd;
+        let mut iovs: [libc::iovec; RECV_BATCH] = std::array::from_fn(|i| libc::iovec {
+            iov_base: self.slots[i * SLOT..].as_mut_ptr().cast(),
+            iov_len: SLOT,
+        });
+        // SAFETY: mmsghdr is plain data; zeroed means no control data and no flags
+        let mut msgs: [libc::mmsghdr; RECV_BATCH] = unsafe { std::mem::zeroed() };
+        for (i, m) in msgs.iter_mut().enumerate() {
+            m.msg_hdr.msg_iov = &mut iovs[i];
+            m.msg_hdr.msg_iovlen = 1;
+            m.msg_hdr.msg_name = (&mut self.addrs[i] as *mut libc::sockaddr_in).cast();
+            m.msg_hdr.msg_namelen = std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t;
+        }
+        // SAFETY: every header points at a slot, an iovec and an address that outlive the call,
+        // with their true sizes
+        let n = unsafe {
+            libc::recvmmsg(
+                socket.as_raw_fd(),
+                msgs.as_mut_ptr(),
+                RECV_BATCH as libc::c_uint,
+                libc::MSG_DONTWAIT,
+                std::ptr::null_mut(),
+            )
+        };
+        if n < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        let n = n as usize;
+        for (len, m) in self.lens.iter_mut().zip(&msgs[..n]) {
+            *len = m.msg_len as usize;
+        }
+        Ok(n)
+    }
+
+    /// Datagram `i` of the last batch and who sent it.
+    fn get(&self, i: usize) -> (SocketAddr, &[u8]) {
+        let a = &self.addrs[i];
+        let from = SocketAddr::from((
+            Ipv4Addr::from(u32::from_be(a.sin_addr.s_addr)),
+            u16::from_be(a.sin_port),
+        ));
+        (from, &self.slots[i * SLOT..i * SLOT + self.lens[i].min(SLOT)])
+    }
+}
 
 impl Receiver {
     async fn run(mut self, socket: Arc<UdpSocket>) {
-        let mut buf = BytesMut::with_capacity(RECV_CHUNK);
+        let mut batch = Batch::new();
+        let mut chunk = BytesMut::with_capacity(RECV_CHUNK);
         loop {
-            if buf.capacity() - buf.len() < wire::FRAGMENT_BODY + wire::FRAGMENT_HEADER + 64 {
-                buf = BytesMut::with_capacity(RECV_CHUNK);
-            }
+            let wait = socket.async_io(Interest::READABLE, || batch.receive(&socket));
             let received = match self.reassembler.next_deadline() {
-                None => socket.recv_buf_from(&mut buf).await,
+                None => wait.await,
                 Some(deadline) => {
                     let deadline = tokio::time::Instant::from_std(deadline);
-                    match tokio::time::timeout_at(deadline, socket.recv_buf_from(&mut buf)).await {
+                    match tokio::time::timeout_at(deadline, wait).await {
                         Ok(r) => r,
                         Err(_) => {
                             self.reassembler
@@ -459,39 +528,52 @@ impl Receiver {
                     }
                 }
             };
-            let from = match received {
-                Ok((_, from)) => from,
+            let n = match received {
+                Ok(n) => n,
                 Err(e) => {
                     tracing::debug!(medium = %self.medium, "lcm receive: {e}");
                     tokio::time::sleep(Duration::from_millis(10)).await;
                     continue;
                 }
             };
-            let datagram = buf.split().freeze();
-            if !self.datagram(from, datagram) {
-                return;
+            for i in 0..n {
+                let (from, d) = batch.get(i);
+                if !self.datagram(from, d, &mut chunk) {
+                    return;
+                }
+            }
+            // a partial message times out even while other traffic keeps the socket busy
+            if self.reassembler.pending() > 0 {
+                self.reassembler
+                    .expire(std::time::Instant::now(), &mut self.dropped);
+                self.report_dropped();
             }
         }
     }
 
-    /// Handles one datagram; false once the medium is gone.
-    fn datagram(&mut self, from: SocketAddr, d: Bytes) -> bool {
+    /// Handles one datagram, cutting a short message's payload from `chunk`; false once the
+    /// medium is gone.
+    fn datagram(&mut self, from: SocketAddr, d: &[u8], chunk: &mut BytesMut) -> bool {
         if from.port() == self.own_port && self.local.contains(&from.ip()) {
             return true;
         }
-        let (seq, channel, payload) = match wire::parse(&d) {
+        match wire::parse(d) {
             Err(e) => {
                 self.ingress
                     .reject(e.reason, format_args!("packet from {from}: {e}"));
-                return true;
+                true
             }
             Ok(Packet::Short {
                 seq,
                 channel,
                 payload,
             }) => {
-                let start = payload.as_ptr() as usize - d.as_ptr() as usize;
-                (seq, channel.to_string(), d.slice(start..))
+                if chunk.capacity() - chunk.len() < payload.len() {
+                    *chunk = BytesMut::with_capacity(RECV_CHUNK.max(payload.len()));
+                }
+                chunk.extend_from_slice(payload);
+                let payload = chunk.split().freeze();
+                self.deliver(from, seq, channel, payload)
             }
             Ok(Packet::Fragment(f)) => {
                 let now = std::time::Instant::now();
@@ -503,8 +585,8 @@ impl Receiver {
                         seq,
                         channel,
                         payload,
-                    } => (seq, channel, payload),
-                    Step::Pending => return true,
+                    } => self.deliver(from, seq, &channel, payload),
+                    Step::Pending => true,
                     Step::Duplicate => {
                         self.ingress.reject(
                             "lcm-duplicate-fragment",
@@ -513,12 +595,11 @@ impl Receiver {
                                 f.no, f.seq
                             ),
                         );
-                        return true;
+                        true
                     }
                 }
             }
-        };
-        self.deliver(from, seq, &channel, payload)
+        }
     }
 
     fn deliver(&mut self, from: SocketAddr, seq: u32, channel: &str, payload: Bytes) -> bool {
