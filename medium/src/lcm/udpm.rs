@@ -503,7 +503,10 @@ impl Batch {
             Ipv4Addr::from(u32::from_be(a.sin_addr.s_addr)),
             u16::from_be(a.sin_port),
         ));
-        (from, &self.slots[i * SLOT..i * SLOT + self.lens[i].min(SLOT)])
+        (
+            from,
+            &self.slots[i * SLOT..i * SLOT + self.lens[i].min(SLOT)],
+        )
     }
 }
 
