@@ -289,7 +289,7 @@ fn main() {
         paced.count,
         n - paced.count
     );
-    for senders in [1, 2] {
+    for senders in [1, 2, 3] {
         let raw = seabus_from_raw(&sb_url, 64, n, 300_000.0, senders);
         println!(
             "  64 B paced at 300k msg/s from {senders} plain socket(s) (they reached {}): seabus delivered {} of {n}, lost {} (target: none)",
