@@ -8,61 +8,6 @@ use common::*;
 use std::process::Command;
 use std::time::Duration;
 
-/// Two namespaces joined by a veth pair, removed on drop.
-struct Hosts {
-    a: String,
-    b: String,
-    subnet: u8,
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip")
-        .args(args)
-        .output()
-        .map_err(|e| format!("ip: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!(
-            "ip {}: {}",
-            args.join(" "),
-            String::from_utf8_lossy(&out.stderr).trim()
-        ))
-    }
-}
-
-impl Hosts {
-    fn new() -> Result<Hosts, String> {
-        let id = std::process::id() % 100_000;
-        let subnet = fastrand::u8(1..250);
-        let hosts = Hosts {
-            a: format!("sb-a-{id}"),
-            b: format!("sb-b-{id}"),
-            subnet,
-        };
-        let (va, vb) = (format!("sba{id}"), format!("sbb{id}"));
-        ip(&["netns", "add", &hosts.a])?;
-        ip(&["netns", "add", &hosts.b])?;
-        ip(&["link", "add", &va, "type", "veth", "peer", "name", &vb])?;
-        ip(&["link", "set", &va, "netns", &hosts.a])?;
-        ip(&["link", "set", &vb, "netns", &hosts.b])?;
-        for (ns, dev, host) in [(&hosts.a, &va, 1), (&hosts.b, &vb, 2)] {
-            let addr = format!("10.77.{subnet}.{host}/24");
-            ip(&["-n", ns, "addr", "add", &addr, "brd", "+", "dev", dev])?;
-            ip(&["-n", ns, "link", "set", dev, "up"])?;
-            ip(&["-n", ns, "link", "set", "lo", "up"])?;
-        }
-        Ok(hosts)
-    }
-}
-
-impl Drop for Hosts {
-    fn drop(&mut self) {
-        let _ = ip(&["netns", "del", &self.a]);
-        let _ = ip(&["netns", "del", &self.b]);
-    }
-}
-
 #[test]
 fn broadcast_reaches_another_host() {
     let hosts = match Hosts::new() {

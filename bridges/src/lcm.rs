@@ -80,6 +80,12 @@ pub fn is_lcm(url: &str) -> bool {
     url.starts_with("udpm:")
 }
 
+/// True for a medium that carries only its own kind of messages (LCM types, DSAAV message types),
+/// where seabus's own reports have no place.
+pub fn is_foreign(url: &str) -> bool {
+    is_lcm(url) || url.starts_with("dsaav+")
+}
+
 impl Mapping {
     /// Compiles a route's `lcm` attribute for the leg from medium `from` to medium `to` (0 or 1).
     pub fn new(

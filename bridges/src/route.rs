@@ -86,7 +86,7 @@ pub struct RouteBridge {
     last_sent: HashMap<(usize, Topic), Instant>,
     report: Option<Duration>,
     report_topic: Topic,
-    /// The ports reports go out on: not LCM media, which carry typed LCM messages only.
+    /// The ports reports go out on: not LCM or DSAAV media, which carry their own messages only.
     report_ports: Vec<usize>,
     /// LCM types, when a route has one.
     types: Option<Arc<ResolvedTypes>>,
@@ -158,7 +158,7 @@ impl RouteBridge {
             report: (!report.is_zero()).then_some(report),
             report_topic,
             report_ports: (0..2)
-                .filter(|&i| !crate::lcm::is_lcm(&spec.urls[i]))
+                .filter(|&i| !crate::lcm::is_foreign(&spec.urls[i]))
                 .collect(),
             types,
             problems: Tally::new(),

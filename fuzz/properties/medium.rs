@@ -2,6 +2,7 @@
 //! function panics when an input breaks a property and tells whether the input was a valid one.
 
 use bytes::Bytes;
+use seabus_medium::dsaav::wire::Frame as DsaavFrame;
 use seabus_medium::lcm::codec;
 use seabus_medium::lcm::eventlog;
 use seabus_medium::lcm::reassembly::{Reassembler, Step};
@@ -554,4 +555,29 @@ pub fn lcm_codec(data: &[u8]) -> bool {
         "{name} decodes and encodes to other bytes"
     );
     true
+}
+
+/// DSAAV IComms frames: any bytes decode or are refused without a panic, naming an offset inside
+/// them, and a frame that decodes encodes back to the same bytes (up to its stated length). True
+/// when `data` decodes.
+pub fn dsaav_frame(data: &[u8]) -> bool {
+    match DsaavFrame::decode(data) {
+        Err(e) => {
+            assert!(
+                e.offset <= data.len().max(2),
+                "error offset past the input: {e}"
+            );
+            false
+        }
+        Ok(frame) => {
+            let again = frame.encode().expect("a decoded frame encodes");
+            assert!(again.len() <= data.len(), "encoded longer than read");
+            // float values keep their bits both ways, NaNs included
+            assert!(
+                data.get(..again.len()) == Some(again.as_slice()),
+                "decoded frame encodes to other bytes"
+            );
+            true
+        }
+    }
 }

@@ -12,9 +12,10 @@
 //!   module's handlers from an interface (active mode). Every interface has bounded queues
 //!   ([`queue`]: data drops oldest, commands hold the sender back) and drops duplicates by provenance
 //!   ([`dedup`]).
-//! - Media: in-process (no transport), [`udp`], and [`serial`] (serial devices and pseudo-terminals,
-//!   with NMEA, line, COBS or SLIP framing). Any medium opens from a URL ([`url`],
-//!   [`Medium::open`]) and can carry a fault stage ([`fault`]) for tests.
+//! - Media: in-process (no transport), [`udp`], [`serial`] (serial devices and pseudo-terminals,
+//!   with NMEA, line, COBS or SLIP framing), [`lcm`] (LCM's UDP multicast, its types and event
+//!   logs) and [`dsaav`] (DSAAV IComms on raw Ethernet, UDP or in-process). Any medium opens from
+//!   a URL ([`url`], [`Medium::open`]) and can carry a fault stage ([`fault`]) for tests.
 //! - [`xml`] — a small positioned XML tree for the files users write (every error names file, line
 //!   and column).
 
@@ -22,6 +23,7 @@ pub mod active;
 pub mod binary;
 pub mod datamap;
 pub mod dedup;
+pub mod dsaav;
 pub mod fault;
 pub mod json;
 pub mod lcm;

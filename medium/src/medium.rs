@@ -506,6 +506,21 @@ const SCHEMES: &[Scheme] = &[
         open: |o| Ok(Some(crate::lcm::udpm::open(o)? as Arc<dyn Transport>)),
     },
     Scheme {
+        name: "dsaav+eth",
+        check: |url| crate::dsaav::DsaavConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::dsaav::open(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
+        name: "dsaav+udp",
+        check: |url| crate::dsaav::DsaavConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::dsaav::open(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
+        name: "dsaav+inproc",
+        check: |url| crate::dsaav::DsaavConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::dsaav::open(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
         name: "serial",
         check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::serial::open_serial(o)? as Arc<dyn Transport>)),

@@ -36,4 +36,7 @@ seed_tests! {
     /// LCM messages decode or are refused without a panic, and those that decode encode back to
     /// the same bytes.
     lcm_codec_seeds => lcm_codec,
+    /// DSAAV frames decode or are refused without a panic, and decoded frames encode to the same
+    /// bytes.
+    dsaav_frame_seeds => dsaav_frame,
 }

@@ -75,3 +75,69 @@ pub fn wait_for(child: &mut Child, limit: Duration) -> Option<std::process::Exit
     let _ = child.wait();
     None
 }
+
+/// Two namespaces joined by a veth pair, removed on drop.
+pub struct Hosts {
+    /// The first namespace.
+    pub a: String,
+    /// The second namespace.
+    pub b: String,
+    /// The veth end in `a`.
+    pub dev_a: String,
+    /// The veth end in `b`.
+    pub dev_b: String,
+    /// The hosts are 10.77.SUBNET.1 (in `a`) and .2 (in `b`).
+    pub subnet: u8,
+}
+
+/// Runs `ip ARGS`.
+pub fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .map_err(|e| format!("ip: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(format!(
+            "ip {}: {}",
+            args.join(" "),
+            String::from_utf8_lossy(&out.stderr).trim()
+        ))
+    }
+}
+
+impl Hosts {
+    /// Makes the namespaces and the veth pair; an error says why it cannot (not root, no `ip`).
+    pub fn new() -> Result<Hosts, String> {
+        let id = std::process::id() % 100_000;
+        let subnet = fastrand::u8(1..250);
+        let (va, vb) = (format!("sba{id}"), format!("sbb{id}"));
+        let hosts = Hosts {
+            a: format!("sb-a-{id}"),
+            b: format!("sb-b-{id}"),
+            dev_a: va.clone(),
+            dev_b: vb.clone(),
+            subnet,
+        };
+        ip(&["netns", "add", &hosts.a])?;
+        ip(&["netns", "add", &hosts.b])?;
+        ip(&["link", "add", &va, "type", "veth", "peer", "name", &vb])?;
+        ip(&["link", "set", &va, "netns", &hosts.a])?;
+        ip(&["link", "set", &vb, "netns", &hosts.b])?;
+        for (ns, dev, host) in [(&hosts.a, &va, 1), (&hosts.b, &vb, 2)] {
+            let addr = format!("10.77.{subnet}.{host}/24");
+            ip(&["-n", ns, "addr", "add", &addr, "brd", "+", "dev", dev])?;
+            ip(&["-n", ns, "link", "set", dev, "up"])?;
+            ip(&["-n", ns, "link", "set", "lo", "up"])?;
+        }
+        Ok(hosts)
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        let _ = ip(&["netns", "del", &self.a]);
+        let _ = ip(&["netns", "del", &self.b]);
+    }
+}

@@ -297,6 +297,12 @@ fn socket(cfg: &UdpConfig) -> std::io::Result<(std::net::UdpSocket, usize)> {
     Ok((s.into(), got))
 }
 
+/// A socket set up as a UDP medium's (shared port, multicast group joined, buffer sized), and the
+/// addresses its datagrams go to: for media that carry their own frames over UDP.
+pub fn bind(cfg: &UdpConfig) -> std::io::Result<(std::net::UdpSocket, Vec<SocketAddr>)> {
+    Ok((socket(cfg)?.0, cfg.destinations()?))
+}
+
 /// The UDP transport.
 pub struct UdpTransport {
     name: Arc<str>,

@@ -1,0 +1,714 @@
+//! DSAAV IComms as a seabus medium: key-value messages between numbered nodes and ports, over raw
+//! Ethernet, UDP or in-process backbones, the same frames on each ([`wire`]).
+//!
+//! ```text
+//! dsaav+eth://eth0?node=3               raw Ethernet frames, EtherType 0x88B5, on an interface
+//! dsaav+udp://239.255.42.2:47900?node=3 UDP multicast (ttl 0 by default) or broadcast
+//! dsaav+inproc://vehicle?node=3         in-process: every medium of this program named `vehicle`
+//! ```
+//! Options: `node` (this medium's node number, required, unique on the backbone), `port` (the
+//! source port of messages that do not name one, default 0), `channel` (the channel of messages
+//! that name no destination, default 0), `dict` (a dictionary file adding keys and types to the
+//! built-in [`dict`]), and for UDP `ttl` and `iface`.
+//!
+//! A message's topic is `dsaav.TYPE` (a message type of the dictionary, or its number) and its
+//! payload a datamap: the parameters by their dictionary names, and the header in keys starting
+//! with `@` — `@src` and `@dst` (`NODE:PORT`), `@channel`, `@id`, `@ref`. Sending, `@dst` or
+//! `@channel` say where it goes (the `channel` option otherwise), `@port` gives the source port,
+//! and `@id` / `@ref` the message and reference ids (ids count up by themselves otherwise). A
+//! received key the dictionary does not know arrives as `k<NUMBER>` and is counted
+//! (`dsaav-unknown-key`); frames that do not read are counted by reason. A medium receives what is
+//! addressed to its node and every channel broadcast, and never its own frames.
+
+pub mod dict;
+pub mod wire;
+
+use crate::datamap::{DataMap, Value};
+use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::{Kind, Message, Origin, Provenance, Stamp};
+use crate::payload::Payload;
+use crate::topic::Topic;
+use crate::url::{MediumUrl, UrlError};
+use bytes::Bytes;
+use dict::{Dictionary, ValueType};
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::{Arc, Mutex, OnceLock};
+use wire::{Address, Destination, Frame, Param};
+
+/// The EtherType of DSAAV frames on raw Ethernet (IEEE local experimental).
+pub const ETHERTYPE: u16 = 0x88B5;
+
+/// What the medium puts its frames on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Backbone {
+    /// Raw Ethernet on an interface.
+    Ethernet(String),
+    /// UDP, as the UDP medium reaches its peers (multicast, broadcast or listed peers).
+    Udp(crate::udp::UdpConfig),
+    /// Every medium of this program with the same name.
+    InProcess(String),
+}
+
+/// A DSAAV medium's settings, read from its URL.
+#[derive(Debug, Clone)]
+pub struct DsaavConfig {
+    /// The backbone.
+    pub backbone: Backbone,
+    /// This medium's node.
+    pub node: u16,
+    /// Source port of messages that name none.
+    pub port: u16,
+    /// Channel of messages that name no destination.
+    pub channel: u16,
+    /// The keys and types.
+    pub dict: Arc<Dictionary>,
+}
+
+impl DsaavConfig {
+    /// Reads the settings from a `dsaav+…://` URL, taking its options.
+    pub fn from_url(url: &mut MediumUrl) -> Result<DsaavConfig, UrlError> {
+        let node: u16 = url
+            .take_parsed("node", "a node number 0–65534")?
+            .ok_or_else(|| url.error("needs `node=N`, this medium's node number"))?;
+        if node == wire::BROADCAST_NODE {
+            return Err(url.error("option `node`: 65535 means broadcast; use 0–65534"));
+        }
+        let port = url.take_parsed("port", "a port 0–65535")?.unwrap_or(0);
+        let channel = url
+            .take_parsed("channel", "a channel 0–65535")?
+            .unwrap_or(0);
+        let mut dictionary = Dictionary::built_in();
+        if let Some(path) = url.take("dict") {
+            let text = std::fs::read_to_string(&path)
+                .map_err(|e| url.error(format!("option `dict={path}`: {e}")))?;
+            dictionary
+                .add(&path, &text)
+                .map_err(|e| url.error(format!("option `dict`: {e}")))?;
+        }
+        const OPTIONS: [&str; 4] = ["node", "port", "channel", "dict"];
+        let backbone = match url.scheme.as_str() {
+            "dsaav+eth" if !url.host.is_empty() => {
+                url.finish(&OPTIONS)?;
+                Backbone::Ethernet(url.host.clone())
+            }
+            "dsaav+inproc" if !url.host.is_empty() => {
+                url.finish(&OPTIONS)?;
+                Backbone::InProcess(url.host.clone())
+            }
+            "dsaav+udp" => {
+                // the rest are the UDP medium's options (ttl, iface, broadcast, …)
+                let mut udp = url.clone();
+                udp.scheme = "udp".to_string();
+                Backbone::Udp(crate::udp::UdpConfig::from_url(&mut udp)?)
+            }
+            s => {
+                return Err(url.error(format!(
+                    "`{s}://` needs a name: dsaav+eth://INTERFACE or dsaav+inproc://NAME"
+                )));
+            }
+        };
+        Ok(DsaavConfig {
+            backbone,
+            node,
+            port,
+            channel,
+            dict: Arc::new(dictionary),
+        })
+    }
+}
+
+fn io_send(medium: &str, e: impl std::fmt::Display) -> SendError {
+    SendError::Io {
+        medium: medium.to_string(),
+        reason: e.to_string(),
+    }
+}
+
+/// Turns a seabus message into an IComms frame from `src_node`.
+pub fn to_frame(
+    dict: &Dictionary,
+    src_node: u16,
+    default_port: u16,
+    default_channel: u16,
+    next_id: impl FnOnce() -> u32,
+    msg: &Message,
+) -> Result<Frame, String> {
+    let Some(type_name) = msg.topic.as_str().strip_prefix("dsaav.") else {
+        return Err(format!(
+            "topic `{}`: a DSAAV medium carries topics dsaav.TYPE",
+            msg.topic
+        ));
+    };
+    let kind = dict.type_id(type_name).ok_or_else(|| {
+        format!(
+            "topic `{}`: `{type_name}` is not a DSAAV message type",
+            msg.topic
+        )
+    })?;
+    let map = msg.payload.to_map().map_err(|e| e.to_string())?;
+    let int = |key: &str, v: &Value, max: i64| -> Result<i64, String> {
+        v.as_i64()
+            .filter(|n| (0..=max).contains(n))
+            .ok_or_else(|| format!("`{key}` must be an integer 0–{max}, not {v}"))
+    };
+    let mut dst = Destination::Channel(default_channel);
+    let mut port = default_port;
+    let mut id = None;
+    let mut reference = 0;
+    let mut params = Vec::with_capacity(map.len());
+    for (key, v) in map.iter() {
+        match key {
+            "@dst" => {
+                let text = v
+                    .as_str()
+                    .ok_or_else(|| format!("`@dst` must be NODE:PORT, not {v}"))?;
+                dst = Destination::To(text.parse()?);
+            }
+            "@channel" => dst = Destination::Channel(int(key, v, 65_535)? as u16),
+            "@port" => port = int(key, v, 65_535)? as u16,
+            "@id" => id = Some(int(key, v, u32::MAX.into())? as u32),
+            "@ref" => reference = int(key, v, u32::MAX.into())? as u32,
+            // what a received message said of its source: not sent on
+            "@src" => {}
+            _ => {
+                let Some((number, ty)) = dict.key(key) else {
+                    return Err(format!("`{key}` is not a key of the DSAAV dictionary"));
+                };
+                params.push((number, param(key, ty, v)?));
+            }
+        }
+    }
+    Ok(Frame {
+        src: Address {
+            node: src_node,
+            port,
+        },
+        dst,
+        id: id.unwrap_or_else(next_id),
+        kind,
+        reference,
+        params,
+    })
+}
+
+/// A datamap value as the key's wire type.
+fn param(key: &str, ty: ValueType, v: &Value) -> Result<Param, String> {
+    let wrong = || format!("`{key}` is {} in the DSAAV dictionary, not {v}", ty.name());
+    Ok(match ty {
+        ValueType::Int => Param::Int(
+            v.as_i64()
+                .and_then(|n| i32::try_from(n).ok())
+                .ok_or_else(wrong)?,
+        ),
+        ValueType::Float => Param::Float(v.as_f64().ok_or_else(wrong)? as f32),
+        ValueType::Double => Param::Double(v.as_f64().ok_or_else(wrong)?),
+        ValueType::Str => Param::Str(v.as_str().ok_or_else(wrong)?.to_string()),
+    })
+}
+
+/// Turns a frame into the topic and datamap a seabus receiver gets, with the keys the dictionary
+/// did not know.
+pub fn from_frame(dict: &Dictionary, f: &Frame) -> (String, DataMap, Vec<u16>) {
+    let mut map = DataMap::with_capacity(f.params.len() + 4);
+    map.push("@src", f.src.to_string());
+    match f.dst {
+        Destination::To(a) => map.push("@dst", a.to_string()),
+        Destination::Channel(c) => map.push("@channel", i64::from(c)),
+    }
+    map.push("@id", i64::from(f.id));
+    if f.reference != 0 {
+        map.push("@ref", i64::from(f.reference));
+    }
+    let mut unknown = Vec::new();
+    for (key, p) in &f.params {
+        let name = match dict.key_name(*key) {
+            Some((name, _)) => name.to_string(),
+            None => {
+                unknown.push(*key);
+                format!("k{key}")
+            }
+        };
+        let value = match p {
+            Param::Int(v) => Value::Int(i64::from(*v)),
+            Param::Float(v) => Value::Float(f64::from(*v)),
+            Param::Double(v) => Value::Float(*v),
+            Param::Str(s) => Value::from(s.as_str()),
+        };
+        map.push(name, value);
+    }
+    (format!("dsaav.{}", dict.type_name(f.kind)), map, unknown)
+}
+
+/// The DSAAV transport.
+pub struct DsaavTransport {
+    name: Arc<str>,
+    cfg: DsaavConfig,
+    link: Link,
+    next_id: AtomicU32,
+}
+
+enum Link {
+    Udp(Arc<tokio::net::UdpSocket>, Vec<SocketAddr>),
+    Ethernet(Arc<eth::RawSocket>),
+    InProcess(Hub, u64),
+}
+
+/// Opens a DSAAV medium.
+pub(crate) fn open(mut o: Opening) -> Result<Arc<DsaavTransport>, OpenError> {
+    let cfg = DsaavConfig::from_url(&mut o.url)?;
+    let rx = Receiver::new(&o, &cfg);
+    let link = match &cfg.backbone {
+        Backbone::Udp(ucfg) => {
+            let (socket, dests) =
+                crate::udp::bind(ucfg).map_err(o.io_error(format!("binding {}", ucfg.bind)))?;
+            let socket = Arc::new(
+                tokio::net::UdpSocket::from_std(socket)
+                    .map_err(o.io_error("registering the socket"))?,
+            );
+            let task = tokio::spawn(rx.udp(socket.clone()));
+            o.ingress.own_task(task.abort_handle());
+            Link::Udp(socket, dests)
+        }
+        Backbone::Ethernet(iface) => {
+            let socket = Arc::new(
+                eth::RawSocket::open(iface, ETHERTYPE)
+                    .map_err(o.io_error(format!("opening a raw socket on {iface}")))?,
+            );
+            let task = tokio::spawn(rx.ethernet(socket.clone()));
+            o.ingress.own_task(task.abort_handle());
+            Link::Ethernet(socket)
+        }
+        Backbone::InProcess(name) => {
+            let hub = hub(name);
+            let me = fastrand::u64(1..);
+            let task = tokio::spawn(rx.in_process(hub.subscribe(), me));
+            o.ingress.own_task(task.abort_handle());
+            Link::InProcess(hub, me)
+        }
+    };
+    o.ingress.set_link(LinkState::Up);
+    Ok(Arc::new(DsaavTransport {
+        name: o.name.clone(),
+        cfg,
+        link,
+        next_id: AtomicU32::new(1),
+    }))
+}
+
+/// An in-process backbone: frames with the id of the medium that sent them.
+type Hub = tokio::sync::broadcast::Sender<(u64, Bytes)>;
+
+/// The in-process backbone called `name`, made on first use.
+fn hub(name: &str) -> Hub {
+    static HUBS: OnceLock<Mutex<HashMap<String, Hub>>> = OnceLock::new();
+    let mut hubs = HUBS
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    hubs.entry(name.to_string())
+        .or_insert_with(|| tokio::sync::broadcast::channel(4096).0)
+        .clone()
+}
+
+impl Transport for DsaavTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let frame = to_frame(
+            &self.cfg.dict,
+            self.cfg.node,
+            self.cfg.port,
+            self.cfg.channel,
+            || self.next_id.fetch_add(1, Ordering::Relaxed),
+            msg,
+        )
+        .map_err(|e| io_send(&self.name, e))?;
+        let len = frame.encoded_len();
+        if len > wire::MAX_FRAME {
+            return Err(SendError::TooLarge {
+                medium: self.name.to_string(),
+                size: len,
+                max: wire::MAX_FRAME,
+            });
+        }
+        frame
+            .encode()
+            .map(Bytes::from)
+            .map_err(|e| io_send(&self.name, e))
+    }
+
+    fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            match &self.link {
+                Link::Udp(socket, dests) => {
+                    for dest in dests {
+                        socket
+                            .send_to(&frame, dest)
+                            .await
+                            .map_err(|e| io_send(&self.name, format!("sending to {dest}: {e}")))?;
+                    }
+                    Ok(())
+                }
+                Link::Ethernet(socket) => {
+                    // a frame to one node goes to its hardware address once it is known
+                    let to =
+                        (frame[4] & 1 == 0).then(|| u16::from_be_bytes([frame[10], frame[11]]));
+                    socket
+                        .send(to, &frame)
+                        .await
+                        .map_err(|e| io_send(&self.name, e))
+                }
+                Link::InProcess(hub, me) => {
+                    // no receiver yet is not an error: nobody is listening
+                    let _ = hub.send((*me, frame));
+                    Ok(())
+                }
+            }
+        })
+    }
+}
+
+/// Receives frames from a backbone and delivers what is for this node.
+struct Receiver {
+    ingress: Ingress,
+    medium: Arc<str>,
+    node: u16,
+    dict: Arc<Dictionary>,
+    origins: HashMap<u16, (Arc<Origin>, u64)>,
+    topics: HashMap<u16, Option<Topic>>,
+}
+
+impl Receiver {
+    fn new(o: &Opening, cfg: &DsaavConfig) -> Receiver {
+        Receiver {
+            ingress: o.ingress.clone(),
+            medium: o.name.clone(),
+            node: cfg.node,
+            dict: cfg.dict.clone(),
+            origins: HashMap::new(),
+            topics: HashMap::new(),
+        }
+    }
+
+    /// Handles one frame from `from` (for messages); false once the medium is gone.
+    fn frame(&mut self, from: &dyn std::fmt::Display, d: &[u8]) -> (bool, Option<u16>) {
+        let f = match Frame::decode(d) {
+            Ok(f) => f,
+            Err(e) => {
+                self.ingress
+                    .reject(e.reason, format_args!("frame from {from}: {e}"));
+                return (true, None);
+            }
+        };
+        let src = f.src.node;
+        let mine = match f.dst {
+            Destination::To(a) => a.node == self.node,
+            Destination::Channel(_) => true,
+        };
+        if src == self.node || !mine {
+            return (true, Some(src));
+        }
+        let (topic, map, unknown) = from_frame(&self.dict, &f);
+        for key in unknown {
+            self.ingress.reject(
+                "dsaav-unknown-key",
+                format_args!(
+                    "frame from {from}: key {key} is not in the dictionary (kept as k{key})"
+                ),
+            );
+        }
+        let topic = match self.topics.get(&f.kind) {
+            Some(t) => t.clone(),
+            None => {
+                let t = Topic::new(&topic).ok();
+                self.topics.insert(f.kind, t.clone());
+                t
+            }
+        };
+        let Some(topic) = topic else {
+            self.ingress.reject(
+                "dsaav-bad-type",
+                format_args!("frame from {from}: message type gives no topic"),
+            );
+            return (true, Some(src));
+        };
+        if self.origins.len() > 4096 && !self.origins.contains_key(&src) {
+            self.origins.clear();
+        }
+        let medium = &self.medium;
+        let (origin, seq) = self
+            .origins
+            .entry(src)
+            .or_insert_with(|| (Origin::new(&format!("dsaav@{src}"), medium, 1), 0));
+        *seq += 1;
+        let msg = Message {
+            topic,
+            kind: Kind::Data,
+            provenance: Provenance {
+                origin: origin.clone(),
+                seq: *seq,
+                hops: 0,
+            },
+            stamp: Stamp::now(),
+            payload: Payload::from(map),
+        };
+        (self.ingress.deliver(msg), Some(src))
+    }
+
+    async fn udp(mut self, socket: Arc<tokio::net::UdpSocket>) {
+        let mut buf = vec![0u8; 65_536];
+        loop {
+            match socket.recv_from(&mut buf).await {
+                Ok((n, from)) => {
+                    if !self.frame(&from, &buf[..n]).0 {
+                        return;
+                    }
+                }
+                Err(e) => {
+                    tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                }
+            }
+        }
+    }
+
+    async fn ethernet(mut self, socket: Arc<eth::RawSocket>) {
+        let mut buf = vec![0u8; 2048];
+        loop {
+            match socket.recv(&mut buf).await {
+                Ok(Some((mac, n))) => {
+                    let from = eth::Mac(mac);
+                    let (open, src) = self.frame(&from, &buf[..n]);
+                    if let Some(node) = src {
+                        socket.learn(node, mac);
+                    }
+                    if !open {
+                        return;
+                    }
+                }
+                Ok(None) => {}
+                Err(e) => {
+                    tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
+                    tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                }
+            }
+        }
+    }
+
+    async fn in_process(mut self, mut rx: tokio::sync::broadcast::Receiver<(u64, Bytes)>, me: u64) {
+        use tokio::sync::broadcast::error::RecvError;
+        loop {
+            match rx.recv().await {
+                Ok((sender, frame)) if sender != me => {
+                    if !self.frame(&"this program", &frame).0 {
+                        return;
+                    }
+                }
+                Ok(_) => {}
+                Err(RecvError::Lagged(n)) => self.ingress.reject(
+                    "dsaav-overrun",
+                    format_args!("{n} frames passed by while this medium was busy"),
+                ),
+                Err(RecvError::Closed) => return,
+            }
+        }
+    }
+}
+
+/// Raw Ethernet frames through an AF_PACKET socket.
+pub mod eth {
+    use std::collections::HashMap;
+    use std::fmt;
+    use std::io;
+    use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+    use std::sync::Mutex;
+    use tokio::io::Interest;
+    use tokio::io::unix::AsyncFd;
+
+    /// A hardware (MAC) address.
+    pub struct Mac(pub [u8; 6]);
+
+    impl fmt::Display for Mac {
+        fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+            let m = self.0;
+            write!(
+                f,
+                "{:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}",
+                m[0], m[1], m[2], m[3], m[4], m[5]
+            )
+        }
+    }
+
+    /// An AF_PACKET socket bound to one interface and EtherType, learning which hardware address
+    /// each node has.
+    pub struct RawSocket {
+        fd: AsyncFd<OwnedFd>,
+        ifindex: i32,
+        mac: [u8; 6],
+        ethertype: u16,
+        peers: Mutex<HashMap<u16, [u8; 6]>>,
+    }
+
+    impl RawSocket {
+        /// Opens the socket on interface `iface` for frames of `ethertype`.
+        pub fn open(iface: &str, ethertype: u16) -> io::Result<RawSocket> {
+            let name = std::ffi::CString::new(iface)
+                .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "bad interface name"))?;
+            // SAFETY: if_nametoindex reads a NUL-terminated string
+            let ifindex = unsafe { libc::if_nametoindex(name.as_ptr()) } as i32;
+            if ifindex == 0 {
+                return Err(io::Error::new(
+                    io::ErrorKind::NotFound,
+                    format!("no interface {iface}"),
+                ));
+            }
+            let mac = read_mac(iface)?;
+            // SAFETY: socket(2) with constant arguments; the result is checked
+            let fd = unsafe {
+                libc::socket(
+                    libc::AF_PACKET,
+                    libc::SOCK_RAW | libc::SOCK_NONBLOCK | libc::SOCK_CLOEXEC,
+                    i32::from(ethertype.to_be()),
+                )
+            };
+            if fd < 0 {
+                return Err(io::Error::last_os_error());
+            }
+            // SAFETY: fd is a new descriptor we own
+            let fd = unsafe { OwnedFd::from_raw_fd(fd) };
+            let addr = sockaddr(ifindex, ethertype, [0; 6]);
+            // SAFETY: bind(2) reads a sockaddr_ll of the size given
+            let r = unsafe {
+                libc::bind(
+                    fd.as_raw_fd(),
+                    (&addr as *const libc::sockaddr_ll).cast(),
+                    std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t,
+                )
+            };
+            if r < 0 {
+                return Err(io::Error::last_os_error());
+            }
+            // SAFETY: the descriptor is owned by the AsyncFd from here on and closed only by it
+            let fd = unsafe { AsyncFd::register(fd) }.map_err(io::Error::from)?;
+            Ok(RawSocket {
+                fd,
+                ifindex,
+                mac,
+                ethertype,
+                peers: Mutex::new(HashMap::new()),
+            })
+        }
+
+        /// Remembers that `node` sends from `mac`.
+        pub fn learn(&self, node: u16, mac: [u8; 6]) {
+            let mut peers = self.peers.lock().unwrap_or_else(|p| p.into_inner());
+            if peers.len() > 4096 && !peers.contains_key(&node) {
+                peers.clear();
+            }
+            peers.insert(node, mac);
+        }
+
+        /// Sends `payload` to the hardware address of node `to` when known, else to everyone.
+        pub async fn send(&self, to: Option<u16>, payload: &[u8]) -> io::Result<()> {
+            let dst = to
+                .and_then(|n| {
+                    self.peers
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner())
+                        .get(&n)
+                        .copied()
+                })
+                .unwrap_or([0xff; 6]);
+            let mut frame = Vec::with_capacity(14 + payload.len());
+            frame.extend_from_slice(&dst);
+            frame.extend_from_slice(&self.mac);
+            frame.extend_from_slice(&self.ethertype.to_be_bytes());
+            frame.extend_from_slice(payload);
+            let addr = sockaddr(self.ifindex, self.ethertype, dst);
+            self.fd
+                .async_io(Interest::WRITABLE, |fd| {
+                    // SAFETY: sendto(2) reads the frame and a sockaddr_ll of the sizes given
+                    let n = unsafe {
+                        libc::sendto(
+                            fd.as_raw_fd(),
+                            frame.as_ptr().cast(),
+                            frame.len(),
+                            0,
+                            (&addr as *const libc::sockaddr_ll).cast(),
+                            std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t,
+                        )
+                    };
+                    if n < 0 {
+                        Err(io::Error::last_os_error())
+                    } else {
+                        Ok(())
+                    }
+                })
+                .await
+        }
+
+        /// Receives one frame: the sender's hardware address and the payload's length in `buf`
+        /// (moved to its start); `None` for a frame this host sent or one too short.
+        pub async fn recv(&self, buf: &mut [u8]) -> io::Result<Option<([u8; 6], usize)>> {
+            let (n, pkttype) = self
+                .fd
+                .async_io(Interest::READABLE, |fd| {
+                    // SAFETY: sockaddr_ll is plain data
+                    let mut from: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
+                    let mut len = std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t;
+                    // SAFETY: recvfrom(2) writes at most buf.len() bytes and a sockaddr_ll
+                    let n = unsafe {
+                        libc::recvfrom(
+                            fd.as_raw_fd(),
+                            buf.as_mut_ptr().cast(),
+                            buf.len(),
+                            0,
+                            (&mut from as *mut libc::sockaddr_ll).cast(),
+                            &mut len,
+                        )
+                    };
+                    if n < 0 {
+                        Err(io::Error::last_os_error())
+                    } else {
+                        Ok((n as usize, from.sll_pkttype))
+                    }
+                })
+                .await?;
+            if n < 14 || pkttype == libc::PACKET_OUTGOING {
+                return Ok(None);
+            }
+            let mut mac = [0u8; 6];
+            mac.copy_from_slice(&buf[6..12]);
+            buf.copy_within(14..n, 0);
+            Ok(Some((mac, n - 14)))
+        }
+    }
+
+    fn sockaddr(ifindex: i32, ethertype: u16, dst: [u8; 6]) -> libc::sockaddr_ll {
+        // SAFETY: sockaddr_ll is plain data
+        let mut a: libc::sockaddr_ll = unsafe { std::mem::zeroed() };
+        a.sll_family = libc::AF_PACKET as u16;
+        a.sll_protocol = ethertype.to_be();
+        a.sll_ifindex = ifindex;
+        a.sll_halen = 6;
+        a.sll_addr[..6].copy_from_slice(&dst);
+        a
+    }
+
+    fn read_mac(iface: &str) -> io::Result<[u8; 6]> {
+        let text = std::fs::read_to_string(format!("/sys/class/net/{iface}/address"))?;
+        let mut mac = [0u8; 6];
+        let parts: Vec<&str> = text.trim().split(':').collect();
+        if parts.len() != 6 {
+            return Err(io::Error::new(
+                io::ErrorKind::InvalidData,
+                format!("{iface} has no Ethernet address"),
+            ));
+        }
+        for (m, p) in mac.iter_mut().zip(parts) {
+            *m = u8::from_str_radix(p, 16)
+                .map_err(|_| io::Error::new(io::ErrorKind::InvalidData, "bad address"))?;
+        }
+        Ok(mac)
+    }
+}
