@@ -17,6 +17,7 @@
 //! - [`support`] — supporting modules (`generator`, `convert`, `square`).
 
 pub mod datasets;
+pub mod dsaav;
 pub mod geo;
 pub mod module;
 pub mod params;
