@@ -71,6 +71,7 @@
 //! component without an override read depth from the sensor.
 
 use seabus_medium::xml::{FileError, Pos};
+use std::collections::HashMap;
 use std::ffi::OsString;
 use std::fmt;
 use std::fs::OpenOptions;
@@ -429,6 +430,9 @@ fn parse(file: &str, text: &str) -> Result<Sections, FileError> {
     let file: Arc<str> = Arc::from(file);
     let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut out = Sections::new();
+    // The lines names were first given at, so that duplicates are found in any number of them.
+    let mut sections: HashMap<&str, u32> = HashMap::new();
+    let mut keys: HashMap<&str, u32> = HashMap::new();
     for (index, raw) in text.split('\n').enumerate() {
         let line = Line {
             file: &file,
@@ -442,12 +446,12 @@ fn parse(file: &str, text: &str) -> Result<Sections, FileError> {
         }
         if body.starts_with('[') {
             let (name, pos) = header(&line, start)?;
-            if let Some(earlier) = out.section(name) {
+            if let Some(earlier) = sections.insert(name, line.number) {
                 return Err(pos.error(format!(
-                    "section `[{name}]` is already defined at line {}",
-                    earlier.pos.as_ref().map_or(0, |p| p.line)
+                    "section `[{name}]` is already defined at line {earlier}"
                 )));
             }
+            keys.clear();
             out.sections.push(Section {
                 name: name.to_owned(),
                 pos: Some(pos),
@@ -473,11 +477,10 @@ fn parse(file: &str, text: &str) -> Result<Sections, FileError> {
                 "setting `{key}` comes before any `[Section]` header"
             )));
         };
-        if let Some(earlier) = section.get(key) {
+        if let Some(earlier) = keys.insert(key, line.number) {
             return Err(line.at(start).error(format!(
-                "key `{key}` is already set in section `[{}]` at line {}",
-                section.name,
-                earlier.pos.as_ref().map_or(0, |p| p.line)
+                "key `{key}` is already set in section `[{}]` at line {earlier}",
+                section.name
             )));
         }
         section.settings.push(setting);
