@@ -11,6 +11,8 @@
 //! - [`system`] — system files: parsing, checking against a registry, route-cycle detection.
 //! - [`runtime`] — the container: opens media, supervises modules (restart with back-off), shuts
 //!   down on request.
+//! - [`dsaav`] — the DSAAV services: the configuration database ([`dsaav::config`]) with its
+//!   application data and data plumbing.
 //! - [`datasets`] — the standard datasets of `configs/datasets.xml` and validation against them.
 //! - [`params`] — module parameters with their places in the file.
 //! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.

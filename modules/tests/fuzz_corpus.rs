@@ -1,5 +1,6 @@
-//! Replays the system-file seeds of the fuzz corpus (`fuzz/corpus/system_file/`) through the same
-//! readers as the fuzz target, so that every seed runs with the ordinary tests, without libFuzzer.
+//! Replays the seeds of the fuzz corpus for the readers of this crate (`fuzz/corpus/system_file/`,
+//! `fuzz/corpus/dsaav_config/`) through the same properties as the fuzz targets, so that every seed
+//! runs with the ordinary tests, without libFuzzer.
 
 #[path = "../../fuzz/properties/modules.rs"]
 mod properties;
@@ -11,4 +12,7 @@ seed_tests! {
     /// Every system-file seed is read or refused without a panic, and at least one is a valid
     /// system.
     system_file_seeds => system_file,
+    /// Every DSAAV configuration seed is read or refused with a place inside it, and those that
+    /// read write back to text that reads the same.
+    dsaav_config_seeds => dsaav_config,
 }

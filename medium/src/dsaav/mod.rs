@@ -164,7 +164,10 @@ pub fn to_frame(
                 let text = v
                     .as_str()
                     .ok_or_else(|| format!("`@dst` must be NODE:PORT, not {v}"))?;
-                dst = Destination::To(text.parse()?);
+                dst = Destination::To(
+                    text.parse()
+                        .map_err(|e: wire::AddressError| e.to_string())?,
+                );
             }
             "@channel" => dst = Destination::Channel(int(key, v, 65_535)? as u16),
             "@port" => port = int(key, v, 65_535)? as u16,

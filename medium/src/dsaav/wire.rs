@@ -51,18 +51,69 @@ impl fmt::Display for Address {
     }
 }
 
-impl std::str::FromStr for Address {
-    type Err = String;
+/// Text that is not an address.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum AddressError {
+    /// Not of the form `node:port`.
+    #[error("`{0}` is not an address: expected `node:port`, e.g. `4:0`")]
+    Form(String),
+    /// The node or the port is not a number in its range.
+    #[error("`{text}` is not an address: {part} `{value}` is not a number from 0 to {max}")]
+    Number {
+        /// The whole text (its first 40 characters).
+        text: String,
+        /// `node` or `port`.
+        part: &'static str,
+        /// The part's text.
+        value: String,
+        /// The largest the part may be (node 65535 is the broadcast node).
+        max: u16,
+    },
+}
 
-    fn from_str(s: &str) -> Result<Address, String> {
-        let bad = || format!("`{s}` is not an address NODE:PORT (numbers 0–65534 and 0–65535)");
-        let (n, p) = s.trim().split_once(':').ok_or_else(bad)?;
-        let node: u16 = n.trim().parse().map_err(|_| bad())?;
-        let port: u16 = p.trim().parse().map_err(|_| bad())?;
-        if node == BROADCAST_NODE {
-            return Err(bad());
-        }
-        Ok(Address { node, port })
+/// The first 40 characters of `text`, control characters escaped, for an error message.
+fn shown(text: &str) -> String {
+    let mut out: String = text
+        .chars()
+        .take(40)
+        .flat_map(|c| {
+            if c.is_control() {
+                c.escape_default().collect::<Vec<_>>()
+            } else {
+                vec![c]
+            }
+        })
+        .collect();
+    if text.chars().nth(40).is_some() {
+        out.push('…');
+    }
+    out
+}
+
+impl std::str::FromStr for Address {
+    type Err = AddressError;
+
+    fn from_str(text: &str) -> Result<Address, AddressError> {
+        let Some((node, port)) = text.split_once(':') else {
+            return Err(AddressError::Form(shown(text)));
+        };
+        let number = |part: &'static str, value: &str, max: u16| {
+            let digits = !value.is_empty() && value.bytes().all(|b| b.is_ascii_digit());
+            digits
+                .then(|| value.parse::<u16>().ok())
+                .flatten()
+                .filter(|n| *n <= max)
+                .ok_or_else(|| AddressError::Number {
+                    text: shown(text),
+                    part,
+                    value: shown(value),
+                    max,
+                })
+        };
+        Ok(Address {
+            node: number("node", node, BROADCAST_NODE - 1)?,
+            port: number("port", port, u16::MAX)?,
+        })
     }
 }
 
@@ -462,7 +513,10 @@ mod tests {
     fn addresses_read_as_node_colon_port() {
         assert_eq!("4:0".parse::<Address>(), Ok(Address { node: 4, port: 0 }));
         assert!("4".parse::<Address>().is_err());
-        assert!("65535:0".parse::<Address>().is_err());
+        assert_eq!(
+            "65535:0".parse::<Address>().unwrap_err().to_string(),
+            "`65535:0` is not an address: node `65535` is not a number from 0 to 65534"
+        );
         assert_eq!(Address { node: 2, port: 3 }.to_string(), "2:3");
     }
 }

@@ -1,4 +1,11 @@
 //! DSAAV services over the IComms medium of `seabus-medium` (`dsaav+…://`), layered as in the
-//! paper: [`rpc`] (reliable, unreliable and broadcast calls) carries the core services.
+//! paper: [`rpc`] (reliable, unreliable and broadcast calls) carries the core services; the
+//! configuration database ([`config`]) holds configuration data from a sectioned text file,
+//! application data that software puts and that persists in its own file, and the "data plumbing"
+//! that tells a component which server provides a service.
 
+pub mod config;
 pub mod rpc;
+
+pub use config::{Database, Sections, ValueError};
+pub use seabus_medium::dsaav::wire::Address;
