@@ -2,9 +2,10 @@
 //! paper: [`rpc`] (reliable, unreliable and broadcast calls) carries the core services; the
 //! configuration database ([`config`]) holds configuration data from a sectioned text file,
 //! application data that software puts and that persists in its own file, and the "data plumbing"
-//! that tells a component which server provides a service.
+//! that tells a component which server provides a service; [`config_service`] serves it over RPC.
 
 pub mod config;
+pub mod config_service;
 pub mod rpc;
 
 pub use config::{Database, Sections, ValueError};
