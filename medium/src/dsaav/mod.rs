@@ -698,19 +698,36 @@ pub mod eth {
         a
     }
 
+    /// The hardware address of `iface`, asked of the kernel (right in any network namespace).
     fn read_mac(iface: &str) -> io::Result<[u8; 6]> {
-        let text = std::fs::read_to_string(format!("/sys/class/net/{iface}/address"))?;
-        let mut mac = [0u8; 6];
-        let parts: Vec<&str> = text.trim().split(':').collect();
-        if parts.len() != 6 {
+        // SAFETY: ifreq is plain data
+        let mut req: libc::ifreq = unsafe { std::mem::zeroed() };
+        let name = iface.as_bytes();
+        if name.len() >= req.ifr_name.len() {
             return Err(io::Error::new(
-                io::ErrorKind::InvalidData,
-                format!("{iface} has no Ethernet address"),
+                io::ErrorKind::InvalidInput,
+                format!("interface name {iface} is too long"),
             ));
         }
-        for (m, p) in mac.iter_mut().zip(parts) {
-            *m = u8::from_str_radix(p, 16)
-                .map_err(|_| io::Error::new(io::ErrorKind::InvalidData, "bad address"))?;
+        for (d, s) in req.ifr_name.iter_mut().zip(name) {
+            *d = *s as libc::c_char;
+        }
+        // SAFETY: a datagram socket used only for the ioctl below, closed by OwnedFd
+        let fd = unsafe { libc::socket(libc::AF_INET, libc::SOCK_DGRAM | libc::SOCK_CLOEXEC, 0) };
+        if fd < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: fd is a new descriptor we own
+        let fd = unsafe { OwnedFd::from_raw_fd(fd) };
+        // SAFETY: SIOCGIFHWADDR reads the name and writes the address into the ifreq we own
+        if unsafe { libc::ioctl(fd.as_raw_fd(), libc::SIOCGIFHWADDR, &mut req) } < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        // SAFETY: after SIOCGIFHWADDR the union holds the hardware address
+        let data = unsafe { req.ifr_ifru.ifru_hwaddr.sa_data };
+        let mut mac = [0u8; 6];
+        for (m, d) in mac.iter_mut().zip(data) {
+            *m = d as u8;
         }
         Ok(mac)
     }
