@@ -1,13 +1,17 @@
 //! Reliable DSAAV RPC round trips against a plain socket ping-pong of the same size, in one run:
 //! over UDP on loopback, and over raw Ethernet between two network namespaces joined by a veth
-//! pair (made here; needs root and `ip`, else that part says it was skipped).
+//! pair (made here; needs root and `ip`, else that part says it was skipped); then sentuator
+//! notifications from one server to four listeners, in-process and over UDP.
 //!
 //! Run: `cargo bench -p seabus-modules --bench rpc`
 
 use seabus_medium::dsaav::wire::Address;
 use seabus_medium::{DataMap, Medium, Node};
 use seabus_modules::dsaav::rpc::{self, CallOptions, RpcClient};
+use seabus_modules::dsaav::sentuator;
 use std::process::Command;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 const CALLS: usize = 5_000;
@@ -189,6 +193,67 @@ fn report(what: &str, rpc: &[Duration], plain: &[Duration]) {
     );
 }
 
+struct Gauge(f64);
+
+impl sentuator::Device for Gauge {
+    fn get(&mut self) -> DataMap {
+        DataMap::new()
+            .with("quantity", sentuator::quantity::DEPTH)
+            .with("depth", self.0)
+    }
+}
+
+/// One sentuator server notifying four listeners on `base` (each medium its own node): how many
+/// notifications each listener took per second.
+fn notifications(base: &str, n: usize) -> (f64, Vec<usize>) {
+    let sep = if base.contains('?') { '&' } else { '?' };
+    runtime().block_on(async move {
+        let counts: Vec<Arc<AtomicUsize>> = (0..4).map(|_| Arc::default()).collect();
+        let mut media = Vec::new();
+        let mut listeners = Vec::new();
+        for (i, count) in counts.iter().enumerate() {
+            let node = 10 + i as u16;
+            let m = Medium::open("dsaav", &format!("{base}{sep}node={node}"), &Node::new("l"))
+                .expect("opens");
+            let c = count.clone();
+            let lm = m.clone();
+            tokio::spawn(async move {
+                sentuator::listen(&lm, 0, move |_, _| {
+                    c.fetch_add(1, Ordering::Relaxed);
+                })
+                .await
+            });
+            media.push(m);
+            listeners.push(Address { node, port: 0 });
+        }
+        let m =
+            Medium::open("dsaav", &format!("{base}{sep}node=1"), &Node::new("s")).expect("opens");
+        let server = sentuator::Sentuator::start(&m, 0, 9, Gauge(0.0), &["Depth"], listeners);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let start = Instant::now();
+        for i in 0..n {
+            server.device().lock().expect("device").0 = i as f64;
+            server.notify().await;
+            if i % 64 == 0 {
+                tokio::task::yield_now().await;
+            }
+        }
+        // let the listeners drain
+        let mut last = 0;
+        for _ in 0..100 {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            let now: usize = counts.iter().map(|c| c.load(Ordering::Relaxed)).sum();
+            if now == last {
+                break;
+            }
+            last = now;
+        }
+        let secs = start.elapsed().as_secs_f64();
+        let got: Vec<usize> = counts.iter().map(|c| c.load(Ordering::Relaxed)).collect();
+        (n as f64 / secs, got)
+    })
+}
+
 fn main() {
     println!(
         "DSAAV reliable RPC round trips (two parameters, about 60-byte frames), {CALLS} calls each:"
@@ -237,4 +302,29 @@ fn main() {
     }
     let _ = ip(&["netns", "del", &ns.0]);
     let _ = ip(&["netns", "del", &ns.1]);
+
+    let n = 20_000;
+    println!("Sentuator notifications, one server to four listeners, {n} readings:");
+    for (what, base) in [
+        (
+            "in-process",
+            format!("dsaav+inproc://bench{}", fastrand::u32(..)),
+        ),
+        (
+            "UDP on loopback",
+            format!(
+                "dsaav+udp://239.255.{}.{}:{}?ttl=0",
+                fastrand::u8(1..250),
+                fastrand::u8(1..250),
+                fastrand::u16(20_000..60_000)
+            ),
+        ),
+    ] {
+        let (rate, got) = notifications(&base, n);
+        println!(
+            "  {what}: {rate:.0} readings/s sent ({:.0} notifications/s), each listener received {:?} of {n}",
+            rate * 4.0,
+            got
+        );
+    }
 }
