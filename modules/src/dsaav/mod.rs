@@ -3,10 +3,12 @@
 //! configuration database ([`config`]) holds configuration data from a sectioned text file,
 //! application data that software puts and that persists in its own file, and the "data plumbing"
 //! that tells a component which server provides a service; [`config_service`] serves it over RPC.
-//! [`sentuator`] puts sensors and actuators behind get / set / notify / health calls.
+//! [`sentuator`] puts sensors and actuators behind get / set / notify / health calls; [`logging`]
+//! keeps one central log for every component.
 
 pub mod config;
 pub mod config_service;
+pub mod logging;
 pub mod rpc;
 pub mod sentuator;
 

@@ -1,0 +1,248 @@
+//! The DSAAV logging service: one chronological central log for every component, with five levels
+//! and size-based rotation.
+//!
+//! A component's [`Logger`] sends records to the logging server by RPC — reliably, except DATA
+//! records (sensor data in volume), which go unreliably so that logging never becomes a
+//! bottleneck. Each component logs at the level its configuration gives it (`LogLevel` in the
+//! `[Logging]` section, overridden by `Logging.LogLevel` in its own section), changeable at run
+//! time. The server writes one line per record to its file —
+//! `2026-11-21T09:15:02.125Z INFO  MyDepthController  text` — and when the file passes its size
+//! limit it is renamed `NAME.1` (older ones shifted up to the number kept) and a new one begun.
+
+use super::config::Database;
+use super::rpc::{self, CallOptions, RpcClient, RpcError};
+use seabus_medium::dsaav::wire::Address;
+use seabus_medium::{DataMap, Medium};
+use std::fmt;
+use std::fs::{File, OpenOptions};
+use std::io::{self, Write};
+use std::path::PathBuf;
+
+/// The logging service's operation: one record.
+pub const LOG_OP: i32 = 300;
+
+/// How much a record matters; a component logs records at or above its level.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Level {
+    /// Critical or unrecoverable errors.
+    Error = 0,
+    /// Problems the component carries on through.
+    Warning = 1,
+    /// Versions, state changes, major events.
+    Info = 2,
+    /// Sensor data, sent unreliably.
+    Data = 3,
+    /// Debugging, enabled for troubleshooting.
+    Debug = 4,
+}
+
+impl Level {
+    /// Every level, most important first.
+    pub const ALL: [Level; 5] = [
+        Level::Error,
+        Level::Warning,
+        Level::Info,
+        Level::Data,
+        Level::Debug,
+    ];
+
+    /// The name used in configuration files (`LOG_INFO`).
+    pub fn config_name(self) -> &'static str {
+        match self {
+            Level::Error => "LOG_ERROR",
+            Level::Warning => "LOG_WARNING",
+            Level::Info => "LOG_INFO",
+            Level::Data => "LOG_DATA",
+            Level::Debug => "LOG_DEBUG",
+        }
+    }
+
+    /// Reads `LOG_INFO` (or `INFO`, any case).
+    pub fn parse(text: &str) -> Option<Level> {
+        let t = text.trim().to_ascii_uppercase();
+        let t = t.strip_prefix("LOG_").unwrap_or(&t);
+        Level::ALL
+            .into_iter()
+            .find(|l| l.config_name().strip_prefix("LOG_") == Some(t))
+    }
+
+    fn from_number(n: i64) -> Option<Level> {
+        Level::ALL.into_iter().find(|l| *l as i64 == n)
+    }
+}
+
+impl fmt::Display for Level {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.config_name().trim_start_matches("LOG_"))
+    }
+}
+
+/// The central log file, rotated by size.
+pub struct LogFile {
+    path: PathBuf,
+    file: File,
+    size: u64,
+    limit: u64,
+    keep: u32,
+}
+
+impl LogFile {
+    /// Opens (appending to) `path`, rotating when it passes `limit` bytes and keeping `keep` old
+    /// files.
+    pub fn open(path: PathBuf, limit: u64, keep: u32) -> io::Result<LogFile> {
+        let file = OpenOptions::new().create(true).append(true).open(&path)?;
+        let size = file.metadata()?.len();
+        Ok(LogFile {
+            path,
+            file,
+            size,
+            limit: limit.max(1),
+            keep,
+        })
+    }
+
+    fn numbered(&self, n: u32) -> PathBuf {
+        let mut p = self.path.clone().into_os_string();
+        p.push(format!(".{n}"));
+        PathBuf::from(p)
+    }
+
+    fn rotate(&mut self) -> io::Result<()> {
+        self.file.flush()?;
+        if self.keep == 0 {
+            self.file = File::create(&self.path)?;
+        } else {
+            for n in (1..self.keep).rev() {
+                let from = self.numbered(n);
+                if from.exists() {
+                    std::fs::rename(&from, self.numbered(n + 1))?;
+                }
+            }
+            std::fs::rename(&self.path, self.numbered(1))?;
+            self.file = OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(&self.path)?;
+        }
+        self.size = 0;
+        Ok(())
+    }
+
+    /// Appends one record's line, rotating first when the file is full.
+    pub fn write(&mut self, line: &str) -> io::Result<()> {
+        if self.size > 0 && self.size + line.len() as u64 + 1 > self.limit {
+            self.rotate()?;
+        }
+        self.file.write_all(line.as_bytes())?;
+        self.file.write_all(b"\n")?;
+        self.size += line.len() as u64 + 1;
+        Ok(())
+    }
+}
+
+/// A record's line in the central log.
+pub fn format_line(time_s: f64, level: Level, component: &str, text: &str) -> String {
+    let clean = |s: &str| s.replace(['\n', '\r'], " ");
+    let when =
+        std::time::UNIX_EPOCH + std::time::Duration::try_from_secs_f64(time_s).unwrap_or_default();
+    format!(
+        "{} {:<7} {:<18} {}",
+        humantime::format_rfc3339_millis(when),
+        level.to_string(),
+        clean(component),
+        clean(text)
+    )
+}
+
+/// Serves the logging operation on `port`, writing every record to `log`, until the medium
+/// closes. Records that cannot be written are refused to reliable callers with status 6.
+pub async fn serve(medium: &Medium, port: u16, mut log: LogFile) {
+    rpc::serve(medium, port, &[], move |call| {
+        let p = &call.params;
+        let level = p
+            .get_i64("level")
+            .and_then(Level::from_number)
+            .ok_or((5, "a log record needs `level` 0–4".to_string()))?;
+        let time = p
+            .get_f64("time")
+            .unwrap_or_else(|| seabus_medium::Stamp::now().as_secs_f64());
+        let component = p.get_str("component").unwrap_or("?");
+        let text = p.get_str("text").unwrap_or("");
+        log.write(&format_line(time, level, component, text))
+            .map(|()| DataMap::new())
+            .map_err(|e| (6, format!("cannot write the log: {e}")))
+    })
+    .await
+}
+
+/// A component's logger: its level, and the way to the logging server.
+pub struct Logger {
+    component: String,
+    level: Level,
+    server: Address,
+    rpc: RpcClient,
+    opts: CallOptions,
+}
+
+impl Logger {
+    /// A logger for `component` on `port` of the medium's node, sending to the logging server
+    /// and at the level the configuration gives (`Logging.LogLevel` of the component, else
+    /// `LogLevel` of `[Logging]`, else INFO).
+    pub fn new(
+        medium: &Medium,
+        port: u16,
+        component: &str,
+        cfg: &Database,
+        opts: CallOptions,
+    ) -> Result<Logger, String> {
+        let server = cfg
+            .server_of(component, "Logging")
+            .map_err(|e| e.to_string())?;
+        let level = match cfg.setting(component, "Logging", "LogLevel") {
+            Ok(v) => Level::parse(v.as_str()).ok_or_else(|| {
+                format!("{component}: LogLevel `{}` is not a log level", v.as_str())
+            })?,
+            Err(_) => Level::Info,
+        };
+        Ok(Logger {
+            component: component.to_string(),
+            level,
+            server,
+            rpc: RpcClient::new(medium, port),
+            opts,
+        })
+    }
+
+    /// The level records are logged at or above.
+    pub fn level(&self) -> Level {
+        self.level
+    }
+
+    /// Changes the level at run time.
+    pub fn set_level(&mut self, level: Level) {
+        self.level = level;
+    }
+
+    /// Logs `text` at `level` if the component's level lets it through: DATA unreliably, the
+    /// others reliably. Returns whether it was sent.
+    pub async fn log(&self, level: Level, text: &str) -> Result<bool, RpcError> {
+        if level > self.level {
+            return Ok(false);
+        }
+        let record = DataMap::new()
+            .with("level", level as i64)
+            .with("component", self.component.as_str())
+            .with("text", text)
+            .with("time", seabus_medium::Stamp::now().as_secs_f64());
+        if level == Level::Data {
+            self.rpc
+                .call_unreliable(self.server, LOG_OP, &record)
+                .await?;
+        } else {
+            self.rpc
+                .call(self.server, LOG_OP, &record, self.opts)
+                .await?;
+        }
+        Ok(true)
+    }
+}
