@@ -2,9 +2,11 @@
 //! paper: [`rpc`] (reliable, unreliable and broadcast calls) carries the core services; the
 //! configuration database ([`config`]) holds configuration data from a sectioned text file,
 //! application data that software puts and that persists in its own file, and the "data plumbing"
-//! that tells a component which server provides a service.
+//! that tells a component which server provides a service; the health monitor's core ([`health`])
+//! reads the health rules file and turns component health updates into a vehicle severity.
 
 pub mod config;
+pub mod health;
 pub mod rpc;
 
 pub use config::{Database, Sections, ValueError};
