@@ -128,7 +128,10 @@ async fn what_cannot_be_carried_is_refused_naming_why() {
         port.send("dsaav.data", DataMap::new().with("@dst", "2"))
             .await,
     );
-    assert!(e.contains("`2` is not an address: expected `node:port`"), "{e}");
+    assert!(
+        e.contains("`2` is not an address: expected `node:port`"),
+        "{e}"
+    );
     let e = refused(
         port.send("dsaav.data", DataMap::new().with("text", "x".repeat(2000)))
             .await,
