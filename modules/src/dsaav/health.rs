@@ -66,7 +66,8 @@ use std::path::Path;
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::time::Instant;
+/// The time a monitor is given (tokio's, so that a paused test clock drives it too).
+pub use tokio::time::Instant;
 
 /// The topic of the health snapshot when the file names none.
 pub const DEFAULT_PUBLISH: &str = "vehicle.health";
