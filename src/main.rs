@@ -307,21 +307,6 @@ fn check(file: &std::path::Path) -> ExitCode {
     }
 }
 
-/// Builds a datamap from `key=value` arguments.
-fn fields_map(fields: &[String]) -> Result<DataMap, String> {
-    let mut map = DataMap::new();
-    for f in fields {
-        let (k, v) = f
-            .split_once('=')
-            .ok_or_else(|| format!("`{f}` is not key=value"))?;
-        if k.is_empty() {
-            return Err(format!("`{f}` has an empty key"));
-        }
-        map.insert(k.to_string(), Value::parse_loose(v));
-    }
-    Ok(map)
-}
-
 async fn publish(args: PubArgs) -> ExitCode {
     let usage = |msg: String| {
         eprintln!("seabus pub: {msg}");
@@ -338,7 +323,7 @@ async fn publish(args: PubArgs) -> ExitCode {
         lcm,
         lcm_types,
     } = args;
-    let map = match fields_map(&fields) {
+    let map = match seabus_medium::parse::parse_fields(fields.iter().map(String::as_str)) {
         Ok(m) => m,
         Err(e) => return usage(e),
     };
@@ -426,25 +411,6 @@ fn types() {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn fields_are_typed() {
-        let m = fields_map(&[
-            "a=1".into(),
-            "b=2.5".into(),
-            "c=true".into(),
-            "d=\"7\"".into(),
-            "e=x=y".into(),
-        ])
-        .unwrap();
-        assert_eq!(m.get("a"), Some(&Value::Int(1)));
-        assert_eq!(m.get("b"), Some(&Value::Float(2.5)));
-        assert_eq!(m.get("c"), Some(&Value::Bool(true)));
-        assert_eq!(m.get("d"), Some(&Value::Str("7".into())));
-        assert_eq!(m.get("e"), Some(&Value::Str("x=y".into())));
-        assert!(fields_map(&["novalue".into()]).is_err());
-        assert!(fields_map(&["=1".into()]).is_err());
-    }
 
     #[test]
     fn the_demo_system_is_valid() {

@@ -1,6 +1,8 @@
 //! Reading the small values users write in files, URLs and on the command line: booleans,
-//! durations, rates. One reader each, shared by every place that takes them.
+//! durations, rates, and typed `key=value` fields. One reader each, shared by every place that
+//! takes them.
 
+use crate::datamap::{DataMap, Value};
 use std::time::Duration;
 
 /// Longest duration seabus accepts anywhere (about 31 years).
@@ -65,6 +67,57 @@ pub fn rate_period(per_second: f64) -> Option<Duration> {
     }
 }
 
+/// Splits `text` into words at blanks. A double-quoted run keeps its blanks inside its word and its
+/// quotes in the word (`reason="no depth"` is one word); a quote left open is an error.
+pub fn split_words(text: &str) -> Result<Vec<&str>, String> {
+    let mut words = Vec::new();
+    let mut start: Option<usize> = None;
+    let mut quoted = false;
+    for (i, c) in text.char_indices() {
+        if c == '"' {
+            quoted = !quoted;
+        }
+        if c.is_whitespace() && !quoted {
+            if let Some(s) = start.take() {
+                words.push(&text[s..i]);
+            }
+        } else if start.is_none() {
+            start = Some(i);
+        }
+    }
+    if quoted {
+        return Err("a double quote `\"` is not closed".to_string());
+    }
+    if let Some(s) = start {
+        words.push(&text[s..]);
+    }
+    Ok(words)
+}
+
+/// One `key=value` field: the key is what comes before the first `=` (not empty), the value is
+/// typed by [`Value::parse_loose`] (`1` an integer, `2.5` a float, `true` a boolean, `"7"` and
+/// anything else a string).
+pub fn parse_field(text: &str) -> Result<(&str, Value), String> {
+    let (key, value) = text
+        .split_once('=')
+        .ok_or_else(|| format!("`{text}` is not key=value"))?;
+    if key.is_empty() {
+        return Err(format!("`{text}` has an empty key"));
+    }
+    Ok((key, Value::parse_loose(value)))
+}
+
+/// A datamap of `key=value` fields ([`parse_field`]) in order; a key given again replaces its
+/// earlier value.
+pub fn parse_fields<'a>(fields: impl IntoIterator<Item = &'a str>) -> Result<DataMap, String> {
+    let mut map = DataMap::new();
+    for f in fields {
+        let (key, value) = parse_field(f)?;
+        map.insert(key.to_string(), value);
+    }
+    Ok(map)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -100,5 +153,36 @@ mod tests {
         assert_eq!(secs(1e30), None);
         assert_eq!(parse_bool(" yes "), Some(true));
         assert_eq!(parse_bool("maybe"), None);
+    }
+
+    #[test]
+    fn fields_are_typed() {
+        let m = parse_fields(["a=1", "b=2.5", "c=true", "d=\"7\"", "e=x=y", "a=2"]).unwrap();
+        assert_eq!(m.len(), 5);
+        assert_eq!(m.get("a"), Some(&Value::Int(2)));
+        assert_eq!(m.get("b"), Some(&Value::Float(2.5)));
+        assert_eq!(m.get("c"), Some(&Value::Bool(true)));
+        assert_eq!(m.get("d"), Some(&Value::Str("7".into())));
+        assert_eq!(m.get("e"), Some(&Value::Str("x=y".into())));
+        assert_eq!(
+            parse_fields(["novalue"]).unwrap_err(),
+            "`novalue` is not key=value"
+        );
+        assert_eq!(parse_fields(["=1"]).unwrap_err(), "`=1` has an empty key");
+    }
+
+    #[test]
+    fn words_split_at_blanks_outside_quotes() {
+        assert_eq!(
+            split_words("  cmd.x a=1\treason=\"no  depth\" \"b c\"d ").unwrap(),
+            ["cmd.x", "a=1", "reason=\"no  depth\"", "\"b c\"d"]
+        );
+        assert_eq!(split_words(" \n ").unwrap(), Vec::<&str>::new());
+        assert_eq!(
+            split_words("a b=\"open").unwrap_err(),
+            "a double quote `\"` is not closed"
+        );
+        let (k, v) = parse_field("reason=\"no  depth\"").unwrap();
+        assert_eq!((k, v), ("reason", Value::Str("no  depth".into())));
     }
 }

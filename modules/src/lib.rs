@@ -12,7 +12,8 @@
 //! - [`runtime`] — the container: opens media, supervises modules (restart with back-off), shuts
 //!   down on request.
 //! - [`dsaav`] — the DSAAV services: the configuration database ([`dsaav::config`]) with its
-//!   application data and data plumbing.
+//!   application data and data plumbing, and the health monitor's rules and state machine
+//!   ([`dsaav::health`]).
 //! - [`datasets`] — the standard datasets of `configs/datasets.xml` and validation against them.
 //! - [`params`] — module parameters with their places in the file.
 //! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.

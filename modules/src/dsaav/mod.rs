@@ -4,10 +4,12 @@
 //! application data that software puts and that persists in its own file, and the "data plumbing"
 //! that tells a component which server provides a service; [`config_service`] serves it over RPC.
 //! [`sentuator`] puts sensors and actuators behind get / set / notify / health calls; [`logging`]
-//! keeps one central log for every component.
+//! keeps one central log for every component; the health monitor's core ([`health`]) reads the
+//! health rules file and turns component health updates into a vehicle severity.
 
 pub mod config;
 pub mod config_service;
+pub mod health;
 pub mod logging;
 pub mod rpc;
 pub mod sentuator;
