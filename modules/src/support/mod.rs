@@ -3,10 +3,13 @@
 //! - `generator` publishes a counter and a sine wave at its tick rate, for testing links end to end;
 //! - `convert` turns fields of one topic into fields of another by linear conversions declared in
 //!   the system file (`depth_ft*0.3048 as depth`);
-//! - `square` drives a vehicle around a square with course commands, leg by leg, from its position.
+//! - `square` drives a vehicle around a square with course commands, leg by leg, from its position;
+//! - `health-monitor` watches every module and medium by a health rules file and publishes the
+//!   vehicle's severity.
 
 pub mod convert;
 pub mod generator;
+pub mod health_monitor;
 pub mod square;
 
 use crate::registry::Registry;
@@ -15,5 +18,6 @@ use crate::registry::Registry;
 pub fn register(reg: &mut Registry) {
     reg.add_module(generator::TYPE)
         .add_module(convert::TYPE)
-        .add_module(square::TYPE);
+        .add_module(square::TYPE)
+        .add_module(health_monitor::TYPE);
 }
