@@ -5,8 +5,9 @@ mod record;
 mod spy;
 
 use clap::{Parser, Subcommand};
+use seabus_medium::lcm::types::ResolvedTypes;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, Medium, Node, Payload, Value};
+use seabus_medium::{DataMap, Format, Kind, Medium, Node, Payload, Stamp, Value};
 use seabus_modules::system::{self, SystemSpec};
 use seabus_modules::{Catalogue, Registry, Runtime};
 use std::path::PathBuf;
@@ -335,13 +336,13 @@ async fn publish(args: PubArgs) -> ExitCode {
             "--rate {rate}: expected above 0 and at most a million per second"
         ));
     };
-    let payload = match &lcm {
+    let outgoing = match &lcm {
         Some(name) => match lcm_message(name, &lcm_types, &map) {
-            Ok(p) => p,
+            Ok(o) => o,
             Err(e) => return usage(e),
         },
         None => match Payload::from(map).convert(format) {
-            Ok(p) => p,
+            Ok(p) => Outgoing::Same(p),
             Err(e) => return usage(e.to_string()),
         },
     };
@@ -355,31 +356,85 @@ async fn publish(args: PubArgs) -> ExitCode {
     let mut ticker = tokio::time::interval(period);
     for _ in 0..count {
         ticker.tick().await;
-        if let Err(e) = port.publish(kind, topic.as_str(), payload.clone()).await {
+        let payload = match outgoing.payload(Stamp::now()) {
+            Ok(p) => p,
+            Err(e) => return usage(e),
+        };
+        if let Err(e) = port.publish(kind, topic.as_str(), payload).await {
             return usage(e.to_string());
         }
     }
     ExitCode::SUCCESS
 }
 
-/// The LCM message of type `name` made from `map` (a missing `utime` is now).
-fn lcm_message(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<Payload, String> {
-    let types = seabus_bridges::lcm::types_with(paths).map_err(|e| format!("--lcm-types: {e}"))?;
+/// What `seabus pub` sends: the same payload every time, or an LCM message made anew for each,
+/// with the time it is sent in its `utime`.
+enum Outgoing {
+    Same(Payload),
+    Lcm {
+        types: ResolvedTypes,
+        name: String,
+        map: DataMap,
+    },
+}
+
+impl Outgoing {
+    /// An LCM message of type `name` (one of `types`) made from `map`, checked by making it once.
+    fn lcm(types: ResolvedTypes, name: &str, map: &DataMap) -> Result<Outgoing, String> {
+        let outgoing = Outgoing::Lcm {
+            types,
+            name: name.to_string(),
+            map: map.clone(),
+        };
+        outgoing.payload(Stamp::now())?;
+        Ok(outgoing)
+    }
+
+    /// The payload of the message sent at `stamp`.
+    fn payload(&self, stamp: Stamp) -> Result<Payload, String> {
+        match self {
+            Outgoing::Same(p) => Ok(p.clone()),
+            Outgoing::Lcm { types, name, map } => lcm_payload(types, name, map, stamp),
+        }
+    }
+}
+
+/// The LCM message of type `name` made from `map`, sent at `stamp`: the type's single `int64_t
+/// utime`, when the fields do not give it, is `stamp` in microseconds.
+fn lcm_payload(
+    types: &ResolvedTypes,
+    name: &str,
+    map: &DataMap,
+    stamp: Stamp,
+) -> Result<Payload, String> {
     let Some(ty) = types.get(name) else {
+        return Err(format!("--lcm {name}: no such LCM type"));
+    };
+    let bytes = if seabus_bridges::lcm::has_utime(ty) && map.get("utime").is_none() {
+        let mut map = map.clone();
+        map.insert("utime", Value::Int(stamp.0 / 1_000));
+        seabus_medium::lcm::codec::encode(types, ty, &map)
+    } else {
+        seabus_medium::lcm::codec::encode(types, ty, map)
+    };
+    bytes
+        .map(Payload::from)
+        .map_err(|e| format!("--lcm {name}: {e}"))
+}
+
+/// The LCM message of type `name` made from `map`, with the types of `paths` besides the
+/// built-in ones.
+fn lcm_message(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<Outgoing, String> {
+    let types = seabus_bridges::lcm::types_with(paths).map_err(|e| format!("--lcm-types: {e}"))?;
+    if types.get(name).is_none() {
         let mut known: Vec<&str> = types.iter().map(|t| t.full_name()).collect();
         known.sort_unstable();
         return Err(format!(
             "--lcm {name}: no such LCM type; known types: {}",
             known.join(", ")
         ));
-    };
-    let mut map = map.clone();
-    if ty.member("utime").is_some() && map.get("utime").is_none() {
-        map.insert("utime", Value::Int(seabus_medium::Stamp::now().0 / 1_000));
     }
-    seabus_medium::lcm::codec::encode(&types, ty, &map)
-        .map(Payload::from)
-        .map_err(|e| format!("--lcm {name}: {e}"))
+    Outgoing::lcm(types, name, map)
 }
 
 fn types() {
@@ -411,6 +466,56 @@ fn types() {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lcm_messages_are_stamped_as_sent_in_a_single_int64_utime_only() {
+        let mut set = seabus_medium::lcm::types::TypeSet::new();
+        set.add_text(
+            "t.lcm",
+            "package t;\n\
+             struct s_t { int64_t utime; double x; }\n\
+             struct d_t { double utime; }\n\
+             struct a_t { int64_t utime[2]; }\n\
+             struct str_t { string utime; }",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let types = set.resolve().unwrap_or_else(|e| panic!("{e}"));
+        let map = DataMap::new().and("x", 1.5);
+        let decoded = |out: &Outgoing, name: &str, stamp: i64| {
+            let p = out.payload(Stamp(stamp)).unwrap_or_else(|e| panic!("{e}"));
+            let bytes = p.as_bytes().expect("bytes");
+            let ty = types.get(name).expect("type");
+            seabus_medium::lcm::codec::decode(&types, ty, bytes).unwrap_or_else(|e| panic!("{e}"))
+        };
+        // each message sent gets its own time
+        let out = Outgoing::lcm(types.clone(), "t.s_t", &map).unwrap_or_else(|e| panic!("{e}"));
+        for stamp in [1_000_000_000, 2_000_000_000] {
+            let m = decoded(&out, "t.s_t", stamp);
+            assert_eq!(m.get("utime"), Some(&Value::Int(stamp / 1_000)));
+            assert_eq!(m.get("x"), Some(&Value::Float(1.5)));
+        }
+        // one given in the fields stays
+        let given = DataMap::new().and("utime", 7);
+        let out = Outgoing::lcm(types.clone(), "t.s_t", &given).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            decoded(&out, "t.s_t", 5_000).get("utime"),
+            Some(&Value::Int(7))
+        );
+        // a `utime` of another type is left to its default
+        let empty = DataMap::new();
+        let out = Outgoing::lcm(types.clone(), "t.d_t", &empty).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            decoded(&out, "t.d_t", 5_000)
+                .get("utime")
+                .and_then(Value::as_f64)
+                .is_some_and(f64::is_nan)
+        );
+        for name in ["t.a_t", "t.str_t"] {
+            let out = Outgoing::lcm(types.clone(), name, &empty).unwrap_or_else(|e| panic!("{e}"));
+            let m = decoded(&out, name, 5_000);
+            assert_ne!(m.get("utime"), Some(&Value::Int(5)), "{name}");
+        }
+    }
 
     #[test]
     fn the_demo_system_is_valid() {

@@ -253,7 +253,7 @@ pub struct ReplayArgs {
     pub file: PathBuf,
     /// The medium, for example udp://239.255.42.1:47800.
     pub url: String,
-    /// Speed factor: 2 plays twice as fast; max (or 0) sends as fast as possible.
+    /// Speed factor, 0.001 to 1e6: 2 plays twice as fast; max (or 0) sends as fast as possible.
     #[arg(
         long,
         default_value = "1",
@@ -277,16 +277,28 @@ pub struct ReplayArgs {
     pub looping: bool,
 }
 
+/// Slowest `--speed`.
+const MIN_SPEED: f64 = 1e-3;
+/// Fastest `--speed` other than `max`.
+const MAX_SPEED: f64 = 1e6;
+
 /// Reads `--speed`: `None` for as fast as possible (`max` or `0`), else the factor.
 fn parse_speed(text: &str) -> Option<Option<f64>> {
     match text {
         "max" => Some(None),
         _ => match text.parse::<f64>() {
             Ok(0.0) => Some(None),
-            Ok(x) if x.is_finite() && x > 0.0 && x <= 1e6 => Some(Some(x)),
+            Ok(x) if (MIN_SPEED..=MAX_SPEED).contains(&x) => Some(Some(x)),
             _ => None,
         },
     }
+}
+
+/// When the event logged at `timestamp` is due, pacing from the event logged at `log0` sent at
+/// `clock0`, at `speed`; `None` when that is beyond any clock (it never is).
+fn due(clock0: Instant, log0: i64, timestamp: i64, speed: f64) -> Option<Instant> {
+    let after = timestamp.saturating_sub(log0).max(0) as f64 / 1e6 / speed;
+    clock0.checked_add(Duration::try_from_secs_f64(after).ok()?)
 }
 
 /// One channel of the log, as replay sees it.
@@ -407,12 +419,18 @@ impl Replay<'_> {
                     _ => *base.insert((timestamp, Instant::now())),
                 };
                 previous = timestamp;
-                let wait = (timestamp - log0) as f64 / 1e6 / speed;
-                let at = clock0 + Duration::try_from_secs_f64(wait).unwrap_or(Duration::ZERO);
-                if at > Instant::now() {
-                    tokio::select! {
-                        _ = &mut *stop => return PassEnd::Stopped,
-                        _ = tokio::time::sleep_until(at) => {}
+                match due(clock0, log0, timestamp, speed) {
+                    Some(at) if at <= Instant::now() => {}
+                    // waiting beyond any clock: until stopped
+                    None => {
+                        stop.await;
+                        return PassEnd::Stopped;
+                    }
+                    Some(at) => {
+                        tokio::select! {
+                            _ = &mut *stop => return PassEnd::Stopped,
+                            _ = tokio::time::sleep_until(at) => {}
+                        }
                     }
                 }
             } else if futures_ready(stop) {
@@ -497,7 +515,8 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     };
     let Some(speed) = parse_speed(&args.speed) else {
         return usage(format!(
-            "--speed {}: expected a factor above 0 and at most 1e6, or max (or 0) for as fast as possible",
+            "--speed {}: expected a factor from {MIN_SPEED} to {MAX_SPEED:e}, or max (or 0) for as \
+             fast as possible",
             args.speed
         ));
     };
@@ -587,8 +606,24 @@ mod tests {
         assert_eq!(parse_speed("max"), Some(None));
         assert_eq!(parse_speed("0"), Some(None));
         assert_eq!(parse_speed("2.5"), Some(Some(2.5)));
-        for bad in ["-1", "nan", "inf", "fast", "1e7", ""] {
+        assert_eq!(parse_speed("0.001"), Some(Some(0.001)));
+        for bad in ["-1", "nan", "inf", "fast", "1e7", "", "1e-18", "0.0009"] {
             assert_eq!(parse_speed(bad), None, "{bad}");
         }
+    }
+
+    #[test]
+    fn pacing_stays_within_the_clock() {
+        let now = Instant::now();
+        let s = Duration::from_secs;
+        assert_eq!(due(now, 0, 2_000_000, 2.0), Some(now + s(1)));
+        assert_eq!(due(now, 5, 5, MIN_SPEED), Some(now));
+        // timestamps as far apart as they go, at the slowest speed: no overflow, no panic
+        for (log0, timestamp) in [(i64::MIN, i64::MAX), (0, i64::MAX), (i64::MIN, 0)] {
+            let at = due(now, log0, timestamp, MIN_SPEED);
+            assert!(at.is_none_or(|at| at > now + s(1 << 40)), "{at:?}");
+        }
+        // speeds below the slowest would be refused; the pacing itself does not panic on them
+        assert!(due(now, 0, i64::MAX, 1e-18).is_none());
     }
 }

@@ -543,6 +543,10 @@ fn speed_scales_the_logged_spacing() {
 
     for (args, reason) in [
         (vec!["--speed", "-1"], "--speed -1: expected"),
+        (
+            vec!["--speed", "1e-18"],
+            "--speed 1e-18: expected a factor from 0.001",
+        ),
         (vec!["--from", "-2"], "--from -2: expected"),
         (vec!["--channels", "("], "--channels (:"),
     ] {

@@ -9,7 +9,7 @@
 //! an `int64_t utime` member gets the message's stamp there (microseconds) when the map has none.
 
 use seabus_medium::lcm::codec::{self, CodecError};
-use seabus_medium::lcm::types::{MemberType, Primitive, ResolvedTypes, TypeSet};
+use seabus_medium::lcm::types::{MemberType, Primitive, ResolvedTypes, StructType, TypeSet};
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Payload, Stamp, Value};
 use seabus_modules::system::{BridgeSpec, RouteSpec};
@@ -21,7 +21,15 @@ pub const BUILT_IN: &str = include_str!("../../configs/lcm/seabus.lcm");
 /// The name the built-in types' file is known by in messages.
 pub const BUILT_IN_FILE: &str = "configs/lcm/seabus.lcm";
 
-/// The built-in LCM types and those of `paths` (`.lcm` files, or directories of them).
+/// True when `ty` has an `int64_t utime` member holding a single value: the member filled with a
+/// message's stamp (microseconds since the epoch) when the map has none.
+pub fn has_utime(ty: &StructType) -> bool {
+    ty.member("utime")
+        .is_some_and(|(_, m)| m.dims.is_empty() && m.ty == MemberType::Primitive(Primitive::Int64))
+}
+
+/// The built-in LCM types and those of `paths` (`.lcm` files, or directories of them). A struct
+/// declared again exactly as before, as in a copy of the built-in file, is the same struct.
 pub fn types_with(paths: &[PathBuf]) -> Result<ResolvedTypes, FileError> {
     let mut set = TypeSet::new();
     set.add_text(BUILT_IN_FILE, BUILT_IN)?;
@@ -114,16 +122,11 @@ impl Mapping {
                 spec.media[0], spec.media[1]
             )));
         }
-        let utime = ty.members().iter().any(|m| {
-            m.name == "utime"
-                && m.dims.is_empty()
-                && m.ty == MemberType::Primitive(Primitive::Int64)
-        });
         Ok(Some(Mapping {
             ty: name.clone(),
             decode,
             encode,
-            utime,
+            utime: has_utime(ty),
         }))
     }
 
@@ -193,5 +196,81 @@ impl Problem {
             _ => "lcm-codec",
         };
         Problem::new(reason, format!("channel `{channel}`: {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A directory of its own under the system's temporary directory, removed when dropped.
+    struct Dir(PathBuf);
+
+    impl Dir {
+        fn new(name: &str) -> Dir {
+            let nanos = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.as_nanos());
+            let path =
+                std::env::temp_dir().join(format!("seabus-{name}-{}-{nanos}", std::process::id()));
+            std::fs::create_dir_all(&path).unwrap();
+            Dir(path)
+        }
+    }
+
+    impl Drop for Dir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
+    #[test]
+    fn a_copy_of_the_built_in_types_among_ones_own_is_accepted() {
+        let dir = Dir::new("lcm-types");
+        std::fs::write(dir.0.join("seabus.lcm"), BUILT_IN).unwrap();
+        std::fs::write(
+            dir.0.join("lab.lcm"),
+            "package lab; struct probe_t { int64_t utime; seabus.depth_t depth; }",
+        )
+        .unwrap();
+        let types = types_with(std::slice::from_ref(&dir.0)).unwrap_or_else(|e| panic!("{e}"));
+        let built_in = types_with(&[]).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(types.len(), built_in.len() + 1);
+        assert!(types.get("lab.probe_t").is_some());
+        // the same name declared otherwise is still an error
+        std::fs::write(
+            dir.0.join("seabus.lcm"),
+            BUILT_IN.replacen("double depth;", "float depth;", 1),
+        )
+        .unwrap();
+        let e = types_with(std::slice::from_ref(&dir.0))
+            .map(|_| ())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "struct `seabus.depth_t` is declared twice; first at configs/lcm/seabus.lcm"
+            ),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn only_a_single_int64_utime_is_stamped() {
+        let mut set = TypeSet::new();
+        set.add_text(
+            "t.lcm",
+            "struct s_t { int64_t utime; }\n\
+             struct d_t { double utime; }\n\
+             struct a_t { int64_t utime[2]; }\n\
+             struct n_t { int64_t time; }",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let types = set.resolve().unwrap_or_else(|e| panic!("{e}"));
+        let stamped: Vec<bool> = ["s_t", "d_t", "a_t", "n_t"]
+            .iter()
+            .map(|n| types.get(n).is_some_and(has_utime))
+            .collect();
+        assert_eq!(stamped, [true, false, false, false]);
     }
 }

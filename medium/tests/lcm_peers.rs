@@ -1,7 +1,8 @@
 //! The LCM medium against real LCM peers on this machine (ttl 0): the C library liblcm, through
 //! the `lcm` crate that binds it, and the Python `lcm` package; short and fragmented messages in
 //! both directions, packets compared byte for byte with liblcm's, and fragments out of order,
-//! repeated, missing and interleaved from two senders over real sockets.
+//! repeated, missing and interleaved from two senders over real sockets; a sender starting again
+//! on the same port, two local publishers of large messages, and closing.
 //!
 //! The peers are installed by `./scripts/test` (Debian `liblcm-dev`, PyPI `lcm`).
 
@@ -159,6 +160,11 @@ async fn seabus_messages_reach_liblcm() {
 /// A socket that hears the group as liblcm's receivers do.
 fn listener() -> UdpSocket {
     let (group, port) = group_port();
+    listener_on(group, port)
+}
+
+/// A socket that hears `group` on `port` as liblcm's receivers do.
+fn listener_on(group: Ipv4Addr, port: u16) -> UdpSocket {
     let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).unwrap();
     s.set_reuse_address(true).unwrap();
     let _ = s.set_recv_buffer_size(4 << 20);
@@ -391,4 +397,170 @@ async fn fragments_in_any_order_repeated_missing_and_interleaved() {
         iface.try_recv().is_err(),
         "the incomplete message is not delivered"
     );
+}
+
+/// A group and port of a test's own, so that what it sends and counts is its own.
+fn own_group() -> (Ipv4Addr, u16) {
+    (
+        Ipv4Addr::new(239, 255, 78, fastrand::u8(1..250)),
+        fastrand::u16(20_000..60_000),
+    )
+}
+
+fn open_on(group: Ipv4Addr, port: u16) -> Medium {
+    Medium::open(
+        "lcm",
+        &format!("udpm://{group}:{port}?ttl=0&recv_buf_size=4194304"),
+        &Node::new("t"),
+    )
+    .expect("lcm medium opens")
+}
+
+/// A plain socket sending to the group on loopback.
+fn plain_sender() -> UdpSocket {
+    let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).unwrap();
+    s.set_multicast_ttl_v4(0).unwrap();
+    let _ = s.set_multicast_if_v4(&Ipv4Addr::LOCALHOST);
+    s.bind(&SocketAddr::from((Ipv4Addr::UNSPECIFIED, 0)).into())
+        .unwrap();
+    UdpSocket::from(s)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_sender_starting_again_on_its_port_loses_nothing() {
+    // sequence numbers 0..=2000, then 0..=2000 again from the same address: a sender on a fixed
+    // port that started again. LCM never sends a message twice, so all of them are new.
+    const RUN: u32 = 2001;
+    let (group, port) = own_group();
+    let m = open_on(group, port);
+    let mut iface = m.attach_with("t", 8192, 64).subscribed("**").unwrap();
+    let to = SocketAddr::from((group, port));
+    let sender = std::thread::spawn(move || {
+        let s = plain_sender();
+        for run in 0..2u32 {
+            for seq in 0..RUN {
+                let body = (run * RUN + seq).to_be_bytes();
+                for d in wire::encode(seq, "RESTART", &body).unwrap() {
+                    s.send_to(&d, to).unwrap();
+                }
+                if seq % 50 == 0 {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            }
+        }
+    });
+    let mut got = Vec::new();
+    let deadline = Instant::now() + WAIT;
+    while got.len() < 2 * RUN as usize && Instant::now() < deadline {
+        let Ok(Some(msg)) = timeout(Duration::from_millis(500), iface.recv()).await else {
+            continue;
+        };
+        let b = msg.payload.as_bytes().expect("bytes");
+        got.push(u32::from_be_bytes(b[..4].try_into().expect("4 bytes")));
+    }
+    sender.join().expect("sender thread");
+    got.sort_unstable();
+    assert_eq!(
+        got,
+        (0..2 * RUN).collect::<Vec<_>>(),
+        "{} of {} delivered; rejected: {:?}",
+        got.len(),
+        2 * RUN,
+        m.stats().rejected
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn fragments_of_two_local_publishers_do_not_interleave() {
+    // liblcm up to 1.4 keeps one partial message per sender and drops it when a fragment of
+    // another message comes: one message's fragments must go out together
+    const EACH: u8 = 4;
+    let (group, port) = own_group();
+    let sock = listener_on(group, port);
+    let m = open_on(group, port);
+    let expected =
+        2 * usize::from(EACH) * wire::encode(0, "ILV_0", &pattern(BIG, 0)).unwrap().len();
+    let capture = std::thread::spawn(move || {
+        let mut seen: Vec<(u32, u16)> = Vec::new();
+        let mut buf = vec![0u8; 65_536];
+        let deadline = Instant::now() + WAIT;
+        while seen.len() < expected && Instant::now() < deadline {
+            let Ok(n) = sock.recv(&mut buf) else { continue };
+            if let Ok(Packet::Fragment(f)) = wire::parse(&buf[..n]) {
+                seen.push((f.seq, f.no));
+            }
+        }
+        seen
+    });
+    let publishers: Vec<_> = (0..2u8)
+        .map(|k| {
+            let iface = m.attach(&format!("p{k}"));
+            tokio::spawn(async move {
+                for i in 0..EACH {
+                    iface
+                        .send(format!("ILV_{k}").as_str(), pattern(BIG, k * 16 + i))
+                        .await
+                        .expect("sent");
+                }
+            })
+        })
+        .collect();
+    for p in publishers {
+        p.await.expect("publisher");
+    }
+    let seen = tokio::task::spawn_blocking(move || capture.join().expect("capture thread"))
+        .await
+        .expect("capture");
+    assert_eq!(seen.len(), expected, "every fragment captured");
+    // the fragments of each message come in one run, in order
+    let mut runs: Vec<(u32, Vec<u16>)> = Vec::new();
+    for (seq, no) in seen {
+        match runs.last_mut() {
+            Some((s, nos)) if *s == seq => nos.push(no),
+            _ => runs.push((seq, vec![no])),
+        }
+    }
+    let mut seqs: Vec<u32> = runs.iter().map(|(s, _)| *s).collect();
+    seqs.sort_unstable();
+    seqs.dedup();
+    assert_eq!(
+        seqs.len(),
+        runs.len(),
+        "a message's fragments were interleaved with another's: {runs:?}"
+    );
+    assert!(
+        runs.iter()
+            .all(|(_, nos)| nos.iter().copied().eq(0..nos.len() as u16))
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn closing_releases_the_receive_socket() {
+    for subscribe_before in [true, false] {
+        let (group, port) = own_group();
+        let m = open_on(group, port);
+        let mut iface = m.attach("t");
+        if subscribe_before {
+            iface.subscribe("**").unwrap();
+        }
+        m.close();
+        if !subscribe_before {
+            // nothing joins for a closed medium
+            iface.subscribe("**").unwrap();
+        }
+        // the medium still exists, but its port is free: a socket that does not share it binds
+        let deadline = Instant::now() + WAIT;
+        let bound = loop {
+            match UdpSocket::bind((group, port)) {
+                Ok(s) => break Ok(s),
+                Err(e) if Instant::now() > deadline => break Err(e),
+                Err(_) => tokio::time::sleep(Duration::from_millis(20)).await,
+            }
+        };
+        assert!(
+            bound.is_ok(),
+            "{group}:{port} still held after close (subscribed before: {subscribe_before}): {bound:?}"
+        );
+        drop(m);
+    }
 }

@@ -39,17 +39,24 @@
 //! Both ways, lists and maps nest at most [`MAX_DEPTH`] deep (counted together, as every payload
 //! form counts them), so that a recursive type nested deeper is an error rather than a deep
 //! recursion, and a message holds at most [`MAX_ELEMENTS`] array elements (those of a
-//! one-dimensional `byte` array, read as bytes, do not count), so that a few hostile bytes cannot
-//! make a decoder build millions of values for structs that encode to nothing. The decoder
-//! reserves room for an array only as far as the bytes left can fill it.
+//! one-dimensional `byte` array, read as bytes, do not count). Array elements that may encode to
+//! no bytes at all (empty structs, rows of arrays that may be empty) are decoded at most one per
+//! byte of the message and [`FREE_ELEMENTS`] more, so that a few hostile bytes cannot make a
+//! decoder build millions of values. The decoder reserves room for an array only as far as the
+//! bytes left can fill it.
 
-use super::types::{Dim, Member, MemberType, Primitive, ResolvedTypes, Size, StructType};
+use super::types::{
+    Dim, Member, MemberType, Primitive, ResolvedTypes, Size, StructType, primitive_min_size,
+};
 use crate::datamap::{DataMap, MAX_DEPTH, Value};
 use std::borrow::Cow;
 use std::fmt;
 
 /// Most array elements, counted over all arrays, one message may hold.
 pub const MAX_ELEMENTS: usize = 1 << 22;
+/// Array elements that may encode to no bytes a message being decoded may hold besides one per
+/// byte of the message.
+pub const FREE_ELEMENTS: usize = 4096;
 
 /// Bytes of the fingerprint that starts every message.
 const FINGERPRINT_LEN: usize = 8;
@@ -184,6 +191,18 @@ pub enum CodecError {
         path: String,
         /// Decoding: where it starts.
         offset: Option<usize>,
+    },
+    /// Decoding: more array elements that may encode to no bytes than the message's size allows
+    /// (one per byte and [`FREE_ELEMENTS`] more).
+    TooManyEmpty {
+        /// The array where the count goes over.
+        path: String,
+        /// Where it starts.
+        offset: usize,
+        /// Its elements.
+        count: usize,
+        /// The message's size.
+        size: usize,
     },
     /// A member's struct type is not among the types given.
     UnknownType {
@@ -345,6 +364,16 @@ impl fmt::Display for CodecError {
                     ": more than {MAX_ELEMENTS} array elements in one message"
                 )
             }
+            CodecError::TooManyEmpty {
+                path,
+                offset,
+                count,
+                size,
+            } => write!(
+                f,
+                "field `{path}` at byte {offset}: {count} elements that may take no bytes, more \
+                 than a message of {size} bytes may hold"
+            ),
             CodecError::UnknownType { path, name } => write!(
                 f,
                 "field `{path}` has type `{name}`, which is not among the types given"
@@ -487,6 +516,7 @@ impl<'t> Fail<'t> {
             | CodecError::Truncated { path, .. }
             | CodecError::TooDeep { path, .. }
             | CodecError::TooManyElements { path, .. }
+            | CodecError::TooManyEmpty { path, .. }
             | CodecError::UnknownType { path, .. } => (Some(path), [None, None]),
             CodecError::SizeMismatch {
                 path,
@@ -1123,6 +1153,7 @@ pub fn decode(types: &ResolvedTypes, ty: &StructType, bytes: &[u8]) -> Result<Da
         pos: FINGERPRINT_LEN,
         sizes: Vec::new(),
         elements: 0,
+        free: bytes.len().saturating_add(FREE_ELEMENTS),
     };
     let map = decoder.read_struct(ty, 0).map_err(|f| (*f).finish())?;
     if decoder.pos != bytes.len() {
@@ -1145,6 +1176,8 @@ struct Decoder<'t, 'b> {
     sizes: Vec<i64>,
     /// Array elements read so far.
     elements: usize,
+    /// Array elements that may encode to no bytes still allowed.
+    free: usize,
 }
 
 impl<'t> Decoder<'t, '_> {
@@ -1260,6 +1293,17 @@ impl<'t> Decoder<'t, '_> {
         }
         count_elements(&mut self.elements, count, Some(offset))?;
         let innermost = level + 1 == m.dims.len();
+        if count > 0 && item_min_size(m, level, elem) == 0 {
+            if count > self.free {
+                return Err(fail(CodecError::TooManyEmpty {
+                    path: String::new(),
+                    offset,
+                    count,
+                    size: self.bytes.len(),
+                }));
+            }
+            self.free -= count;
+        }
         if innermost
             && let Elem::Prim(p) = elem
             && let Some(width) = width(p)
@@ -1340,6 +1384,22 @@ impl<'t> Decoder<'t, '_> {
             }
         })
     }
+}
+
+/// The fewest bytes one element at `level` of member `m`'s dimensions encodes to: one value of
+/// the element type, or a row of the dimensions inside.
+fn item_min_size(m: &Member, level: usize, elem: Elem<'_>) -> u64 {
+    let one = match elem {
+        Elem::Prim(p) => primitive_min_size(p),
+        Elem::Struct(t) => t.min_size(),
+    };
+    m.dims
+        .iter()
+        .skip(level + 1)
+        .fold(one, |n, d| match d.size {
+            Size::Fixed(k) => n.saturating_mul(u64::from(k)),
+            Size::Member(_) => 0,
+        })
 }
 
 /// Bytes of one value of `p`, for the types of one size.
@@ -2103,6 +2163,32 @@ mod tests {
                 .and_then(Value::as_list)
                 .map(<[Value]>::len),
             Some(3)
+        );
+        // under that, as many as the message has bytes and a few more: 12 bytes are not read
+        // as millions of maps
+        let n = ((MAX_ELEMENTS - 1) as u32).to_be_bytes();
+        assert_eq!(
+            dec_err(&t, "empty_t", &n),
+            "field `items` at byte 12: 4194303 elements that may take no bytes, more than a \
+             message of 12 bytes may hold"
+        );
+        let n = ((FREE_ELEMENTS + 12) as u32).to_be_bytes();
+        assert!(dec(&t, "empty_t", &n).is_ok());
+        let n = ((FREE_ELEMENTS + 13) as u32).to_be_bytes();
+        assert!(dec(&t, "empty_t", &n).is_err());
+        // nor millions of empty rows
+        assert_eq!(
+            dec_err(&t, "grid_t", &[0, 0x3f, 0xff, 0xff, 0, 0, 0, 0]),
+            "field `g` at byte 16: 4194303 elements that may take no bytes, more than a message \
+             of 16 bytes may hold"
+        );
+        // nor structs of empty structs
+        let t2 = types(
+            "struct e_t { }\nstruct z_t { e_t a[1000]; }\nstruct m_t { int32_t n; z_t z[n]; }",
+        );
+        assert!(
+            dec_err(&t2, "m_t", &[0, 0, 0, 100]).contains("elements that may take no bytes"),
+            "100 × 1000 empty maps from 12 bytes"
         );
         // rows of nothing count too
         let rows = (MAX_ELEMENTS as u32 + 1).to_be_bytes();

@@ -202,6 +202,7 @@ pub struct StructType {
     pos: Pos,
     base_hash: u64,
     fingerprint: u64,
+    min_size: u64,
 }
 
 impl StructType {
@@ -256,6 +257,45 @@ impl StructType {
     /// The fingerprint that starts every encoded message of this type.
     pub fn fingerprint(&self) -> u64 {
         self.fingerprint
+    }
+
+    /// The fewest bytes a value of this type encodes to, not counting the fingerprint (0 for a
+    /// struct with no members, or with only arrays that may be empty); `u64::MAX` when more.
+    pub fn min_size(&self) -> u64 {
+        self.min_size
+    }
+
+    /// Whether `other` declares the same struct: same full name, members and constants, so same
+    /// fingerprint (wherever each is written).
+    fn same_declaration(&self, other: &StructType) -> bool {
+        let members = |s: &StructType| {
+            s.members
+                .iter()
+                .map(|m| (m.name.clone(), m.ty.clone(), m.dims.clone()))
+                .collect::<Vec<_>>()
+        };
+        let constants = |s: &StructType| {
+            s.constants
+                .iter()
+                .map(|c| (c.name.clone(), c.ty, c.text.clone()))
+                .collect::<Vec<_>>()
+        };
+        self.full_name == other.full_name
+            && self.base_hash == other.base_hash
+            && members(self) == members(other)
+            && constants(self) == constants(other)
+    }
+}
+
+/// The fewest bytes one value of primitive type `p` encodes to.
+pub fn primitive_min_size(p: Primitive) -> u64 {
+    match p {
+        Primitive::Int8 | Primitive::Byte | Primitive::Boolean => 1,
+        Primitive::Int16 => 2,
+        Primitive::Int32 | Primitive::Float => 4,
+        Primitive::Int64 | Primitive::Double => 8,
+        // its length, and the terminating NUL
+        Primitive::String => 5,
     }
 }
 
@@ -316,26 +356,36 @@ impl TypeSet {
         self.insert(parsed)
     }
 
-    /// Adds `parsed`, refusing all of it when one of its structs is already declared.
+    /// Adds `parsed`, refusing all of it when one of its structs is already declared otherwise.
+    /// A struct declared again exactly as before (a copy of a file read already) is the same
+    /// struct, and is kept once, from its first declaration.
     fn insert(&mut self, parsed: Vec<StructType>) -> Result<(), FileError> {
         let mut new: HashMap<&str, &StructType> = HashMap::new();
-        for s in &parsed {
+        let mut again = vec![false; parsed.len()];
+        for (s, again) in parsed.iter().zip(&mut again) {
             let prior = self
                 .index
                 .get(&s.full_name)
                 .and_then(|&i| self.structs.get(i))
                 .or_else(|| new.get(s.full_name.as_str()).copied());
-            if let Some(prior) = prior {
-                return Err(s.pos.error(format!(
-                    "struct `{}` is declared twice; first at {}",
-                    s.full_name, prior.pos
-                )));
+            match prior {
+                Some(prior) if prior.same_declaration(s) => *again = true,
+                Some(prior) => {
+                    return Err(s.pos.error(format!(
+                        "struct `{}` is declared twice; first at {}",
+                        s.full_name, prior.pos
+                    )));
+                }
+                None => {
+                    new.insert(&s.full_name, s);
+                }
             }
-            new.insert(&s.full_name, s);
         }
-        for s in parsed {
-            self.index.insert(s.full_name.clone(), self.structs.len());
-            self.structs.push(s);
+        for (s, again) in parsed.into_iter().zip(again) {
+            if !again {
+                self.index.insert(s.full_name.clone(), self.structs.len());
+                self.structs.push(s);
+            }
         }
         Ok(())
     }
@@ -367,6 +417,7 @@ impl TypeSet {
             by_value.push(fixed);
         }
         check_finite(&structs, &by_value)?;
+        min_sizes(&mut structs, &index, &by_value);
         let fingerprints = fingerprints(&structs, &edges)?;
         let mut by_fingerprint: HashMap<u64, Vec<usize>> = HashMap::new();
         for (i, (s, fp)) in structs.iter_mut().zip(fingerprints).enumerate() {
@@ -490,6 +541,36 @@ fn check_finite(structs: &[StructType], by_value: &[Vec<usize>]) -> Result<(), F
         )));
     }
     Ok(())
+}
+
+/// Sets every struct's [`StructType::min_size`]. `by_value` has no cycle (checked before), so
+/// the structs held by value are done before those holding them.
+fn min_sizes(structs: &mut [StructType], index: &HashMap<String, usize>, by_value: &[Vec<usize>]) {
+    let order = components(by_value).list;
+    for i in order.into_iter().flatten() {
+        let Some(s) = structs.get(i) else {
+            continue;
+        };
+        let mut size = 0u64;
+        for m in &s.members {
+            let one = match &m.ty {
+                MemberType::Primitive(p) => primitive_min_size(*p),
+                MemberType::Struct(name) => index
+                    .get(name)
+                    .and_then(|&t| structs.get(t))
+                    .map_or(0, StructType::min_size),
+            };
+            let n = m.dims.iter().fold(one, |n, d| match d.size {
+                Size::Fixed(k) => n.saturating_mul(u64::from(k)),
+                // it may be empty
+                Size::Member(_) => 0,
+            });
+            size = size.saturating_add(n);
+        }
+        if let Some(s) = structs.get_mut(i) {
+            s.min_size = size;
+        }
+    }
 }
 
 /// The strongly connected components of a graph.
@@ -940,6 +1021,7 @@ impl<'a> Parser<'a> {
             pos: self.pos(name),
             base_hash: 0,
             fingerprint: 0,
+            min_size: 0,
         };
         loop {
             let Some(t) = self.peek()? else {
@@ -1597,6 +1679,64 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_struct_declared_again_identically_is_the_same_struct() {
+        let text = "package p;\nstruct a { int32_t n; double v[n]; const int8_t K = 3; }\n\
+                    struct b { a x[2]; }";
+        let mut set = TypeSet::new();
+        set.add_text("one.lcm", text)
+            .unwrap_or_else(|e| panic!("{e}"));
+        // a copy, laid out otherwise: accepted, kept once
+        set.add_text(
+            "copy.lcm",
+            &format!("// a copy\n\n{}", text.replace("; ", ";\n  ")),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(set.len(), 2);
+        let t = set.clone().resolve().unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            t.get("p.a").map(|a| a.pos().file.to_string()),
+            Some("one.lcm".into())
+        );
+        // the same name declared otherwise is an error: another member, a constant's value
+        for other in [
+            "package p; struct a { int32_t n; float v[n]; const int8_t K = 3; }",
+            "package p; struct a { int32_t n; double v[n]; const int8_t K = 4; }",
+            "package p; struct a { int32_t n; double v[n]; }",
+        ] {
+            let e = set.clone().add_text("other.lcm", other).unwrap_err();
+            assert!(
+                e.to_string()
+                    .contains("struct `p.a` is declared twice; first at one.lcm:2:8"),
+                "{other}: {e}"
+            );
+        }
+        // and twice in one file, identically, too
+        let mut set = TypeSet::new();
+        set.add_text("t.lcm", "struct c { int8_t x; }\nstruct c { int8_t x; }")
+            .unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(set.len(), 1);
+    }
+
+    #[test]
+    fn min_sizes_count_what_every_value_must_send() {
+        let t = resolve(&[(
+            "t.lcm",
+            "struct e { }\n\
+             struct z { e a[3]; int32_t n; }\n\
+             struct s { string s; boolean b; e e; int16_t k[2][3]; z z[2]; }\n\
+             struct node { int32_t n; node c[n]; int8_t m[n][4]; }\n\
+             struct w { s x[2]; int32_t m; byte b[m]; }",
+        )])
+        .unwrap_or_else(|e| panic!("{e}"));
+        let size = |n: &str| t.get(n).map(StructType::min_size);
+        assert_eq!(size("e"), Some(0));
+        assert_eq!(size("z"), Some(4));
+        assert_eq!(size("s"), Some(5 + 1 + 12 + 8));
+        assert_eq!(size("node"), Some(4));
+        assert_eq!(size("w"), Some(2 * 26 + 4));
     }
 
     #[test]

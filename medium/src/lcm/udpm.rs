@@ -15,8 +15,13 @@
 //!
 //! The channel is the topic; the payload is the LCM message's bytes. Messages this medium sent are
 //! not received back. liblcm's self-test packets are ignored. Packets that do not read, channels
-//! that are not topics, and partial messages given up (timeout, memory cap, overlap) are counted in
-//! the medium's rejected counters by reason.
+//! that are not topics, and partial messages given up (timeout, memory cap, too many, overlap) are
+//! counted in the medium's rejected counters by reason.
+//!
+//! A large message's fragments go out together, even when several local publishers send at once
+//! (liblcm up to 1.4 keeps one partial message per sender). A sender's sequence number jumping
+//! back by more than 64 means it started again (LCM never sends a message twice): it becomes a new
+//! origin.
 
 use super::ChannelRegex;
 use super::reassembly::{self, Dropped, Reassembler, Step};
@@ -209,13 +214,18 @@ fn own_groups_only(s: &Socket) -> std::io::Result<()> {
 /// The LCM transport.
 pub struct LcmTransport {
     name: Arc<str>,
-    /// The receive socket, which joins the group when something here first subscribes
-    listen: Arc<UdpSocket>,
+    /// The receive socket, which joins the group when something here first subscribes; `None`
+    /// once the medium is closed
+    listen: Mutex<Option<Arc<UdpSocket>>>,
     joined: std::sync::Once,
     cfg: LcmConfig,
     ingress: Ingress,
     /// `None` once the medium is closed
     socket: Mutex<Option<Arc<UdpSocket>>>,
+    /// Held while a message goes out in fragments, so that the fragments of two messages never
+    /// interleave: liblcm up to 1.4 keeps one partial message per sender, and drops it when a
+    /// fragment of another comes
+    fragmenting: tokio::sync::Mutex<()>,
     dest: SocketAddr,
     seq: AtomicU32,
 }
@@ -283,7 +293,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
             .collect(),
         channels: cfg.channels.clone(),
         reassembler: Reassembler::new(cfg.frag_timeout, cfg.frag_mem),
-        senders: HashMap::new(),
+        senders: Senders::default(),
         topics: HashMap::new(),
         dropped: Vec::new(),
     };
@@ -293,11 +303,12 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
     tracing::debug!(medium = %o.name, group = %cfg.group, port = cfg.port, ttl = cfg.ttl, "lcm medium open");
     Ok(Arc::new(LcmTransport {
         name: o.name.clone(),
-        listen: rx,
+        listen: Mutex::new(Some(rx)),
         joined: std::sync::Once::new(),
         cfg,
         ingress: o.ingress.clone(),
         socket: Mutex::new(Some(tx)),
+        fragmenting: tokio::sync::Mutex::new(()),
         dest: SocketAddr::V4(bind),
         seq: AtomicU32::new(0),
     }))
@@ -365,13 +376,15 @@ impl Transport for LcmTransport {
             let channel = std::str::from_utf8(&frame[..nul]).unwrap_or_default();
             let head = &frame[..(nul + 1).min(frame.len())];
             let payload = &frame[head.len()..];
-            let seq = self.seq.fetch_add(1, Ordering::Relaxed);
             if wire::is_short(channel, payload.len()) {
-                let header = wire::short_header(seq);
+                let header = wire::short_header(self.seq.fetch_add(1, Ordering::Relaxed));
                 return self
                     .send(&socket, &[IoSlice::new(&header), IoSlice::new(&frame)])
                     .await;
             }
+            // one message's fragments at a time, numbered in the order they go out
+            let _fragmenting = self.fragmenting.lock().await;
+            let seq = self.seq.fetch_add(1, Ordering::Relaxed);
             for (header, range) in wire::fragments(seq, channel, payload.len()) {
                 let data = &payload[range.clone()];
                 if range.start == 0 {
@@ -393,15 +406,22 @@ impl Transport for LcmTransport {
         })
     }
 
+    /// Releases both sockets (the receive task, which holds the receive socket too, is stopped
+    /// by the medium), leaving the group.
     fn close(&self) {
         self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
+        self.listen.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 
-    /// Joins the group: a medium only publishing never makes the kernel copy the group's
-    /// traffic to it.
+    /// Joins the group, unless the medium is closed: a medium only publishing never makes the
+    /// kernel copy the group's traffic to it.
     fn subscribed(&self) {
+        let listen = self.listen.lock().unwrap_or_else(|p| p.into_inner());
+        let Some(socket) = listen.as_deref() else {
+            return;
+        };
         self.joined.call_once(|| {
-            if let Err(e) = join(SockRef::from(&*self.listen), &self.cfg) {
+            if let Err(e) = join(SockRef::from(socket), &self.cfg) {
                 self.ingress.set_link(LinkState::Down(format!(
                     "cannot join {} to receive: {e}",
                     self.cfg.group
@@ -414,14 +434,60 @@ impl Transport for LcmTransport {
 /// What is known of one sender: its origin and the last sequence number, widened to 64 bits.
 struct Sender {
     origin: Arc<Origin>,
-    boot: u32,
     last: Option<u64>,
 }
 
 /// Senders and channels remembered before the tables are cleared (a flood of new ones).
 const MAX_REMEMBERED: usize = 4096;
-/// A sequence number this far behind the last one means the sender started again.
-const RESTART_GAP: i64 = 4096;
+/// A sequence number at most this far behind the last one is a message that came late; farther
+/// behind, the sender started again (LCM never sends a message twice).
+const REORDER_WINDOW: i64 = 64;
+
+/// The senders heard, each with its origin and last sequence number.
+#[derive(Default)]
+struct Senders {
+    table: HashMap<SocketAddr, Sender>,
+    /// Origins made so far: each sender, and each start of a sender, gets the next number as its
+    /// boot, so that no origin is ever used twice (not even after the table is cleared).
+    boots: u32,
+}
+
+impl Senders {
+    /// The origin of `from` on medium `medium` and its sequence number widened to 64 bits; a
+    /// sender whose numbers jump back beyond [`REORDER_WINDOW`] started again, and becomes a new
+    /// origin.
+    fn sequence(&mut self, medium: &str, from: SocketAddr, seq: u32) -> (Arc<Origin>, u64) {
+        if !self.table.contains_key(&from) && self.table.len() >= MAX_REMEMBERED {
+            self.table.clear();
+        }
+        let boots = &mut self.boots;
+        let mut origin = || {
+            *boots = boots.wrapping_add(1);
+            Origin::new(&format!("lcm@{from}"), medium, *boots)
+        };
+        let s = self.table.entry(from).or_insert_with(|| Sender {
+            origin: origin(),
+            last: None,
+        });
+        let wide = match s.last {
+            None => u64::from(seq),
+            Some(last) => {
+                let step = i64::from(seq.wrapping_sub(last as u32) as i32);
+                if step < -REORDER_WINDOW {
+                    s.origin = origin();
+                    s.last = None;
+                    u64::from(seq)
+                } else {
+                    last.saturating_add_signed(step)
+                }
+            }
+        };
+        if s.last.is_none_or(|l| wide > l) {
+            s.last = Some(wide);
+        }
+        (s.origin.clone(), wide)
+    }
+}
 
 struct Receiver {
     ingress: Ingress,
@@ -430,7 +496,7 @@ struct Receiver {
     local: Vec<IpAddr>,
     channels: Option<ChannelRegex>,
     reassembler: Reassembler,
-    senders: HashMap<SocketAddr, Sender>,
+    senders: Senders,
     topics: HashMap<Box<str>, Option<Topic>>,
     dropped: Vec<Dropped>,
 }
@@ -463,16 +529,24 @@ impl Batch {
     /// Takes the datagrams waiting on `socket`, up to a batch; `WouldBlock` when there are none.
     fn receive(&mut self, socket: &UdpSocket) -> std::io::Result<usize> {
         use std::os::fd::AsRawFd;
+        // every pointer handed to the kernel comes from these two, taken once
+        let slots = self.slots.as_mut_ptr();
+        let addrs = self.addrs.as_mut_ptr();
         let mut iovs: [libc::iovec; RECV_BATCH] = std::array::from_fn(|i| libc::iovec {
-            iov_base: self.slots[i * SLOT..].as_mut_ptr().cast(),
+            // SAFETY: `slots` holds RECV_BATCH slots of SLOT bytes: slot i lies inside it
+            iov_base: unsafe { slots.add(i * SLOT) }.cast(),
             iov_len: SLOT,
         });
+        let iov = iovs.as_mut_ptr();
         // SAFETY: mmsghdr is plain data; zeroed means no control data and no flags
         let mut msgs: [libc::mmsghdr; RECV_BATCH] = unsafe { std::mem::zeroed() };
         for (i, m) in msgs.iter_mut().enumerate() {
-            m.msg_hdr.msg_iov = &mut iovs[i];
+            // SAFETY: `iovs` and `addrs` hold RECV_BATCH entries each, so entry i lies inside
+            unsafe {
+                m.msg_hdr.msg_iov = iov.add(i);
+                m.msg_hdr.msg_name = addrs.add(i).cast();
+            }
             m.msg_hdr.msg_iovlen = 1;
-            m.msg_hdr.msg_name = (&mut self.addrs[i] as *mut libc::sockaddr_in).cast();
             m.msg_hdr.msg_namelen = std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t;
         }
         // SAFETY: every header points at a slot, an iovec and an address that outlive the call,
@@ -545,12 +619,11 @@ impl Receiver {
                     return;
                 }
             }
-            // a partial message times out even while other traffic keeps the socket busy
-            if self.reassembler.pending() > 0 {
-                self.reassembler
-                    .expire(std::time::Instant::now(), &mut self.dropped);
-                self.report_dropped();
-            }
+            // once a batch: a partial message times out even while other traffic keeps the
+            // socket busy
+            self.reassembler
+                .expire(std::time::Instant::now(), &mut self.dropped);
+            self.report_dropped();
         }
     }
 
@@ -581,7 +654,6 @@ impl Receiver {
             Ok(Packet::Fragment(f)) => {
                 let now = std::time::Instant::now();
                 let step = self.reassembler.fragment(now, from, &f, &mut self.dropped);
-                self.reassembler.expire(now, &mut self.dropped);
                 self.report_dropped();
                 match step {
                     Step::Complete {
@@ -589,7 +661,7 @@ impl Receiver {
                         channel,
                         payload,
                     } => self.deliver(from, seq, &channel, payload),
-                    Step::Pending => true,
+                    Step::Pending | Step::GivenUp => true,
                     Step::Duplicate => {
                         self.ingress.reject(
                             "lcm-duplicate-fragment",
@@ -629,7 +701,7 @@ impl Receiver {
             );
             return true;
         };
-        let (origin, seq) = self.sequence(from, seq);
+        let (origin, seq) = self.senders.sequence(&self.medium, from, seq);
         self.ingress.deliver(Message {
             topic,
             kind: Kind::Data,
@@ -641,38 +713,6 @@ impl Receiver {
             stamp: Stamp::now(),
             payload: Payload::from(payload),
         })
-    }
-
-    /// The sender's origin and the sequence number widened to 64 bits; a sender whose numbers
-    /// jump far back started again, and becomes a new origin.
-    fn sequence(&mut self, from: SocketAddr, seq: u32) -> (Arc<Origin>, u64) {
-        if !self.senders.contains_key(&from) && self.senders.len() >= MAX_REMEMBERED {
-            self.senders.clear();
-        }
-        let medium = &self.medium;
-        let s = self.senders.entry(from).or_insert_with(|| Sender {
-            origin: Origin::new(&format!("lcm@{from}"), medium, 1),
-            boot: 1,
-            last: None,
-        });
-        let wide = match s.last {
-            None => u64::from(seq),
-            Some(last) => {
-                let step = i64::from(seq.wrapping_sub(last as u32) as i32);
-                if step < -RESTART_GAP {
-                    s.boot = s.boot.wrapping_add(1);
-                    s.origin = Origin::new(&format!("lcm@{from}"), medium, s.boot);
-                    s.last = None;
-                    u64::from(seq)
-                } else {
-                    last.saturating_add_signed(step)
-                }
-            }
-        };
-        if s.last.is_none_or(|l| wide > l) {
-            s.last = Some(wide);
-        }
-        (s.origin.clone(), wide)
     }
 
     fn report_dropped(&mut self) {
@@ -714,6 +754,74 @@ mod tests {
             let e = cfg(url).unwrap_err();
             assert!(e.reason.contains(says), "{url}: {}", e.reason);
         }
+    }
+
+    #[test]
+    fn a_sender_jumping_back_started_again_and_origins_are_never_reused() {
+        let mut senders = Senders::default();
+        let a = SocketAddr::from(([10, 0, 0, 1], 7000));
+        let first = senders.sequence("lcm", a, 0).0;
+        for seq in 1..=2000 {
+            assert_eq!(
+                senders.sequence("lcm", a, seq),
+                (first.clone(), u64::from(seq))
+            );
+        }
+        // late by a little: the same sender
+        assert_eq!(senders.sequence("lcm", a, 1940), (first.clone(), 1940));
+        // back by more than the reorder window: started again
+        let (second, seq) = senders.sequence("lcm", a, 1935);
+        assert_ne!(second.id, first.id);
+        assert_eq!(seq, 1935);
+        let (again, seq) = senders.sequence("lcm", a, 0);
+        assert_ne!(again.id, second.id);
+        assert_eq!(seq, 0);
+        // a wrap of the 32-bit number is no start
+        let b = SocketAddr::from(([10, 0, 0, 2], 7000));
+        let (ob, _) = senders.sequence("lcm", b, u32::MAX);
+        assert_eq!(senders.sequence("lcm", b, 0), (ob, 1 << 32));
+        // the table is cleared after a flood of senders: `a` comes back as an origin never seen
+        let mut seen = vec![first.id, second.id, again.id];
+        for port in 0..MAX_REMEMBERED as u16 + 1 {
+            let (o, _) = senders.sequence("lcm", SocketAddr::from(([10, 0, 1, 1], port)), 0);
+            seen.push(o.id);
+        }
+        let (back, _) = senders.sequence("lcm", a, 5);
+        assert!(!seen.contains(&back.id), "origin {back:?} used before");
+    }
+
+    #[tokio::test]
+    async fn a_batch_takes_several_datagrams_each_in_its_slot() {
+        let rx = UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).await.unwrap();
+        let to = rx.local_addr().unwrap();
+        let tx = std::net::UdpSocket::bind((Ipv4Addr::LOCALHOST, 0)).unwrap();
+        // the largest: the largest UDP payload over IPv4
+        let sizes = [1usize, 3000, 65_507, 7];
+        for (i, n) in sizes.iter().enumerate() {
+            tx.send_to(&vec![i as u8 + 1; *n], to).unwrap();
+        }
+        let mut batch = Batch::new();
+        let mut got = Vec::new();
+        for _ in 0..100 {
+            match batch.receive(&rx) {
+                Ok(n) => got.extend((0..n).map(|i| {
+                    let (from, d) = batch.get(i);
+                    (from, d.to_vec())
+                })),
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+                Err(e) => panic!("{e}"),
+            }
+            if got.len() == sizes.len() {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        let want: Vec<_> = sizes
+            .iter()
+            .enumerate()
+            .map(|(i, n)| (tx.local_addr().unwrap(), vec![i as u8 + 1; *n]))
+            .collect();
+        assert_eq!(got, want);
     }
 
     #[test]

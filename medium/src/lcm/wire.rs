@@ -175,6 +175,14 @@ pub fn parse(d: &[u8]) -> Result<Packet<'_>, PacketError> {
                     format!("fragment {no} of {count}"),
                 ));
             }
+            // every fragment but the last carries at least one byte of the message
+            if u32::from(count) - 1 > msg_size {
+                return Err(error(
+                    "lcm-bad-fragment",
+                    18,
+                    format!("{count} fragments cannot carry a {msg_size}-byte message"),
+                ));
+            }
             let (channel, body) = if no == 0 {
                 let (c, b) = channel_at(d, FRAGMENT_HEADER)?;
                 (Some(c), b)
@@ -379,6 +387,12 @@ mod tests {
         let mut f = encode(1, "C", &vec![1; 70_000]).unwrap().remove(1);
         f[8..12].copy_from_slice(&100u32.to_be_bytes()); // data beyond the message
         assert_eq!(parse(&f).unwrap_err().reason, "lcm-bad-fragment");
+        // more fragments than the message has bytes: nothing liblcm sends, only a cost
+        let mut f = b"LC03\0\0\0\x07\0\0\0\0\0\0\0\0\xff\xfe\xff\xff".to_vec();
+        let e = parse(&f).unwrap_err();
+        assert_eq!((e.reason, e.offset), ("lcm-bad-fragment", 18));
+        f[8..12].copy_from_slice(&65_534u32.to_be_bytes());
+        assert!(matches!(parse(&f), Ok(Packet::Fragment(_))));
         assert_eq!(
             encode(1, &"x".repeat(64), b"").unwrap_err(),
             EncodeError::ChannelTooLong(64)
