@@ -1,6 +1,7 @@
 //! `seabus`: the command-line program. It parses arguments and wires a system file to the runtime;
 //! everything else lives in the library crates.
 
+mod logtail;
 mod record;
 mod spy;
 
@@ -84,8 +85,29 @@ enum Command {
     /// the damage are sent, and its byte offset is shown); 2 when the arguments, file or medium
     /// cannot be used; 3 when the medium refused events.
     Replay(record::ReplayArgs),
+    /// The DSAAV central log.
+    Log {
+        #[command(subcommand)]
+        command: LogCommand,
+    },
     /// List the module types, bridge types, medium schemes and standard datasets.
     Types,
+}
+
+/// What `seabus log` does.
+#[derive(Subcommand)]
+enum LogCommand {
+    /// Print the end of the central log, then follow it as it grows (across rotation).
+    Tail {
+        /// The log file the logging server writes.
+        file: PathBuf,
+        /// Lines of the end to print first.
+        #[arg(short = 'n', long, default_value_t = 10)]
+        lines: usize,
+        /// Stop after this many seconds.
+        #[arg(long = "for", value_name = "SECS")]
+        duration: Option<f64>,
+    },
 }
 
 /// What `seabus pub` sends.
@@ -196,6 +218,17 @@ fn main() -> ExitCode {
             Command::Pub(args) => publish(args).await,
             Command::Record(args) => record::record(args).await,
             Command::Replay(args) => record::replay(args).await,
+            Command::Log {
+                command:
+                    LogCommand::Tail {
+                        file,
+                        lines,
+                        duration,
+                    },
+            } => match seconds(duration) {
+                Ok(d) => logtail::tail(&file, lines, d),
+                Err(code) => code,
+            },
             Command::Types => {
                 types();
                 ExitCode::SUCCESS

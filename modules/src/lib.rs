@@ -40,5 +40,7 @@ pub use system::SystemSpec;
 pub fn registry() -> Registry {
     let mut reg = Registry::new();
     support::register(&mut reg);
+    reg.add_module(dsaav::servers::CONFIG)
+        .add_module(dsaav::servers::LOG);
     reg
 }

@@ -5,7 +5,8 @@
 //! that tells a component which server provides a service; [`config_service`] serves it over RPC.
 //! [`sentuator`] puts sensors and actuators behind get / set / notify / health calls; [`logging`]
 //! keeps one central log for every component; the health monitor's core ([`health`]) reads the
-//! health rules file and turns component health updates into a vehicle severity.
+//! health rules file and turns component health updates into a vehicle severity; [`servers`] makes
+//! the configuration and logging servers module types for system files.
 
 pub mod config;
 pub mod config_service;
@@ -13,6 +14,7 @@ pub mod health;
 pub mod logging;
 pub mod rpc;
 pub mod sentuator;
+pub mod servers;
 
 pub use config::{Database, Sections, ValueError};
 pub use seabus_medium::dsaav::wire::Address;
