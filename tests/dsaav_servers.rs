@@ -79,7 +79,7 @@ async fn servers_from_a_system_file_configure_and_log_components() {
     );
 
     // and it follows what is written after it started
-    let mut follow = seabus()
+    let follow = seabus()
         .args(["log", "tail"])
         .arg(&log)
         .args(["-n", "0", "--for", "4"])
