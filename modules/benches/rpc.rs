@@ -136,10 +136,13 @@ fn ethernet_ping_pong(
             let s = RawSocket::open(&b_dev, 0x88B6).expect("raw socket");
             let _ = ready_tx.send(());
             let mut buf = vec![0u8; 2048];
-            while let Ok(Ok(Some((_, n)))) =
+            while let Ok(Ok(got)) =
                 tokio::time::timeout(Duration::from_secs(1), s.recv(&mut buf)).await
             {
-                let _ = s.send(None, &buf[..n]).await;
+                // the socket also sees the frames it sends itself
+                if let Some((_, n)) = got.filter(|(from, _)| *from != s.mac()) {
+                    let _ = s.send(None, &buf[..n]).await;
+                }
             }
         });
     });
@@ -155,10 +158,13 @@ fn ethernet_ping_pong(
             for _ in 0..CALLS {
                 let t = Instant::now();
                 let _ = s.send(None, &msg).await;
-                if let Ok(Ok(Some(_))) =
-                    tokio::time::timeout(Duration::from_secs(1), s.recv(&mut buf)).await
-                {
-                    out.push(t.elapsed());
+                // the answer, not the copy of what was just sent
+                let deadline = tokio::time::Instant::now() + Duration::from_secs(1);
+                while let Ok(Ok(got)) = tokio::time::timeout_at(deadline, s.recv(&mut buf)).await {
+                    if got.is_some_and(|(from, _)| from != s.mac()) {
+                        out.push(t.elapsed());
+                        break;
+                    }
                 }
             }
             out.sort();

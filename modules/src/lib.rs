@@ -41,6 +41,9 @@ pub fn registry() -> Registry {
     let mut reg = Registry::new();
     support::register(&mut reg);
     reg.add_module(dsaav::servers::CONFIG)
-        .add_module(dsaav::servers::LOG);
+        .add_module(dsaav::servers::LOG)
+        .add_module(dsaav::starfish::VEHICLE_SIM)
+        .add_module(dsaav::starfish::DEPTH_FILTER)
+        .add_module(dsaav::starfish::DEPTH_CONTROLLER);
     reg
 }

@@ -571,7 +571,8 @@ pub mod eth {
                 libc::socket(
                     libc::AF_PACKET,
                     libc::SOCK_RAW | libc::SOCK_NONBLOCK | libc::SOCK_CLOEXEC,
-                    i32::from(ethertype.to_be()),
+                    // nothing is received until the filter is on and the socket bound
+                    0,
                 )
             };
             if fd < 0 {
@@ -579,7 +580,10 @@ pub mod eth {
             }
             // SAFETY: fd is a new descriptor we own
             let fd = unsafe { OwnedFd::from_raw_fd(fd) };
-            let addr = sockaddr(ifindex, ethertype, [0; 6]);
+            attach_filter(&fd, ethertype)?;
+            // every frame of the interface, the ones this host sends included (other media of
+            // this host are other nodes), and the filter keeps those of `ethertype`
+            let addr = sockaddr(ifindex, libc::ETH_P_ALL as u16, [0; 6]);
             // SAFETY: bind(2) reads a sockaddr_ll of the size given
             let r = unsafe {
                 libc::bind(
@@ -600,6 +604,11 @@ pub mod eth {
                 ethertype,
                 peers: Mutex::new(HashMap::new()),
             })
+        }
+
+        /// This interface's hardware address.
+        pub fn mac(&self) -> [u8; 6] {
+            self.mac
         }
 
         /// Remembers that `node` sends from `mac`.
@@ -651,9 +660,9 @@ pub mod eth {
         }
 
         /// Receives one frame: the sender's hardware address and the payload's length in `buf`
-        /// (moved to its start); `None` for a frame this host sent or one too short.
+        /// (moved to its start); `None` for one too short.
         pub async fn recv(&self, buf: &mut [u8]) -> io::Result<Option<([u8; 6], usize)>> {
-            let (n, pkttype) = self
+            let n = self
                 .fd
                 .async_io(Interest::READABLE, |fd| {
                     // SAFETY: sockaddr_ll is plain data
@@ -673,11 +682,13 @@ pub mod eth {
                     if n < 0 {
                         Err(io::Error::last_os_error())
                     } else {
-                        Ok((n as usize, from.sll_pkttype))
+                        Ok(n as usize)
                     }
                 })
                 .await?;
-            if n < 14 || pkttype == libc::PACKET_OUTGOING {
+            // frames this host sends are seen too (PACKET_OUTGOING): another medium of this host
+            // on the same interface is another node, and a medium skips its own frames by node
+            if n < 14 {
                 return Ok(None);
             }
             let mut mac = [0u8; 6];
@@ -685,6 +696,40 @@ pub mod eth {
             buf.copy_within(14..n, 0);
             Ok(Some((mac, n - 14)))
         }
+    }
+
+    /// Keeps only frames of `ethertype` (a classic BPF program: load the EtherType, compare,
+    /// accept or drop), so the socket sees none of the interface's other traffic.
+    fn attach_filter(fd: &OwnedFd, ethertype: u16) -> io::Result<()> {
+        let op = |code: u16, jt: u8, jf: u8, k: u32| libc::sock_filter { code, jt, jf, k };
+        let program = [
+            // ldh [12]
+            op(0x28, 0, 0, 12),
+            // jeq #ethertype, next, drop
+            op(0x15, 0, 1, u32::from(ethertype)),
+            // ret #65535
+            op(0x06, 0, 0, 0xffff),
+            // ret #0
+            op(0x06, 0, 0, 0),
+        ];
+        let prog = libc::sock_fprog {
+            len: program.len() as u16,
+            filter: program.as_ptr() as *mut libc::sock_filter,
+        };
+        // SAFETY: setsockopt(2) reads the program through the sock_fprog, both alive for the call
+        let r = unsafe {
+            libc::setsockopt(
+                fd.as_raw_fd(),
+                libc::SOL_SOCKET,
+                libc::SO_ATTACH_FILTER,
+                (&prog as *const libc::sock_fprog).cast(),
+                std::mem::size_of::<libc::sock_fprog>() as libc::socklen_t,
+            )
+        };
+        if r < 0 {
+            return Err(io::Error::last_os_error());
+        }
+        Ok(())
     }
 
     fn sockaddr(ifindex: i32, ethertype: u16, dst: [u8; 6]) -> libc::sockaddr_ll {

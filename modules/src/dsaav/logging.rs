@@ -213,6 +213,28 @@ impl Logger {
         })
     }
 
+    /// A logger for `component` whose server and level come from the configuration service.
+    pub async fn from_service(
+        medium: &Medium,
+        port: u16,
+        component: &str,
+        cfg: &super::config_service::ConfigClient,
+        opts: CallOptions,
+    ) -> Result<Logger, RpcError> {
+        let server = cfg.server_of(component, "Logging").await?;
+        let level = match cfg.setting(component, "Logging", "LogLevel").await {
+            Ok(v) => Level::parse(&v).unwrap_or(Level::Info),
+            Err(_) => Level::Info,
+        };
+        Ok(Logger {
+            component: component.to_string(),
+            level,
+            server,
+            rpc: RpcClient::new(medium, port),
+            opts,
+        })
+    }
+
     /// The level records are logged at or above.
     pub fn level(&self) -> Level {
         self.level

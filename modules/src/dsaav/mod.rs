@@ -6,7 +6,8 @@
 //! [`sentuator`] puts sensors and actuators behind get / set / notify / health calls; [`logging`]
 //! keeps one central log for every component; the health monitor's core ([`health`]) reads the
 //! health rules file and turns component health updates into a vehicle severity; [`servers`] makes
-//! the configuration and logging servers module types for system files.
+//! the configuration and logging servers module types for system files, and [`starfish`] the
+//! paper's depth-control example.
 
 pub mod config;
 pub mod config_service;
@@ -15,6 +16,7 @@ pub mod logging;
 pub mod rpc;
 pub mod sentuator;
 pub mod servers;
+pub mod starfish;
 
 pub use config::{Database, Sections, ValueError};
 pub use seabus_medium::dsaav::wire::Address;

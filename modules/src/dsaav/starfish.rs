@@ -1,0 +1,362 @@
+//! The STARFISH paper's depth-control example as module types, each a DSAAV component on its own
+//! node, configured and plumbed only through the configuration service:
+//!
+//! - `starfish-vehicle-sim` (media: the Elevators node, then the DepthSensor node): a simple depth
+//!   model — the depth changes at `rate` m/s per degree of elevator, nose up rising — serving the
+//!   Elevators actuator and the DepthSensor sensor (both on port 0 of their nodes);
+//! - `depth-filter` (its node): reads depth from the server its configuration names for `Depth`
+//!   (`DepthFilter` overrides it to the sensor), smooths it, and serves it as the `Depth` sentuator;
+//! - `depth-controller` (its node; component `MyDepthController` by default): reads depth from its
+//!   `Depth` server, sets the elevators to `ControlGain × (depth − target)` (at most 30°), and logs
+//!   each step at DEBUG through the logging service.
+//!
+//! Changing only the configuration file re-plumbs the data: with `[Depth] Server = 4:0` the
+//! controller reads the sensor itself.
+
+use super::config_service::ConfigClient;
+use super::logging::{Level, Logger};
+use super::rpc::CallOptions;
+use super::sentuator::{self, Device, Sentuator, SentuatorClient, quantity};
+use crate::datasets::Catalogue;
+use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId};
+use crate::registry::{Built, ModuleConfig, ModuleType};
+use async_trait::async_trait;
+use seabus_medium::dsaav::wire::Address;
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Medium};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// The `starfish-vehicle-sim` module type.
+pub const VEHICLE_SIM: ModuleType = ModuleType {
+    name: "starfish-vehicle-sim",
+    kind: ModuleKind::Driver,
+    summary: "simulated Elevators and DepthSensor sentuators over a simple depth model (DSAAV)",
+    build: build_sim,
+};
+
+/// The `depth-filter` module type.
+pub const DEPTH_FILTER: ModuleType = ModuleType {
+    name: "depth-filter",
+    kind: ModuleKind::Supporting,
+    summary: "smooths depth from its configured source and serves it as the Depth sentuator",
+    build: build_filter,
+};
+
+/// The `depth-controller` module type.
+pub const DEPTH_CONTROLLER: ModuleType = ModuleType {
+    name: "depth-controller",
+    kind: ModuleKind::Supporting,
+    summary: "holds a depth with the elevators, plumbed and tuned by the configuration",
+    build: build_controller,
+};
+
+const TICK: Duration = Duration::from_millis(100);
+/// Largest elevator angle, degrees.
+const MAX_ELEVATOR: f64 = 30.0;
+
+fn opts() -> CallOptions {
+    CallOptions {
+        timeout: Duration::from_secs(2),
+        ..CallOptions::default()
+    }
+}
+
+fn medium(ctx: &Context, i: usize) -> Result<Medium, ModuleError> {
+    ctx.port(i)
+        .map(|p| p.medium().clone())
+        .ok_or_else(|| ModuleError::msg(format!("needs a DSAAV medium as its medium {}", i + 1)))
+}
+
+/// The simulated vehicle's depth and elevator.
+#[derive(Debug, Clone, Copy)]
+struct Physics {
+    depth: f64,
+    elevator: f64,
+    rate: f64,
+}
+
+struct SharedDevice<F>(Arc<Mutex<Physics>>, F);
+
+impl<F: Fn(&mut Physics, Option<&DataMap>) -> Result<DataMap, (i64, String)> + Send + 'static>
+    Device for SharedDevice<F>
+{
+    fn get(&mut self) -> DataMap {
+        let mut p = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        (self.1)(&mut p, None).unwrap_or_default()
+    }
+    fn set(&mut self, values: &DataMap) -> super::rpc::Outcome {
+        let mut p = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        (self.1)(&mut p, Some(values))
+    }
+}
+
+struct VehicleSim {
+    physics: Arc<Mutex<Physics>>,
+    servers: Vec<Box<dyn std::any::Any + Send>>,
+}
+
+fn build_sim(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
+    let p = &cfg.params;
+    let physics = Physics {
+        depth: p.float_or("depth", 10.0)?,
+        elevator: 0.0,
+        rate: p.float_or("rate", 0.1)?,
+    };
+    Ok(Built {
+        decl: Declaration::new(ModuleKind::Driver).default_tick(TICK),
+        module: Box::new(VehicleSim {
+            physics: Arc::new(Mutex::new(physics)),
+            servers: Vec::new(),
+        }),
+    })
+}
+
+#[async_trait]
+impl Module for VehicleSim {
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        let elevators = SharedDevice(
+            self.physics.clone(),
+            |p: &mut Physics, set: Option<&DataMap>| {
+                if let Some(v) = set {
+                    match v.get_f64("elevator") {
+                        Some(a) if a.abs() <= MAX_ELEVATOR => p.elevator = a,
+                        Some(a) => {
+                            return Err((5, format!("elevator {a}° is past ±{MAX_ELEVATOR}°")));
+                        }
+                        None => return Err((5, "set needs `elevator`".to_string())),
+                    }
+                }
+                Ok(DataMap::new()
+                    .with("quantity", quantity::ELEVATOR)
+                    .with("elevator", p.elevator))
+            },
+        );
+        let sensor = SharedDevice(
+            self.physics.clone(),
+            |p: &mut Physics, set: Option<&DataMap>| {
+                if set.is_some() {
+                    return Err((3, "a sensor cannot be set".to_string()));
+                }
+                Ok(DataMap::new()
+                    .with("quantity", quantity::DEPTH)
+                    .with("measurement", sentuator::measurement::RAW)
+                    .with("depth", p.depth))
+            },
+        );
+        let (a, b) = (medium(ctx, 0)?, medium(ctx, 1)?);
+        self.servers.push(Box::new(Sentuator::start(
+            &a,
+            0,
+            9,
+            elevators,
+            &["Elevators"],
+            vec![],
+        )));
+        self.servers.push(Box::new(Sentuator::start(
+            &b,
+            0,
+            9,
+            sensor,
+            &["DepthSensor"],
+            vec![],
+        )));
+        Ok(())
+    }
+
+    async fn on_timer(&mut self, _: &mut Context, _: TimerId) -> Result<(), ModuleError> {
+        let mut p = self.physics.lock().unwrap_or_else(|e| e.into_inner());
+        // nose up (positive elevator) rises
+        p.depth = (p.depth - p.rate * p.elevator * TICK.as_secs_f64()).max(0.0);
+        Ok(())
+    }
+}
+
+/// Finds the configuration server and the address `component` is to use for `service`.
+async fn plumb(
+    medium: &Medium,
+    component: &str,
+    service: &str,
+) -> Result<(ConfigClient, Address), ModuleError> {
+    let cfg = ConfigClient::discover(medium, 7, opts())
+        .await
+        .map_err(|e| ModuleError::msg(format!("no configuration server: {e}")))?;
+    let at = cfg
+        .server_of(component, service)
+        .await
+        .map_err(|e| ModuleError::msg(format!("{component}: {service}: {e}")))?;
+    Ok((cfg, at))
+}
+
+struct DepthFilter {
+    component: String,
+    smoothing: f64,
+    filtered: Arc<Mutex<Option<f64>>>,
+    source: Option<(SentuatorClient, Address)>,
+    server: Option<Box<dyn std::any::Any + Send>>,
+}
+
+fn build_filter(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
+    let p = &cfg.params;
+    Ok(Built {
+        decl: Declaration::new(ModuleKind::Supporting).default_tick(TICK),
+        module: Box::new(DepthFilter {
+            component: p.str("component").unwrap_or("DepthFilter").to_string(),
+            smoothing: p.float_or("smoothing", 0.5)?,
+            filtered: Arc::default(),
+            source: None,
+            server: None,
+        }),
+    })
+}
+
+#[async_trait]
+impl Module for DepthFilter {
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        let m = medium(ctx, 0)?;
+        let (_, at) = plumb(&m, &self.component, "Depth").await?;
+        tracing::info!(component = %self.component, "depth from {at}");
+        self.source = Some((SentuatorClient::new(&m, 8, opts()), at));
+        let filtered = self.filtered.clone();
+        let device = SharedDevice(
+            Arc::new(Mutex::new(Physics {
+                depth: 0.0,
+                elevator: 0.0,
+                rate: 0.0,
+            })),
+            move |_: &mut Physics, set: Option<&DataMap>| {
+                if set.is_some() {
+                    return Err((3, "filtered depth cannot be set".to_string()));
+                }
+                match *filtered.lock().unwrap_or_else(|e| e.into_inner()) {
+                    Some(d) => Ok(DataMap::new()
+                        .with("quantity", quantity::DEPTH)
+                        .with("measurement", sentuator::measurement::FILTERED)
+                        .with("depth", d)),
+                    None => Err((4, "no depth yet".to_string())),
+                }
+            },
+        );
+        self.server = Some(Box::new(Sentuator::start(
+            &m,
+            0,
+            9,
+            device,
+            &["Depth"],
+            vec![],
+        )));
+        Ok(())
+    }
+
+    async fn on_timer(&mut self, _: &mut Context, _: TimerId) -> Result<(), ModuleError> {
+        let Some((client, at)) = &self.source else {
+            return Ok(());
+        };
+        match client.get(*at).await {
+            Ok(r) => {
+                if let Some(d) = r.get_f64("depth") {
+                    let mut f = self.filtered.lock().unwrap_or_else(|e| e.into_inner());
+                    let a = self.smoothing;
+                    *f = Some(f.map_or(d, |old| a * old + (1.0 - a) * d));
+                }
+            }
+            Err(e) => tracing::warn!(component = %self.component, "depth: {e}"),
+        }
+        Ok(())
+    }
+}
+
+struct DepthController {
+    component: String,
+    target: f64,
+    state: Option<Controller>,
+}
+
+struct Controller {
+    sentuators: SentuatorClient,
+    depth_at: Address,
+    elevators_at: Address,
+    gain: f64,
+    log: Logger,
+}
+
+fn build_controller(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
+    let p = &cfg.params;
+    Ok(Built {
+        decl: Declaration::new(ModuleKind::Supporting).default_tick(TICK),
+        module: Box::new(DepthController {
+            component: p
+                .str("component")
+                .unwrap_or("MyDepthController")
+                .to_string(),
+            target: p.float_or("target", 5.0)?,
+            state: None,
+        }),
+    })
+}
+
+#[async_trait]
+impl Module for DepthController {
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        let m = medium(ctx, 0)?;
+        let c = self.component.as_str();
+        let (cfg, depth_at) = plumb(&m, c, "Depth").await?;
+        let elevators_at = cfg
+            .server_of(c, "Elevators")
+            .await
+            .map_err(|e| ModuleError::msg(format!("{c}: Elevators: {e}")))?;
+        let gain = cfg
+            .get_float(c, "ControlGain")
+            .await
+            .map_err(|e| ModuleError::msg(format!("{c}: ControlGain: {e}")))?;
+        let log = Logger::from_service(&m, 6, c, &cfg, opts())
+            .await
+            .map_err(|e| ModuleError::msg(format!("{c}: logging: {e}")))?;
+        let _ = log
+            .log(
+                Level::Info,
+                &format!("depth from {depth_at}, elevators at {elevators_at}, gain {gain}"),
+            )
+            .await;
+        self.state = Some(Controller {
+            sentuators: SentuatorClient::new(&m, 8, opts()),
+            depth_at,
+            elevators_at,
+            gain,
+            log,
+        });
+        Ok(())
+    }
+
+    async fn on_timer(&mut self, _: &mut Context, _: TimerId) -> Result<(), ModuleError> {
+        let Some(c) = &self.state else {
+            return Ok(());
+        };
+        let depth = match c.sentuators.get(c.depth_at).await {
+            Ok(r) => r.get_f64("depth"),
+            Err(e) => {
+                let _ = c.log.log(Level::Warning, &format!("no depth: {e}")).await;
+                None
+            }
+        };
+        let Some(depth) = depth else {
+            return Ok(());
+        };
+        let elevator = (c.gain * (depth - self.target)).clamp(-MAX_ELEVATOR, MAX_ELEVATOR);
+        let set = DataMap::new().with("elevator", elevator);
+        if let Err(e) = c.sentuators.set(c.elevators_at, &set).await {
+            let _ = c.log.log(Level::Warning, &format!("elevators: {e}")).await;
+        }
+        let _ = c
+            .log
+            .log(
+                Level::Debug,
+                &format!(
+                    "depth={depth:.3} target={:.3} elevator={elevator:.3}",
+                    self.target
+                ),
+            )
+            .await;
+        Ok(())
+    }
+}
