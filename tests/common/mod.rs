@@ -42,16 +42,43 @@ pub fn group() -> String {
     format!("239.255.{}.{}", fastrand::u8(1..250), fastrand::u8(1..250))
 }
 
-/// Starts `seabus run FILE` with its output captured.
-pub fn spawn_run(path: &Path, extra: &[&str]) -> Child {
-    seabus()
-        .arg("run")
-        .arg(path)
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("seabus run starts")
+/// A child process killed when dropped, so that a failing test leaves nothing running.
+pub struct Running(pub Child);
+
+impl std::ops::Deref for Running {
+    type Target = Child;
+    fn deref(&self) -> &Child {
+        &self.0
+    }
+}
+
+impl std::ops::DerefMut for Running {
+    fn deref_mut(&mut self) -> &mut Child {
+        &mut self.0
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+            let _ = self.0.wait();
+        }
+    }
+}
+
+/// Starts `seabus run FILE` with its output captured; it is killed if the test ends first.
+pub fn spawn_run(path: &Path, extra: &[&str]) -> Running {
+    Running(
+        seabus()
+            .arg("run")
+            .arg(path)
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("seabus run starts"),
+    )
 }
 
 /// Sends SIGTERM to a child.
