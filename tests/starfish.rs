@@ -188,3 +188,86 @@ fn the_same_components_run_over_raw_ethernet_between_two_hosts() {
     assert!(wait_for(&mut host_a, Duration::from_secs(20)).is_some_and(|s| s.success()));
     assert_held(dir.path(), "3:0");
 }
+
+#[test]
+fn sentuators_reach_the_bus_as_datasets_and_take_actuator_commands() {
+    let dir = tempfile::tempdir().unwrap();
+    configuration(dir.path(), "3:0");
+    let ini = dir.path().join("starfish.ini");
+    let text = std::fs::read_to_string(&ini).unwrap();
+    std::fs::write(
+        &ini,
+        text.replace(
+            "Server = 4:0                  # driver on node 4, port 0",
+            "Server = 4:0\nListeners = 6:1",
+        ),
+    )
+    .unwrap();
+    let net = format!("udp://{}:{}?ttl=0", group(), free_port());
+    let dsaav = system(
+        |n| format!("dsaav+inproc://starfish?node={n}"),
+        &[1, 2, 4, 6],
+        &modules(dir.path(), &["config", "log", "vehicle"]),
+    );
+    let text = dsaav.replace(
+        "<seabus node=\"starfish\">\n",
+        &format!(
+            "<seabus node=\"starfish\">\n  <medium name=\"bus\" url=\"inproc://\"/>\n  \
+             <medium name=\"net\" url=\"{net}\"/>\n  \
+             <module name=\"sentuators\" type=\"dsaav-sentuators\" media=\"bus n6\" port=\"1\" elevators=\"2:0\"/>\n  \
+             <bridge name=\"out\" media=\"bus net\" report=\"0\">\n    \
+             <route from=\"bus\" to=\"net\" topics=\"nav.**\"/>\n    \
+             <route from=\"net\" to=\"bus\" topics=\"cmd.**\" kind=\"command\"/>\n  </bridge>\n"
+        ),
+    );
+    let path = dir.path().join("starfish.xml");
+    std::fs::write(&path, text).unwrap();
+    let checked = check(&path);
+    assert!(
+        checked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    let _run = spawn_run(&path, &[]);
+    let spy = |secs: &str| {
+        let out = seabus()
+            .args([
+                "spy",
+                &net,
+                "--json",
+                "--topics",
+                "nav.depth",
+                "--for",
+                secs,
+            ])
+            .output()
+            .unwrap();
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+            .filter_map(|v| v["payload"]["depth"].as_f64())
+            .collect::<Vec<f64>>()
+    };
+    // the depth sensor's notifications arrive as the depth dataset; the vehicle holds 10 m
+    let before = spy("2");
+    assert!(before.len() > 5, "nav.depth from the sensor: {before:?}");
+    assert!(before.iter().all(|d| (d - 10.0).abs() < 1e-9), "{before:?}");
+    // an actuator command on the bus sets the elevators: nose up, the vehicle rises
+    let sent = seabus()
+        .args([
+            "pub",
+            &net,
+            "cmd.actuator",
+            "thrust=0",
+            "elevator=10",
+            "--command",
+        ])
+        .status()
+        .unwrap();
+    assert!(sent.success());
+    let after = spy("2");
+    assert!(
+        after.last().is_some_and(|d| *d < 9.5),
+        "the vehicle rises after the elevator command: {after:?}"
+    );
+}

@@ -7,8 +7,10 @@
 //! keeps one central log for every component; the health monitor's core ([`health`]) reads the
 //! health rules file and turns component health updates into a vehicle severity; [`servers`] makes
 //! the configuration and logging servers module types for system files, and [`starfish`] the
-//! paper's depth-control example.
+//! paper's depth-control example; [`bridge`] joins sentuators to a seabus bus (notifications to
+//! datasets, actuator commands to set calls).
 
+pub mod bridge;
 pub mod config;
 pub mod config_service;
 pub mod health;

@@ -91,9 +91,13 @@ impl<F: Fn(&mut Physics, Option<&DataMap>) -> Result<DataMap, (i64, String)> + S
     }
 }
 
+/// What a simulated sentuator does with a get (`None`) or a set.
+type Handler = fn(&mut Physics, Option<&DataMap>) -> super::rpc::Outcome;
+
 struct VehicleSim {
     physics: Arc<Mutex<Physics>>,
-    servers: Vec<Box<dyn std::any::Any + Send>>,
+    elevators: Option<Sentuator<SharedDevice<Handler>>>,
+    sensor: Option<Sentuator<SharedDevice<Handler>>>,
 }
 
 fn build_sim(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -107,7 +111,8 @@ fn build_sim(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         decl: Declaration::new(ModuleKind::Driver).default_tick(TICK),
         module: Box::new(VehicleSim {
             physics: Arc::new(Mutex::new(physics)),
-            servers: Vec::new(),
+            elevators: None,
+            sensor: None,
         }),
     })
 }
@@ -115,59 +120,74 @@ fn build_sim(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
 #[async_trait]
 impl Module for VehicleSim {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
-        let elevators = SharedDevice(
-            self.physics.clone(),
-            |p: &mut Physics, set: Option<&DataMap>| {
-                if let Some(v) = set {
-                    match v.get_f64("elevator") {
-                        Some(a) if a.abs() <= MAX_ELEVATOR => p.elevator = a,
-                        Some(a) => {
-                            return Err((5, format!("elevator {a}° is past ±{MAX_ELEVATOR}°")));
-                        }
-                        None => return Err((5, "set needs `elevator`".to_string())),
+        let elevators: Handler = |p: &mut Physics, set: Option<&DataMap>| {
+            if let Some(v) = set {
+                match v.get_f64("elevator") {
+                    Some(a) if a.abs() <= MAX_ELEVATOR => p.elevator = a,
+                    Some(a) => {
+                        return Err((5, format!("elevator {a}° is past ±{MAX_ELEVATOR}°")));
                     }
+                    None => return Err((5, "set needs `elevator`".to_string())),
                 }
-                Ok(DataMap::new()
-                    .with("quantity", quantity::ELEVATOR)
-                    .with("elevator", p.elevator))
-            },
-        );
-        let sensor = SharedDevice(
-            self.physics.clone(),
-            |p: &mut Physics, set: Option<&DataMap>| {
-                if set.is_some() {
-                    return Err((3, "a sensor cannot be set".to_string()));
-                }
-                Ok(DataMap::new()
-                    .with("quantity", quantity::DEPTH)
-                    .with("measurement", sentuator::measurement::RAW)
-                    .with("depth", p.depth))
-            },
-        );
+            }
+            Ok(DataMap::new()
+                .with("quantity", quantity::ELEVATOR)
+                .with("elevator", p.elevator))
+        };
+        let sensor: Handler = |p: &mut Physics, set: Option<&DataMap>| {
+            if set.is_some() {
+                return Err((3, "a sensor cannot be set".to_string()));
+            }
+            Ok(DataMap::new()
+                .with("quantity", quantity::DEPTH)
+                .with("measurement", sentuator::measurement::RAW)
+                .with("depth", p.depth))
+        };
         let (a, b) = (medium(ctx, 0)?, medium(ctx, 1)?);
-        self.servers.push(Box::new(Sentuator::start(
+        // the sensor's listeners, when a configuration server names any
+        let quick = CallOptions {
+            timeout: Duration::from_millis(500),
+            ..opts()
+        };
+        let listeners = match ConfigClient::discover(&b, 7, quick).await {
+            Ok(cfg) => match cfg.get_str("DepthSensor", "Listeners").await {
+                Ok(text) => text
+                    .split(',')
+                    .filter_map(|a| a.trim().parse::<Address>().ok())
+                    .collect(),
+                Err(_) => Vec::new(),
+            },
+            Err(_) => Vec::new(),
+        };
+        let shared = |h: Handler| SharedDevice(self.physics.clone(), h);
+        self.elevators = Some(Sentuator::start(
             &a,
             0,
             9,
-            elevators,
+            shared(elevators),
             &["Elevators"],
             vec![],
-        )));
-        self.servers.push(Box::new(Sentuator::start(
+        ));
+        self.sensor = Some(Sentuator::start(
             &b,
             0,
             9,
-            sensor,
+            shared(sensor),
             &["DepthSensor"],
-            vec![],
-        )));
+            listeners,
+        ));
         Ok(())
     }
 
     async fn on_timer(&mut self, _: &mut Context, _: TimerId) -> Result<(), ModuleError> {
-        let mut p = self.physics.lock().unwrap_or_else(|e| e.into_inner());
-        // nose up (positive elevator) rises
-        p.depth = (p.depth - p.rate * p.elevator * TICK.as_secs_f64()).max(0.0);
+        {
+            let mut p = self.physics.lock().unwrap_or_else(|e| e.into_inner());
+            // nose up (positive elevator) rises
+            p.depth = (p.depth - p.rate * p.elevator * TICK.as_secs_f64()).max(0.0);
+        }
+        if let Some(sensor) = &self.sensor {
+            sensor.notify().await;
+        }
         Ok(())
     }
 }
