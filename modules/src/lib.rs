@@ -45,6 +45,7 @@ pub fn registry() -> Registry {
         .add_module(dsaav::starfish::VEHICLE_SIM)
         .add_module(dsaav::starfish::DEPTH_FILTER)
         .add_module(dsaav::starfish::DEPTH_CONTROLLER)
-        .add_module(dsaav::bridge::TYPE);
+        .add_module(dsaav::bridge::TYPE)
+        .add_module(dsaav::ecomms::TYPE);
     reg
 }

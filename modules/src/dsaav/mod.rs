@@ -8,11 +8,12 @@
 //! health rules file and turns component health updates into a vehicle severity; [`servers`] makes
 //! the configuration and logging servers module types for system files, and [`starfish`] the
 //! paper's depth-control example; [`bridge`] joins sentuators to a seabus bus (notifications to
-//! datasets, actuator commands to set calls).
+//! datasets, actuator commands to set calls); [`ecomms`] queues messages for external links.
 
 pub mod bridge;
 pub mod config;
 pub mod config_service;
+pub mod ecomms;
 pub mod health;
 pub mod logging;
 pub mod rpc;
