@@ -7,7 +7,7 @@ use common::*;
 use seabus_medium::{Interface, Medium, Node};
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
 use std::collections::{BTreeMap, BTreeSet};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 const PER_GENERATOR: i64 = 300;
 
@@ -205,6 +205,22 @@ async fn regression_parallel_bridges_never_wait_on_each_other() {
         .subscribed("cmd.**")
         .unwrap();
     let sender = runtime.medium("c").unwrap().attach("sender");
+    // the bridges are running once a probe crosses from c to b
+    let ready = Instant::now() + Duration::from_secs(10);
+    loop {
+        sender
+            .command("cmd.probe", seabus_medium::DataMap::new())
+            .await
+            .unwrap();
+        if tokio::time::timeout(Duration::from_millis(100), sink.recv())
+            .await
+            .is_ok()
+        {
+            break;
+        }
+        assert!(Instant::now() < ready, "the bridges never started");
+    }
+    while let Ok(Some(_)) = tokio::time::timeout(Duration::from_millis(200), sink.recv()).await {}
     let total = 2000i64;
     let send = tokio::spawn(async move {
         for i in 0..total {
@@ -217,6 +233,9 @@ async fn regression_parallel_bridges_never_wait_on_each_other() {
     let mut got = BTreeSet::new();
     let mut twice = 0;
     for m in drain(&mut sink, Duration::from_millis(1500)).await {
+        if m.topic.as_str() == "cmd.probe" {
+            continue;
+        }
         if !got.insert(m.payload.to_map().unwrap().get_i64("i").unwrap()) {
             twice += 1;
         }
