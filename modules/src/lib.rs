@@ -46,6 +46,7 @@ pub fn registry() -> Registry {
         .add_module(dsaav::starfish::DEPTH_FILTER)
         .add_module(dsaav::starfish::DEPTH_CONTROLLER)
         .add_module(dsaav::bridge::TYPE)
-        .add_module(dsaav::ecomms::TYPE);
+        .add_module(dsaav::ecomms::TYPE)
+        .add_module(dsaav::udp_bridge::TYPE);
     reg
 }

@@ -168,3 +168,14 @@ impl Drop for Hosts {
         let _ = ip(&["netns", "del", &self.b]);
     }
 }
+
+/// Moves the calling thread into network namespace `ns`: sockets it makes afterwards live there.
+pub fn enter_namespace(ns: &str) -> std::io::Result<()> {
+    use std::os::fd::AsRawFd;
+    let f = std::fs::File::open(format!("/var/run/netns/{ns}"))?;
+    // SAFETY: setns(2) on a namespace file we hold open
+    if unsafe { libc::setns(f.as_raw_fd(), libc::CLONE_NEWNET) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}

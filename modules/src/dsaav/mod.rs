@@ -8,7 +8,8 @@
 //! health rules file and turns component health updates into a vehicle severity; [`servers`] makes
 //! the configuration and logging servers module types for system files, and [`starfish`] the
 //! paper's depth-control example; [`bridge`] joins sentuators to a seabus bus (notifications to
-//! datasets, actuator commands to set calls); [`ecomms`] queues messages for external links.
+//! datasets, actuator commands to set calls); [`ecomms`] queues messages for external links;
+//! [`udp_bridge`] lets control stations on an allow-list reach the vehicle's services over UDP.
 
 pub mod bridge;
 pub mod config;
@@ -20,6 +21,7 @@ pub mod rpc;
 pub mod sentuator;
 pub mod servers;
 pub mod starfish;
+pub mod udp_bridge;
 
 pub use config::{Database, Sections, ValueError};
 pub use seabus_medium::dsaav::wire::Address;
