@@ -460,11 +460,9 @@ fn lcm_payload(
 fn lcm_message(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<Outgoing, String> {
     let types = seabus_bridges::lcm::types_with(paths).map_err(|e| format!("--lcm-types: {e}"))?;
     if types.get(name).is_none() {
-        let mut known: Vec<&str> = types.iter().map(|t| t.full_name()).collect();
-        known.sort_unstable();
         return Err(format!(
             "--lcm {name}: no such LCM type; known types: {}",
-            known.join(", ")
+            seabus_bridges::lcm::known_types(&types)
         ));
     }
     Outgoing::lcm(types, name, map)

@@ -13,7 +13,7 @@ use seabus_medium::lcm::types::{MemberType, Primitive, ResolvedTypes, StructType
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Payload, Stamp, Value};
 use seabus_modules::system::{BridgeSpec, RouteSpec};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 
 /// The LCM types of the standard datasets, built in.
@@ -39,15 +39,19 @@ pub fn types_with(paths: &[PathBuf]) -> Result<ResolvedTypes, FileError> {
     set.resolve()
 }
 
+/// The names of `types`, sorted, for a message listing what there is.
+pub fn known_types(types: &ResolvedTypes) -> String {
+    let mut known: Vec<&str> = types.iter().map(|t| t.full_name()).collect();
+    known.sort_unstable();
+    known.join(", ")
+}
+
 /// The LCM types a bridge can use: the built-in ones and those its `lcm_types` parameter names.
 pub fn load(spec: &BridgeSpec) -> Result<Arc<ResolvedTypes>, FileError> {
     let mut paths = Vec::new();
     if let Some(p) = spec.params.get("lcm_types") {
-        let base = Path::new(&*spec.pos.file)
-            .parent()
-            .unwrap_or_else(|| Path::new(""));
         for item in p.value.split_whitespace() {
-            let path = base.join(item);
+            let path = seabus_modules::system::beside(&spec.pos, item);
             if !path.exists() {
                 return Err(p.pos.error(format!(
                     "parameter `lcm_types`: `{}` does not exist",
@@ -107,11 +111,9 @@ impl Mapping {
             return Ok(None);
         };
         let Some(ty) = types.get(name) else {
-            let mut known: Vec<&str> = types.iter().map(|t| t.full_name()).collect();
-            known.sort_unstable();
             return Err(route.pos.error(format!(
                 "unknown LCM type `{name}`; known types: {} (more with the bridge's `lcm_types`)",
-                known.join(", ")
+                known_types(types)
             )));
         };
         let (decode, encode) = (is_lcm(&spec.urls[from]), is_lcm(&spec.urls[to]));

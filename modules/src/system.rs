@@ -124,14 +124,37 @@ pub struct SystemSpec {
 
 const TOP_TAGS: [&str; 3] = ["medium", "module", "bridge"];
 
+/// A path a file at `pos` gives, relative to that file's directory.
+pub fn beside(pos: &Pos, relative: &str) -> std::path::PathBuf {
+    std::path::Path::new(&*pos.file)
+        .parent()
+        .unwrap_or_else(|| std::path::Path::new(""))
+        .join(relative.trim())
+}
+
 /// Longest name of a node, medium, module or bridge, in bytes.
 pub const MAX_NAME: usize = 64;
 
 fn check_name(attr: &xml::Attr) -> Result<String, FileError> {
+    check_name_of(attr, "", " (it becomes part of topics)").map(str::to_string)
+}
+
+/// Checks the name an attribute gives (a `what` name: letters, digits, `_` and `-`, at most
+/// [`MAX_NAME`] bytes); `why` ends the message when it is not one.
+pub(crate) fn check_name_of<'a>(
+    attr: &'a xml::Attr,
+    what: &str,
+    why: &str,
+) -> Result<&'a str, FileError> {
     let v = attr.value.trim();
+    let what = if what.is_empty() {
+        String::new()
+    } else {
+        format!("{what} ")
+    };
     if v.len() > MAX_NAME {
         return Err(attr.error(format!(
-            "a name is at most {MAX_NAME} characters, this one has {}",
+            "a {what}name is at most {MAX_NAME} characters, this one has {}",
             v.len()
         )));
     }
@@ -141,10 +164,10 @@ fn check_name(attr: &xml::Attr) -> Result<String, FileError> {
             .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
     {
         return Err(attr.error(format!(
-            "`{v}` is not a name: use letters, digits, `_` and `-` (it becomes part of topics)"
+            "`{v}` is not a {what}name: use letters, digits, `_` and `-`{why}"
         )));
     }
-    Ok(v.to_string())
+    Ok(v)
 }
 
 fn split_list(s: &str) -> Vec<String> {

@@ -211,9 +211,14 @@ fn param(key: &str, ty: ValueType, v: &Value) -> Result<Param, String> {
     })
 }
 
-/// Turns a frame into the topic and datamap a seabus receiver gets, with the keys the dictionary
-/// did not know.
-pub fn from_frame(dict: &Dictionary, f: &Frame) -> (String, DataMap, Vec<u16>) {
+/// The topic of messages of type `kind`.
+pub fn topic_of(dict: &Dictionary, kind: u16) -> String {
+    format!("dsaav.{}", dict.type_name(kind))
+}
+
+/// Turns a frame into the datamap a seabus receiver gets, with the keys the dictionary did not
+/// know.
+pub fn from_frame(dict: &Dictionary, f: &Frame) -> (DataMap, Vec<u16>) {
     let mut map = DataMap::with_capacity(f.params.len() + 4);
     map.push("@src", f.src.to_string());
     match f.dst {
@@ -241,7 +246,7 @@ pub fn from_frame(dict: &Dictionary, f: &Frame) -> (String, DataMap, Vec<u16>) {
         };
         map.push(name, value);
     }
-    (format!("dsaav.{}", dict.type_name(f.kind)), map, unknown)
+    (map, unknown)
 }
 
 /// The DSAAV transport.
@@ -411,7 +416,7 @@ impl Receiver {
         if src == self.node || !mine {
             return (true, Some(src));
         }
-        let (topic, map, unknown) = from_frame(&self.dict, &f);
+        let (map, unknown) = from_frame(&self.dict, &f);
         for key in unknown {
             self.ingress.reject(
                 "dsaav-unknown-key",
@@ -423,7 +428,8 @@ impl Receiver {
         let topic = match self.topics.get(&f.kind) {
             Some(t) => t.clone(),
             None => {
-                let t = Topic::new(&topic).ok();
+                // made once per message type
+                let t = Topic::new(&topic_of(&self.dict, f.kind)).ok();
                 self.topics.insert(f.kind, t.clone());
                 t
             }

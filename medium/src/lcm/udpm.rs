@@ -193,22 +193,7 @@ fn join(s: SockRef<'_>, cfg: &LcmConfig) -> std::io::Result<()> {
 /// Stops a socket from hearing groups it did not join itself (Linux delivers every group any
 /// socket of the host joined to a socket bound to the port, unless told not to).
 fn own_groups_only(s: &Socket) -> std::io::Result<()> {
-    let off: libc::c_int = 0;
-    // SAFETY: setsockopt reads an int from a valid pointer of the stated length
-    let r = unsafe {
-        libc::setsockopt(
-            std::os::fd::AsRawFd::as_raw_fd(s),
-            libc::IPPROTO_IP,
-            libc::IP_MULTICAST_ALL,
-            (&off as *const libc::c_int).cast(),
-            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-        )
-    };
-    if r == 0 {
-        Ok(())
-    } else {
-        Err(std::io::Error::last_os_error())
-    }
+    crate::udp::set_int_option(s, libc::IPPROTO_IP, libc::IP_MULTICAST_ALL, 0)
 }
 
 /// The LCM transport.

@@ -240,23 +240,38 @@ pub fn interface_addresses() -> Vec<(String, Ipv4Addr)> {
     found
 }
 
+/// Sets an integer socket option that socket2 has no call for.
+pub(crate) fn set_int_option(
+    s: &impl std::os::fd::AsRawFd,
+    level: libc::c_int,
+    name: libc::c_int,
+    value: libc::c_int,
+) -> std::io::Result<()> {
+    // SAFETY: setsockopt reads an int from a valid pointer of the stated length
+    let r = unsafe {
+        libc::setsockopt(
+            s.as_raw_fd(),
+            level,
+            name,
+            (&value as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 /// Sets a socket's receive buffer to `bytes`, beyond the system's limit when the process may
 /// (`SO_RCVBUFFORCE`, for root); returns the size the kernel granted.
 pub fn set_recv_buffer(s: &Socket, bytes: usize) -> usize {
     let _ = s.set_recv_buffer_size(bytes);
     if s.recv_buffer_size().unwrap_or(0) < bytes {
         let size = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
-        // SAFETY: setsockopt reads an int from a valid pointer of the stated length; a refusal
-        // (not root) leaves the buffer as it was
-        unsafe {
-            libc::setsockopt(
-                std::os::fd::AsRawFd::as_raw_fd(s),
-                libc::SOL_SOCKET,
-                libc::SO_RCVBUFFORCE,
-                (&size as *const libc::c_int).cast(),
-                std::mem::size_of::<libc::c_int>() as libc::socklen_t,
-            );
-        }
+        // a refusal (not root) leaves the buffer as it was
+        let _ = set_int_option(s, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, size);
     }
     // Linux reports double what was asked for (its bookkeeping overhead)
     s.recv_buffer_size().unwrap_or(0) / 2

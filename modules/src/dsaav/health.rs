@@ -335,23 +335,7 @@ const STATES: &str = "a component state: HEALTHY, UNAVAILABLE, MALFUNCTION or OF
 const LEVELS: &str = "a severity: NONE, WARN, ABORT or EMERGENCY";
 
 fn check_name(attr: &Attr, what: &str) -> Result<Arc<str>, FileError> {
-    let v = attr.value.trim();
-    if v.len() > MAX_NAME {
-        return Err(attr.error(format!(
-            "a {what} name is at most {MAX_NAME} characters, this one has {}",
-            v.len()
-        )));
-    }
-    if v.is_empty()
-        || !v
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
-    {
-        return Err(attr.error(format!(
-            "`{v}` is not a {what} name: use letters, digits, `_` and `-`"
-        )));
-    }
-    Ok(Arc::from(v))
+    crate::system::check_name_of(attr, what, "").map(Arc::from)
 }
 
 /// Attribute `name` of `el` as a duration above zero, when present.

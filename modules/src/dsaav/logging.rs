@@ -204,13 +204,24 @@ impl Logger {
             })?,
             Err(_) => Level::Info,
         };
-        Ok(Logger {
+        Ok(Logger::at(medium, port, component, server, level, opts))
+    }
+
+    fn at(
+        medium: &Medium,
+        port: u16,
+        component: &str,
+        server: Address,
+        level: Level,
+        opts: CallOptions,
+    ) -> Logger {
+        Logger {
             component: component.to_string(),
             level,
             server,
             rpc: RpcClient::new(medium, port),
             opts,
-        })
+        }
     }
 
     /// A logger for `component` whose server and level come from the configuration service.
@@ -226,13 +237,7 @@ impl Logger {
             Ok(v) => Level::parse(&v).unwrap_or(Level::Info),
             Err(_) => Level::Info,
         };
-        Ok(Logger {
-            component: component.to_string(),
-            level,
-            server,
-            rpc: RpcClient::new(medium, port),
-            opts,
-        })
+        Ok(Logger::at(medium, port, component, server, level, opts))
     }
 
     /// The level records are logged at or above.

@@ -217,9 +217,14 @@ impl SentuatorClient {
 /// The listeners the configuration registers for `component`: its `Listeners` key, addresses
 /// separated by commas (`Listeners = 3:1, 5:0`); none when the key is absent.
 pub fn listeners(db: &Database, component: &str) -> Result<Vec<Address>, String> {
-    let Ok(text) = db.get_str(component, "Listeners") else {
-        return Ok(Vec::new());
-    };
+    match db.get_str(component, "Listeners") {
+        Ok(text) => parse_listeners(component, text),
+        Err(_) => Ok(Vec::new()),
+    }
+}
+
+/// Reads a `Listeners` value of `component`: addresses separated by commas.
+pub fn parse_listeners(component: &str, text: &str) -> Result<Vec<Address>, String> {
     text.split(',')
         .map(str::trim)
         .filter(|s| !s.is_empty())

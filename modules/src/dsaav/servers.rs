@@ -16,7 +16,7 @@ use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind};
 use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// The `dsaav-config` module type.
 pub const CONFIG: ModuleType = ModuleType {
@@ -39,10 +39,7 @@ fn path_param(cfg: &ModuleConfig, name: &str) -> Result<PathBuf, FileError> {
     let Some(p) = cfg.params.get(name) else {
         return Err(cfg.pos.error(format!("a {} needs `{name}`", cfg.type_name)));
     };
-    let base = Path::new(&*cfg.pos.file)
-        .parent()
-        .unwrap_or_else(|| Path::new(""));
-    Ok(base.join(p.value.trim()))
+    Ok(crate::system::beside(&cfg.pos, &p.value))
 }
 
 /// What a server module starts on its medium.

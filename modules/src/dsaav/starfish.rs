@@ -151,10 +151,9 @@ impl Module for VehicleSim {
         };
         let listeners = match ConfigClient::discover(&b, 7, quick).await {
             Ok(cfg) => match cfg.get_str("DepthSensor", "Listeners").await {
-                Ok(text) => text
-                    .split(',')
-                    .filter_map(|a| a.trim().parse::<Address>().ok())
-                    .collect(),
+                Ok(text) => {
+                    sentuator::parse_listeners("DepthSensor", &text).map_err(ModuleError::msg)?
+                }
                 Err(_) => Vec::new(),
             },
             Err(_) => Vec::new(),

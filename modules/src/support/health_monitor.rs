@@ -21,7 +21,6 @@ use crate::registry::{Built, ModuleConfig, ModuleType};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Message, Topic};
-use std::path::Path;
 use std::time::Duration;
 use tokio::time::Instant;
 
@@ -51,10 +50,7 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             .pos
             .error("a health-monitor needs `rules`, its health rules file"));
     };
-    let base = Path::new(&*cfg.pos.file)
-        .parent()
-        .unwrap_or_else(|| Path::new(""));
-    let path = base.join(file.value.trim());
+    let path = crate::system::beside(&cfg.pos, &file.value);
     if !path.exists() {
         return Err(file.error(format!("`{}` does not exist", path.display())));
     }
