@@ -165,11 +165,16 @@ fn init_logs(verbose: u8) {
         .collect();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default.join(",")));
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
+    use tracing_subscriber::prelude::*;
+    let terminal = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
+        .with_filter(filter);
+    // a system with a <log> element also sends every record to the DSAAV central log
+    tracing_subscriber::registry()
+        .with(terminal)
+        .with(seabus_modules::dsaav::central::layer())
         .init();
 }
 

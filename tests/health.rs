@@ -5,9 +5,7 @@
 
 mod common;
 use common::*;
-use std::io::{BufRead, BufReader};
 use std::process::Stdio;
-use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 const RULES: &str = r#"<health publish="vehicle.health" period="200ms"
@@ -21,26 +19,6 @@ const RULES: &str = r#"<health publish="vehicle.health" period="200ms"
   <component name="gen" mode="active" timeout="30s"/>
 </health>
 "#;
-
-/// Waits for a spy line that `pred` accepts, at most `limit`; every line read is kept in `seen`.
-fn wait_for_line(
-    rx: &mpsc::Receiver<serde_json::Value>,
-    seen: &mut Vec<serde_json::Value>,
-    limit: Duration,
-    what: &str,
-    pred: impl Fn(&serde_json::Value) -> bool,
-) -> serde_json::Value {
-    let deadline = Instant::now() + limit;
-    while Instant::now() < deadline {
-        if let Ok(v) = rx.recv_timeout(Duration::from_millis(100)) {
-            seen.push(v.clone());
-            if pred(&v) {
-                return v;
-            }
-        }
-    }
-    panic!("no {what} within {limit:?}");
-}
 
 fn report(net: &str, count: &str) -> std::process::Child {
     seabus()
@@ -79,23 +57,7 @@ fn a_silent_component_goes_offline_raises_the_severity_and_comes_back() {
         String::from_utf8_lossy(&checked.stderr)
     );
     let mut run = spawn_run(&path, &[]);
-    let mut spy = seabus()
-        .args(["spy", &net, "--json", "--for", "30"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("spy starts");
-    let (tx, rx) = mpsc::channel();
-    let out = spy.stdout.take().unwrap();
-    std::thread::spawn(move || {
-        for line in BufReader::new(out).lines().map_while(Result::ok) {
-            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line)
-                && tx.send(v).is_err()
-            {
-                return;
-            }
-        }
-    });
+    let (mut spy, rx) = spy_json(&net, 30);
     let component = |v: &serde_json::Value, name: &str| {
         v["payload"]["components"][name]
             .as_str()
@@ -173,4 +135,140 @@ fn a_silent_component_goes_offline_raises_the_severity_and_comes_back() {
     assert!(wait_for(&mut run, Duration::from_secs(5)).is_some());
     let _ = spy.kill();
     let _ = spy.wait();
+}
+
+/// The paper's depth-control example with its health rules (configs/starfish-health.xml) over a
+/// UDP backbone: the components report to the health monitor by RPC and it polls the passive ones
+/// (the logging server, the controller) with the health call. The controller runs in a process of
+/// its own; when that process dies the controller is OFFLINE within its timeout and the vehicle in
+/// EMERGENCY; restarted, it is HEALTHY again.
+#[test]
+fn starfish_components_report_over_dsaav_and_a_dead_controller_goes_offline() {
+    let dir = tempfile::tempdir().unwrap();
+    let configs = concat!(env!("CARGO_MANIFEST_DIR"), "/configs");
+    for f in ["starfish.ini", "starfish-health.xml"] {
+        std::fs::copy(format!("{configs}/{f}"), dir.path().join(f)).unwrap();
+    }
+    let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
+    let (g, p) = (group(), free_port());
+    let node =
+        |n: u16| format!(r#"  <medium name="n{n}" url="dsaav+udp://{g}:{p}?ttl=0&amp;node={n}"/>"#);
+    let vehicle = format!(
+        r#"<seabus node="starfish">
+  <medium name="bus" url="{bus}"/>
+{}
+{}
+{}
+{}
+  <module name="config" type="dsaav-config" medium="n1" config="starfish.ini" appdata="app.ini" port="2"/>
+  <module name="log" type="dsaav-log" medium="n1" file="vehicle.log" port="0"/>
+  <module name="health" type="health-monitor" media="bus n1" rules="starfish-health.xml" dsaav="n1" port="1"/>
+  <module name="vehicle" type="starfish-vehicle-sim" media="n2 n4" depth="10"/>
+  <module name="filter" type="depth-filter" medium="n3"/>
+</seabus>
+"#,
+        node(1),
+        node(2),
+        node(3),
+        node(4)
+    );
+    let controller = format!(
+        r#"<seabus node="controller">
+{}
+  <module name="controller" type="depth-controller" medium="n5" target="5"/>
+</seabus>
+"#,
+        node(5)
+    );
+    let (pv, pc) = (
+        dir.path().join("vehicle.xml"),
+        dir.path().join("controller.xml"),
+    );
+    std::fs::write(&pv, vehicle).unwrap();
+    std::fs::write(&pc, controller).unwrap();
+    for p in [&pv, &pc] {
+        let checked = check(p);
+        assert!(
+            checked.status.success(),
+            "{}",
+            String::from_utf8_lossy(&checked.stderr)
+        );
+    }
+    let (_spy, rx) = spy_json(&bus, 40);
+    let _vehicle = spawn_run(&pv, &[]);
+    let mut ctl = spawn_run(&pc, &[]);
+    let state = |v: &serde_json::Value, name: &str| {
+        v["payload"]["components"][name]
+            .as_str()
+            .unwrap_or("")
+            .to_string()
+    };
+    let all = [
+        "Logging",
+        "Elevators",
+        "DepthSensor",
+        "DepthFilter",
+        "MyDepthController",
+    ];
+    let snapshot = |v: &serde_json::Value| v["topic"] == "vehicle.health";
+    let mut seen = Vec::new();
+    // every component starts HEALTHY with one timeout (at most 3 s) to be heard from: a snapshot
+    // after that shows what they said
+    let started = Instant::now();
+    let healthy = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(15),
+        "every component HEALTHY",
+        |v| {
+            snapshot(v)
+                && started.elapsed() > Duration::from_secs(4)
+                && all.iter().all(|c| state(v, c) == "HEALTHY")
+        },
+    );
+    assert_eq!(healthy["payload"]["severity"], "NONE", "{healthy}");
+
+    // the controller's process dies: its polls go unanswered
+    ctl.kill().unwrap();
+    let _ = ctl.wait();
+    let killed = Instant::now();
+    let offline = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(10),
+        "MyDepthController OFFLINE",
+        |v| snapshot(v) && state(v, "MyDepthController") == "OFFLINE",
+    );
+    assert_eq!(offline["payload"]["severity"], "EMERGENCY", "{offline}");
+    // timeout 2 s after its last answer (polled every 500 ms), published within a period (1 s)
+    assert!(
+        killed.elapsed() < Duration::from_secs(5),
+        "OFFLINE {:?} after the controller died",
+        killed.elapsed()
+    );
+    let is_action = |v: &serde_json::Value| v["topic"] == "cmd.emergency";
+    if !seen.iter().any(is_action) {
+        wait_for_line(
+            &rx,
+            &mut seen,
+            Duration::from_secs(5),
+            "the emergency action",
+            is_action,
+        );
+    }
+    // the others are untouched
+    for c in &all[..4] {
+        assert_eq!(state(&offline, c), "HEALTHY", "{c}: {offline}");
+    }
+
+    // restarted: HEALTHY again, the severity falls
+    let _again = spawn_run(&pc, &[]);
+    let back = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(15),
+        "MyDepthController HEALTHY again",
+        |v| snapshot(v) && all.iter().all(|c| state(v, c) == "HEALTHY"),
+    );
+    assert_eq!(back["payload"]["severity"], "NONE", "{back}");
 }

@@ -8,6 +8,7 @@
 //! builds a fresh instance with fresh ports.
 
 use crate::datasets::Catalogue;
+use crate::dsaav::central::Forwarder;
 use crate::module::{Context, Event, Module, ModuleError, TICK};
 use crate::registry::{Built, Registry};
 use crate::system::{SystemSpec, check};
@@ -126,6 +127,8 @@ pub struct Runtime {
     order: Vec<String>,
     supervisors: Vec<(String, JoinHandle<()>)>,
     shutdown: watch::Sender<bool>,
+    /// Sends every module's log records to the central log, when the system has a `<log>`.
+    forwarder: Option<Forwarder>,
 }
 
 fn open_error(pos: &Pos, e: impl std::fmt::Display) -> FileError {
@@ -171,13 +174,15 @@ impl Runtime {
                 build: Arc::new(move || reg.build_bridge(&bs, &cat)),
             });
         }
-        Ok(Runtime::with_units(
-            node,
-            media,
-            spec.default_medium(),
-            units,
-            catalogue,
-        ))
+        // attached before any module starts, so that none of their records is missed
+        let forwarder = spec.log.as_ref().and_then(|l| {
+            media
+                .get(&l.medium)
+                .map(|m| Forwarder::attach(m, l.port, &node.name))
+        });
+        let mut runtime = Runtime::with_units(node, media, spec.default_medium(), units, catalogue);
+        runtime.forwarder = forwarder;
+        Ok(runtime)
     }
 
     /// Starts `units` on already opened `media`; status goes to the medium called `default`.
@@ -213,6 +218,7 @@ impl Runtime {
             order,
             supervisors,
             shutdown,
+            forwarder: None,
         }
     }
 
@@ -251,6 +257,10 @@ impl Runtime {
                 task.abort();
             }
         }
+        // the modules' last records reach the log before the media close
+        if let Some(f) = self.forwarder {
+            f.finish(SHUTDOWN_GRACE).await;
+        }
         for m in self.shared.media.values() {
             m.close();
         }
@@ -270,11 +280,15 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
         // anywhere in them is a failure like any other
         let task = tokio::spawn({
             let (unit, shared, shutdown) = (unit.clone(), shared.clone(), shutdown.clone());
-            async move {
-                let (module, ctx) = instance(&unit, &shared)?;
-                shared.report(&unit, State::Running, restarts, None).await;
-                run(module, ctx, shutdown).await.map_err(|e| e.to_string())
-            }
+            let span = tracing::info_span!(crate::dsaav::central::MODULE_SPAN, name = %unit.name);
+            tracing::Instrument::instrument(
+                async move {
+                    let (module, ctx) = instance(&unit, &shared)?;
+                    shared.report(&unit, State::Running, restarts, None).await;
+                    run(module, ctx, shutdown).await.map_err(|e| e.to_string())
+                },
+                span,
+            )
         });
         // when the supervisor is cut off at shutdown, the module goes with it
         let _guard = AbortOnDrop(task.abort_handle());
@@ -314,7 +328,7 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
 }
 
 /// Aborts a task when dropped.
-struct AbortOnDrop(tokio::task::AbortHandle);
+pub(crate) struct AbortOnDrop(pub(crate) tokio::task::AbortHandle);
 
 impl Drop for AbortOnDrop {
     fn drop(&mut self) {

@@ -115,6 +115,8 @@ pub struct SystemSpec {
     pub modules: Vec<ModuleConfig>,
     /// Bridges in order.
     pub bridges: Vec<BridgeSpec>,
+    /// Where every module's log records go (`<log>`), when the system says.
+    pub log: Option<LogSpec>,
     /// Other top-level elements, for the services other crates provide (console, health, …);
     /// [`check`] refuses those no registered crate reads.
     pub sections: Vec<Element>,
@@ -122,7 +124,22 @@ pub struct SystemSpec {
     pub pos: Pos,
 }
 
-const TOP_TAGS: [&str; 3] = ["medium", "module", "bridge"];
+const TOP_TAGS: [&str; 4] = ["medium", "module", "bridge", "log"];
+
+/// `<log medium="n1" port="100"/>`: every module of the system logs through the DSAAV logging
+/// service reached on a DSAAV medium (see [`crate::dsaav::central`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LogSpec {
+    /// The DSAAV medium the records are sent on.
+    pub medium: String,
+    /// The port they are sent from on that medium's node.
+    pub port: u16,
+    /// Where it is written.
+    pub pos: Pos,
+}
+
+/// The port records are sent from when `<log>` gives none.
+pub const DEFAULT_LOG_PORT: u16 = 100;
 
 /// A path a file at `pos` gives, relative to that file's directory.
 pub fn beside(pos: &Pos, relative: &str) -> std::path::PathBuf {
@@ -206,6 +223,7 @@ impl SystemSpec {
             media: Vec::new(),
             modules: Vec::new(),
             bridges: Vec::new(),
+            log: None,
             sections: Vec::new(),
             pos: root.pos.clone(),
         };
@@ -244,6 +262,23 @@ impl SystemSpec {
                 "bridge" => spec.bridges.push(bridge_spec(el, &mut |a| {
                     claim(a, "a module or bridge", &mut unit_names)
                 })?),
+                "log" => {
+                    el.only_attrs(&["medium", "port"])?;
+                    el.only_children(&[])?;
+                    if let Some(prev) = &spec.log {
+                        return Err(el.error(format!(
+                            "a system has one <log>; the first is at line {}",
+                            prev.pos.line
+                        )));
+                    }
+                    spec.log = Some(LogSpec {
+                        medium: el.required("medium")?.value.trim().to_string(),
+                        port: el
+                            .parsed("port", "a port 0–65535")?
+                            .unwrap_or(DEFAULT_LOG_PORT),
+                        pos: el.pos.clone(),
+                    });
+                }
                 _ => spec.sections.push(el.clone()),
             }
         }
@@ -650,6 +685,18 @@ pub fn check(
         }
         Ok(())
     };
+    if let Some(log) = &spec.log {
+        medium_exists(&log.medium, &log.pos)?;
+        if spec
+            .medium(&log.medium)
+            .is_some_and(|m| !m.url.starts_with("dsaav+"))
+        {
+            return Err(log.pos.error(format!(
+                "<log> sends to the DSAAV logging service: `{}` is not a DSAAV medium (dsaav+eth, dsaav+udp or dsaav+inproc)",
+                log.medium
+            )));
+        }
+    }
     for m in &spec.modules {
         for name in &m.media {
             medium_exists(name, &m.pos)?;

@@ -27,7 +27,8 @@ async fn components_log_centrally_at_their_configured_levels() {
     let path = dir.path().join("vehicle.log");
     let log = LogFile::open(path.clone(), 1 << 20, 3).unwrap();
     let sm = server_medium.clone();
-    tokio::spawn(async move { logging::serve(&sm, 0, log).await });
+    let (_drain, draining) = tokio::sync::watch::channel(false);
+    tokio::spawn(async move { logging::serve(&sm, 0, log, draining).await });
 
     let opts = CallOptions::default();
     let controller_medium = open(&format!("{bus}?node=5"));
@@ -115,4 +116,56 @@ fn the_central_log_rotates_by_size_keeping_the_newest_files() {
     assert_eq!(Level::parse("LOG_DEBUG"), Some(Level::Debug));
     assert_eq!(Level::parse("warning"), Some(Level::Warning));
     assert_eq!(Level::parse("LOUD"), None);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn records_arriving_out_of_order_are_written_in_time_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = Database::parse("v.ini", "[Logging]\nServer = 1:0\n").unwrap();
+    let bus = format!("dsaav+inproc://order{}", fastrand::u32(..));
+    let server_medium = open(&format!("{bus}?node=1"));
+    let path = dir.path().join("v.log");
+    let log = LogFile::open(path.clone(), 1 << 20, 1).unwrap();
+    let (drain, draining) = tokio::sync::watch::channel(false);
+    let sm = server_medium.clone();
+    let server = tokio::spawn(async move { logging::serve(&sm, 0, log, draining).await });
+
+    let opts = CallOptions::default();
+    let a_medium = open(&format!("{bus}?node=2"));
+    let a = Logger::new(&a_medium, 4, "A", &cfg, opts).unwrap();
+    let now = seabus_medium::Stamp::now().as_secs_f64();
+    // the record made first is sent second
+    a.log_at(now + 0.010, Level::Info, "second").await.unwrap();
+    a.log_at(now, Level::Info, "first").await.unwrap();
+    // a record from a clock ahead of the server's is not held for ever
+    a.log_at(now + 3600.0, Level::Info, "ahead").await.unwrap();
+    let lines = |p: &std::path::Path| -> Vec<String> {
+        std::fs::read_to_string(p)
+            .unwrap_or_default()
+            .lines()
+            .map(|l| l.rsplit(' ').next().unwrap_or("").to_string())
+            .collect()
+    };
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while lines(&path).len() < 3 && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(lines(&path), ["first", "second", "ahead"]);
+
+    // draining: written at once; the medium closing writes what is held
+    drain.send(true).unwrap();
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    a.log_at(
+        seabus_medium::Stamp::now().as_secs_f64(),
+        Level::Warning,
+        "late",
+    )
+    .await
+    .unwrap();
+    assert_eq!(lines(&path).last().map(String::as_str), Some("late"));
+    server_medium.close();
+    tokio::time::timeout(Duration::from_secs(5), server)
+        .await
+        .expect("the server stops when its medium closes")
+        .unwrap();
 }

@@ -129,7 +129,10 @@ async fn sensors_and_actuators_answer_and_notify_their_listeners() {
     }
     assert_eq!(
         client.health(at(4, 0)).await.unwrap(),
-        (sentuator::state::HEALTHY, vec!["DepthSensor".to_string()])
+        (
+            seabus_modules::dsaav::health::ComponentState::Healthy,
+            vec!["DepthSensor".to_string()]
+        )
     );
     let (found, _, services) = client.discover().await.unwrap();
     assert!(

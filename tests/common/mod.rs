@@ -179,3 +179,48 @@ pub fn enter_namespace(ns: &str) -> std::io::Result<()> {
     }
     Ok(())
 }
+
+/// Starts `seabus spy URL --json --for SECS`; its messages arrive on the receiver as JSON values.
+pub fn spy_json(url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<serde_json::Value>) {
+    use std::io::BufRead;
+    let mut spy = Running(
+        seabus()
+            .args(["spy", url, "--json", "--for", &secs.to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spy starts"),
+    );
+    let (tx, rx) = std::sync::mpsc::channel();
+    let out = spy.0.stdout.take().expect("spy's output is piped");
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line)
+                && tx.send(v).is_err()
+            {
+                return;
+            }
+        }
+    });
+    (spy, rx)
+}
+
+/// Waits for a spy line that `pred` accepts, at most `limit`; every line read is kept in `seen`.
+pub fn wait_for_line(
+    rx: &std::sync::mpsc::Receiver<serde_json::Value>,
+    seen: &mut Vec<serde_json::Value>,
+    limit: Duration,
+    what: &str,
+    pred: impl Fn(&serde_json::Value) -> bool,
+) -> serde_json::Value {
+    let deadline = Instant::now() + limit;
+    while Instant::now() < deadline {
+        if let Ok(v) = rx.recv_timeout(Duration::from_millis(100)) {
+            seen.push(v.clone());
+            if pred(&v) {
+                return v;
+            }
+        }
+    }
+    panic!("no {what} within {limit:?}");
+}

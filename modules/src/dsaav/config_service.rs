@@ -92,6 +92,10 @@ fn handle(db: &mut Database, op: i32, p: &DataMap) -> Outcome {
             .setting(text(p, "component")?, text(p, "service")?, text(p, "key")?)
             .map(|v| answer(v.as_str()))
             .map_err(value_error),
+        super::health_service::ops::HEALTH => Ok(super::health_service::health_reply(
+            super::health::ComponentState::Healthy,
+            "Configuration",
+        )),
         op => Err((
             3,
             format!("operation {op} is not a configuration operation"),

@@ -10,13 +10,19 @@
 //! limit it is renamed `NAME.1` (older ones shifted up to the number kept) and a new one begun.
 
 use super::config::Database;
+use super::health::ComponentState;
+use super::health_service::{health_reply, ops::HEALTH};
 use super::rpc::{self, CallOptions, RpcClient, RpcError};
 use seabus_medium::dsaav::wire::Address;
 use seabus_medium::{DataMap, Medium};
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
 use std::fmt;
 use std::fs::{File, OpenOptions};
 use std::io::{self, Write};
 use std::path::PathBuf;
+use std::sync::{Arc, Mutex};
+use tokio::sync::watch;
 
 /// The logging service's operation: one record.
 pub const LOG_OP: i32 = 300;
@@ -154,25 +160,163 @@ pub fn format_line(time_s: f64, level: Level, component: &str, text: &str) -> St
     )
 }
 
-/// Serves the logging operation on `port`, writing every record to `log`, until the medium
-/// closes. Records that cannot be written are refused to reliable callers with status 6.
-pub async fn serve(medium: &Medium, port: u16, mut log: LogFile) {
+/// How long the server holds a record before writing it, so that records from components whose
+/// calls arrive a little late still go into the log in time order.
+pub const HOLD: std::time::Duration = std::time::Duration::from_millis(500);
+
+/// Records held for their turn, in time order, and the log they go to.
+struct Ordered {
+    log: LogFile,
+    /// (time, arrival number, line), earliest first.
+    held: BinaryHeap<Reverse<(TimeKey, u64, String)>>,
+    arrivals: u64,
+    /// Write failures so far.
+    failures: u64,
+    /// Whether the last write failed.
+    failing: bool,
+    /// How long records are held, in seconds: [`HOLD`], or nothing once the server drains.
+    hold: f64,
+}
+
+/// A record's time as an ordered key (seconds since 1970, never NaN).
+#[derive(Debug, Clone, Copy)]
+struct TimeKey(f64);
+
+impl PartialEq for TimeKey {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other).is_eq()
+    }
+}
+
+impl Eq for TimeKey {}
+
+impl PartialOrd for TimeKey {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for TimeKey {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.total_cmp(&other.0)
+    }
+}
+
+impl Ordered {
+    /// Writes every held record made before `until` (all of them for `None`).
+    fn write_due(&mut self, until: Option<f64>) -> io::Result<()> {
+        while let Some(Reverse((t, _, _))) = self.held.peek() {
+            if until.is_some_and(|u| t.0 > u) {
+                break;
+            }
+            let Some(Reverse((_, _, line))) = self.held.pop() else {
+                break;
+            };
+            self.log.write(&line)?;
+        }
+        Ok(())
+    }
+
+    /// Writes the records due now.
+    fn flush_due(&mut self) -> io::Result<()> {
+        let until = seabus_medium::Stamp::now().as_secs_f64() - self.hold;
+        self.write_due(Some(until))
+    }
+
+    /// Writes the records due now, reporting a failure.
+    fn flush_or_report(&mut self) {
+        let written = self.flush_due();
+        self.failing = written.is_err();
+        if let Err(e) = written {
+            self.failures += 1;
+            let n = self.failures;
+            if n <= 5 || n.is_power_of_two() {
+                tracing::error!("cannot write the central log ({n} so far): {e}");
+            }
+        }
+    }
+}
+
+/// Serves the logging operation on `port`, writing every record to `log` in time order (each is
+/// held for [`HOLD`]), until the medium closes; then the records still held are written. Once
+/// `drain` turns true (the system is stopping) nothing more is held: what is held is written, and
+/// what arrives after is written at once. Records that cannot be written are refused to reliable
+/// callers with status 6.
+pub async fn serve(medium: &Medium, port: u16, log: LogFile, mut drain: watch::Receiver<bool>) {
+    let ordered = Arc::new(Mutex::new(Ordered {
+        log,
+        held: BinaryHeap::new(),
+        arrivals: 0,
+        failures: 0,
+        failing: false,
+        hold: HOLD.as_secs_f64(),
+    }));
+    let writer = {
+        let ordered = ordered.clone();
+        tokio::spawn(async move {
+            let mut every = tokio::time::interval(HOLD / 5);
+            // a sender gone means nobody will ask to drain: hold as usual
+            let mut watching = true;
+            loop {
+                tokio::select! {
+                    _ = every.tick() => {}
+                    r = drain.changed(), if watching => watching = r.is_ok(),
+                }
+                let draining = *drain.borrow();
+                let mut o = ordered.lock().unwrap_or_else(|p| p.into_inner());
+                if draining {
+                    o.hold = 0.0;
+                }
+                o.flush_or_report();
+            }
+        })
+    };
+    let handler_state = ordered.clone();
     rpc::serve(medium, port, &[], move |call| {
+        match call.op {
+            LOG_OP => {}
+            HEALTH => {
+                // a log it cannot write is a malfunction
+                let o = handler_state.lock().unwrap_or_else(|p| p.into_inner());
+                let state = if o.failing {
+                    ComponentState::Malfunction
+                } else {
+                    ComponentState::Healthy
+                };
+                return Ok(health_reply(state, "Logging"));
+            }
+            op => return Err((3, format!("operation {op} is not a logging operation"))),
+        }
         let p = &call.params;
         let level = p
             .get_i64("level")
             .and_then(Level::from_number)
             .ok_or((5, "a log record needs `level` 0–4".to_string()))?;
-        let time = p
-            .get_f64("time")
-            .unwrap_or_else(|| seabus_medium::Stamp::now().as_secs_f64());
+        let now = seabus_medium::Stamp::now().as_secs_f64();
+        // a clock ahead of the server's cannot hold a record back
+        let time = p.get_f64("time").filter(|t| t.is_finite()).unwrap_or(now);
         let component = p.get_str("component").unwrap_or("?");
         let text = p.get_str("text").unwrap_or("");
-        log.write(&format_line(time, level, component, text))
+        let mut o = handler_state.lock().unwrap_or_else(|p| p.into_inner());
+        o.arrivals += 1;
+        let n = o.arrivals;
+        o.held.push(Reverse((
+            TimeKey(time.min(now)),
+            n,
+            format_line(time, level, component, text),
+        )));
+        let written = o.flush_due();
+        o.failing = written.is_err();
+        written
             .map(|()| DataMap::new())
             .map_err(|e| (6, format!("cannot write the log: {e}")))
     })
-    .await
+    .await;
+    writer.abort();
+    let mut o = ordered.lock().unwrap_or_else(|p| p.into_inner());
+    if let Err(e) = o.write_due(None) {
+        tracing::error!("cannot write the central log: {e}");
+    }
 }
 
 /// A component's logger: its level, and the way to the logging server.
@@ -233,10 +377,7 @@ impl Logger {
         opts: CallOptions,
     ) -> Result<Logger, RpcError> {
         let server = cfg.server_of(component, "Logging").await?;
-        let level = match cfg.setting(component, "Logging", "LogLevel").await {
-            Ok(v) => Level::parse(&v).unwrap_or(Level::Info),
-            Err(_) => Level::Info,
-        };
+        let level = level_from_service(cfg, component).await;
         Ok(Logger::at(medium, port, component, server, level, opts))
     }
 
@@ -253,14 +394,61 @@ impl Logger {
     /// Logs `text` at `level` if the component's level lets it through: DATA unreliably, the
     /// others reliably. Returns whether it was sent.
     pub async fn log(&self, level: Level, text: &str) -> Result<bool, RpcError> {
+        self.log_at(seabus_medium::Stamp::now().as_secs_f64(), level, text)
+            .await
+    }
+
+    /// As [`Logger::log`], for a record made at `time` (seconds since 1970).
+    pub async fn log_at(&self, time: f64, level: Level, text: &str) -> Result<bool, RpcError> {
         if level > self.level {
             return Ok(false);
         }
+        let to = Recipient {
+            rpc: &self.rpc,
+            server: self.server,
+            opts: self.opts,
+        };
+        to.send(&self.component, time, level, text).await?;
+        Ok(true)
+    }
+}
+
+/// The level the configuration service gives `component` (`Logging.LogLevel` in its section, else
+/// `LogLevel` of `[Logging]`); INFO when it gives none or something that is not a level.
+pub async fn level_from_service(
+    cfg: &super::config_service::ConfigClient,
+    component: &str,
+) -> Level {
+    match cfg.setting(component, "Logging", "LogLevel").await {
+        Ok(v) => Level::parse(&v).unwrap_or(Level::Info),
+        Err(_) => Level::Info,
+    }
+}
+
+/// Where records go: a logging server, called through a client.
+pub struct Recipient<'a> {
+    /// The client the calls go through.
+    pub rpc: &'a RpcClient,
+    /// The logging server.
+    pub server: Address,
+    /// How reliable calls wait and retry.
+    pub opts: CallOptions,
+}
+
+impl Recipient<'_> {
+    /// Sends one record of `component`, made at `time`: DATA unreliably, the others reliably.
+    pub async fn send(
+        &self,
+        component: &str,
+        time: f64,
+        level: Level,
+        text: &str,
+    ) -> Result<(), RpcError> {
         let record = DataMap::new()
             .with("level", level as i64)
-            .with("component", self.component.as_str())
+            .with("component", component)
             .with("text", text)
-            .with("time", seabus_medium::Stamp::now().as_secs_f64());
+            .with("time", time);
         if level == Level::Data {
             self.rpc
                 .call_unreliable(self.server, LOG_OP, &record)
@@ -270,6 +458,6 @@ impl Logger {
                 .call(self.server, LOG_OP, &record, self.opts)
                 .await?;
         }
-        Ok(true)
+        Ok(())
     }
 }

@@ -12,10 +12,12 @@
 //! [`udp_bridge`] lets control stations on an allow-list reach the vehicle's services over UDP.
 
 pub mod bridge;
+pub mod central;
 pub mod config;
 pub mod config_service;
 pub mod ecomms;
 pub mod health;
+pub mod health_service;
 pub mod logging;
 pub mod rpc;
 pub mod sentuator;

@@ -27,6 +27,9 @@ use tokio::sync::oneshot;
 
 /// The channel broadcast calls go to.
 pub const RPC_CHANNEL: u16 = 1;
+/// The status of a reply whose results could not be sent.
+pub const UNSENDABLE: i64 = 7;
+
 /// Replies a server remembers to answer repeated requests.
 pub const REMEMBERED_REPLIES: usize = 65_536;
 
@@ -335,9 +338,17 @@ pub async fn serve(
             replies.remove(&old);
         }
         order.push_back(key);
-        replies.insert(key, reply.clone());
-        if reliable {
-            let _ = iface.send("dsaav.rpc-reply", reply).await;
+        if reliable && let Err(e) = iface.send("dsaav.rpc-reply", reply.clone()).await {
+            // results the wire cannot carry (a key not in the dictionary, too large): the caller
+            // hears why instead of waiting for its timeout
+            reply = DataMap::new()
+                .with("@dst", from.to_string())
+                .with("@port", i64::from(port))
+                .with("@ref", i64::from(id))
+                .with("status", UNSENDABLE)
+                .with("error", format!("the results cannot be sent: {e}"));
+            let _ = iface.send("dsaav.rpc-reply", reply.clone()).await;
         }
+        replies.insert(key, reply);
     }
 }

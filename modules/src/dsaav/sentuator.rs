@@ -8,6 +8,8 @@
 //! server for its health is how a station discovers what a vehicle offers.
 
 use super::config::Database;
+use super::health::ComponentState;
+use super::health_service::health_reply;
 use super::rpc::{self, CallOptions, Outcome, RpcClient, RpcError};
 use seabus_medium::dsaav::wire::{Address, AddressError};
 use seabus_medium::{DataMap, Medium};
@@ -61,16 +63,6 @@ pub mod measurement {
     pub const COMMANDED: i64 = 3;
 }
 
-/// A component's state as a health call answers it (the dictionary key `state`).
-pub mod state {
-    /// Working as expected.
-    pub const HEALTHY: i64 = 0;
-    /// Responding, no data available.
-    pub const UNAVAILABLE: i64 = 1;
-    /// Responding, a fault detected.
-    pub const MALFUNCTION: i64 = 2;
-}
-
 /// One sensor or actuator behind a sentuator server.
 pub trait Device: Send + 'static {
     /// The latest reading, as dictionary keys (`depth`, `quantity`, `measurement`, …).
@@ -80,9 +72,9 @@ pub trait Device: Send + 'static {
         let _ = values;
         Err((3, "a sensor cannot be set".to_string()))
     }
-    /// The device's state ([`state`]).
-    fn health(&mut self) -> i64 {
-        state::HEALTHY
+    /// The device's state.
+    fn health(&mut self) -> ComponentState {
+        ComponentState::Healthy
     }
 }
 
@@ -115,9 +107,7 @@ impl<D: Device> Sentuator<D> {
                 match call.op {
                     ops::GET => Ok(d.get()),
                     ops::SET => d.set(&call.params),
-                    ops::HEALTH => Ok(DataMap::new()
-                        .with("state", d.health())
-                        .with("services", services.as_str())),
+                    ops::HEALTH => Ok(health_reply(d.health(), &services)),
                     op => Err((3, format!("operation {op} is not a sentuator operation"))),
                 }
             })
@@ -194,7 +184,7 @@ impl SentuatorClient {
     }
 
     /// The state of the sentuator at `at`, and the services its component offers.
-    pub async fn health(&self, at: Address) -> Result<(i64, Vec<String>), RpcError> {
+    pub async fn health(&self, at: Address) -> Result<(ComponentState, Vec<String>), RpcError> {
         let reply = self
             .rpc
             .call(at, ops::HEALTH, &DataMap::new(), self.opts)
@@ -204,7 +194,7 @@ impl SentuatorClient {
 
     /// Asks every server on the RPC channel for its health: the first to answer, with its
     /// address, state and services.
-    pub async fn discover(&self) -> Result<(Address, i64, Vec<String>), RpcError> {
+    pub async fn discover(&self) -> Result<(Address, ComponentState, Vec<String>), RpcError> {
         let (at, reply) = self
             .rpc
             .discover(ops::HEALTH, &DataMap::new(), self.opts)
@@ -235,7 +225,7 @@ pub fn parse_listeners(component: &str, text: &str) -> Result<Vec<Address>, Stri
         .collect()
 }
 
-fn health_of(reply: &DataMap) -> (i64, Vec<String>) {
+fn health_of(reply: &DataMap) -> (ComponentState, Vec<String>) {
     let services = reply
         .get_str("services")
         .unwrap_or("")
@@ -244,7 +234,10 @@ fn health_of(reply: &DataMap) -> (i64, Vec<String>) {
         .map(str::to_string)
         .collect();
     (
-        reply.get_i64("state").unwrap_or(state::UNAVAILABLE),
+        reply
+            .get_i64("state")
+            .and_then(ComponentState::from_code)
+            .unwrap_or(ComponentState::Unavailable),
         services,
     )
 }

@@ -53,6 +53,8 @@ enum Server {
 struct ServerModule {
     port: u16,
     server: Server,
+    /// Tells the logging server the system is stopping (it then writes at once).
+    drain: Option<tokio::sync::watch::Sender<bool>>,
 }
 
 fn build_config(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -65,6 +67,7 @@ fn build_config(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         module: Box::new(ServerModule {
             port,
             server: Server::Config(Some(db)),
+            drain: None,
         }),
     })
 }
@@ -82,6 +85,7 @@ fn build_log(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         module: Box::new(ServerModule {
             port,
             server: Server::Log(file, max_size, keep),
+            drain: None,
         }),
     })
 }
@@ -107,9 +111,20 @@ impl Module for ServerModule {
                 let log = LogFile::open(file.clone(), *max_size, *keep).map_err(|e| {
                     ModuleError::msg(format!("cannot open the log {}: {e}", file.display()))
                 })?;
-                tokio::spawn(async move { super::logging::serve(&medium, port, log).await });
+                let (drain, draining) = tokio::sync::watch::channel(false);
+                self.drain = Some(drain);
+                tokio::spawn(
+                    async move { super::logging::serve(&medium, port, log, draining).await },
+                );
             }
         }
         Ok(())
+    }
+
+    async fn stop(&mut self, _: &mut Context) {
+        // the records of the other modules' last moments are written as they come
+        if let Some(d) = &self.drain {
+            let _ = d.send(true);
+        }
     }
 }

@@ -14,16 +14,20 @@
 //! controller reads the sensor itself.
 
 use super::config_service::ConfigClient;
+use super::health::ComponentState;
+use super::health_service::{self, Reporter, health_reply};
 use super::logging::{Level, Logger};
-use super::rpc::CallOptions;
+use super::rpc::{self, CallOptions};
 use super::sentuator::{self, Device, Sentuator, SentuatorClient, quantity};
 use crate::datasets::Catalogue;
 use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId};
 use crate::registry::{Built, ModuleConfig, ModuleType};
+use crate::runtime::AbortOnDrop;
 use async_trait::async_trait;
 use seabus_medium::dsaav::wire::Address;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Medium};
+use std::sync::atomic::{AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -52,6 +56,9 @@ pub const DEPTH_CONTROLLER: ModuleType = ModuleType {
 };
 
 const TICK: Duration = Duration::from_millis(100);
+/// The port components send their health updates from.
+const HEALTH_PORT: u16 = 10;
+
 /// Largest elevator angle, degrees.
 const MAX_ELEVATOR: f64 = 30.0;
 
@@ -98,6 +105,8 @@ struct VehicleSim {
     physics: Arc<Mutex<Physics>>,
     elevators: Option<Sentuator<SharedDevice<Handler>>>,
     sensor: Option<Sentuator<SharedDevice<Handler>>>,
+    /// Health updates of Elevators and DepthSensor, when the configuration names a monitor.
+    reporters: Vec<Reporter>,
 }
 
 fn build_sim(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -113,6 +122,7 @@ fn build_sim(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             physics: Arc::new(Mutex::new(physics)),
             elevators: None,
             sensor: None,
+            reporters: Vec::new(),
         }),
     })
 }
@@ -149,15 +159,19 @@ impl Module for VehicleSim {
             timeout: Duration::from_millis(500),
             ..opts()
         };
-        let listeners = match ConfigClient::discover(&b, 7, quick).await {
-            Ok(cfg) => match cfg.get_str("DepthSensor", "Listeners").await {
-                Ok(text) => {
-                    sentuator::parse_listeners("DepthSensor", &text).map_err(ModuleError::msg)?
+        let mut listeners = Vec::new();
+        self.reporters.clear();
+        if let Ok(cfg) = ConfigClient::discover(&b, 7, quick).await {
+            if let Ok(text) = cfg.get_str("DepthSensor", "Listeners").await {
+                listeners =
+                    sentuator::parse_listeners("DepthSensor", &text).map_err(ModuleError::msg)?;
+            }
+            for (m, component) in [(&a, "Elevators"), (&b, "DepthSensor")] {
+                if let Ok(r) = Reporter::from_service(m, HEALTH_PORT, component, &cfg).await {
+                    self.reporters.push(r);
                 }
-                Err(_) => Vec::new(),
-            },
-            Err(_) => Vec::new(),
-        };
+            }
+        }
         let shared = |h: Handler| SharedDevice(self.physics.clone(), h);
         self.elevators = Some(Sentuator::start(
             &a,
@@ -187,6 +201,9 @@ impl Module for VehicleSim {
         if let Some(sensor) = &self.sensor {
             sensor.notify().await;
         }
+        for r in &mut self.reporters {
+            r.update(ComponentState::Healthy).await;
+        }
         Ok(())
     }
 }
@@ -213,6 +230,7 @@ struct DepthFilter {
     filtered: Arc<Mutex<Option<f64>>>,
     source: Option<(SentuatorClient, Address)>,
     server: Option<Box<dyn std::any::Any + Send>>,
+    reporter: Option<Reporter>,
 }
 
 fn build_filter(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -225,6 +243,7 @@ fn build_filter(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             filtered: Arc::default(),
             source: None,
             server: None,
+            reporter: None,
         }),
     })
 }
@@ -233,8 +252,11 @@ fn build_filter(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
 impl Module for DepthFilter {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
         let m = medium(ctx, 0)?;
-        let (_, at) = plumb(&m, &self.component, "Depth").await?;
+        let (cfg, at) = plumb(&m, &self.component, "Depth").await?;
         tracing::info!(component = %self.component, "depth from {at}");
+        self.reporter = Reporter::from_service(&m, HEALTH_PORT, &self.component, &cfg)
+            .await
+            .ok();
         self.source = Some((SentuatorClient::new(&m, 8, opts()), at));
         let filtered = self.filtered.clone();
         let device = SharedDevice(
@@ -271,15 +293,23 @@ impl Module for DepthFilter {
         let Some((client, at)) = &self.source else {
             return Ok(());
         };
-        match client.get(*at).await {
-            Ok(r) => {
-                if let Some(d) = r.get_f64("depth") {
+        let state = match client.get(*at).await {
+            Ok(r) => match r.get_f64("depth") {
+                Some(d) => {
                     let mut f = self.filtered.lock().unwrap_or_else(|e| e.into_inner());
                     let a = self.smoothing;
                     *f = Some(f.map_or(d, |old| a * old + (1.0 - a) * d));
+                    ComponentState::Healthy
                 }
+                None => ComponentState::Unavailable,
+            },
+            Err(e) => {
+                tracing::warn!(component = %self.component, "depth: {e}");
+                ComponentState::Unavailable
             }
-            Err(e) => tracing::warn!(component = %self.component, "depth: {e}"),
+        };
+        if let Some(r) = &mut self.reporter {
+            r.update(state).await;
         }
         Ok(())
     }
@@ -292,6 +322,10 @@ struct DepthController {
 }
 
 struct Controller {
+    /// Its health as it answers health calls: HEALTHY while it reads depth, else UNAVAILABLE.
+    health: Arc<AtomicU8>,
+    /// Its health server, stopped with the module.
+    _server: Option<AbortOnDrop>,
     sentuators: SentuatorClient,
     depth_at: Address,
     elevators_at: Address,
@@ -337,7 +371,29 @@ impl Module for DepthController {
                 &format!("depth from {depth_at}, elevators at {elevators_at}, gain {gain}"),
             )
             .await;
+        // polled by the health monitor where its configuration says it is served
+        let health = Arc::new(AtomicU8::new(ComponentState::Healthy.code()));
+        let server = match cfg.server_of(c, c).await {
+            Ok(at) => {
+                let (m, h) = (m.clone(), health.clone());
+                let task = tokio::spawn(async move {
+                    rpc::serve(&m, at.port, &[], move |call| match call.op {
+                        health_service::ops::HEALTH => {
+                            let state = ComponentState::from_code(h.load(Ordering::Relaxed).into())
+                                .unwrap_or(ComponentState::Malfunction);
+                            Ok(health_reply(state, ""))
+                        }
+                        op => Err((3, format!("operation {op} is not served here"))),
+                    })
+                    .await
+                });
+                Some(AbortOnDrop(task.abort_handle()))
+            }
+            Err(_) => None,
+        };
         self.state = Some(Controller {
+            health,
+            _server: server,
             sentuators: SentuatorClient::new(&m, 8, opts()),
             depth_at,
             elevators_at,
@@ -358,6 +414,12 @@ impl Module for DepthController {
                 None
             }
         };
+        let state = if depth.is_some() {
+            ComponentState::Healthy
+        } else {
+            ComponentState::Unavailable
+        };
+        c.health.store(state.code(), Ordering::Relaxed);
         let Some(depth) = depth else {
             return Ok(());
         };

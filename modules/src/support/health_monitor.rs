@@ -1,8 +1,10 @@
 //! `health-monitor`: the health monitor as a module, watching every module and medium of the
-//! system by the rules of a health rules file ([`crate::dsaav::health`]).
+//! system by the rules of a health rules file ([`crate::dsaav::health`]), and serving DSAAV
+//! components as the health service ([`crate::dsaav::health_service`]).
 //!
-//! Parameters: `rules` (the rules file, relative to the system file). Its first medium is the bus:
-//! it reads there
+//! Parameters: `rules` (the rules file, relative to the system file); `dsaav` (one of its media, a
+//! DSAAV medium: the health service is served there) with `port` (its port there, default 1 — the
+//! paper's `[Health] Server = 1:1`). Its first medium is the bus: it reads there
 //! - `seabus.module.<NAME>` — the runtime's module states: running → HEALTHY, failed → MALFUNCTION,
 //!   stopped → OFFLINE, for a rules component called like the module;
 //! - `seabus.health.<COMPONENT>` — reports a component sends itself (`state` = HEALTHY,
@@ -13,15 +15,27 @@
 //! period and at once on every change of severity, and the emergency action as a command on entry
 //! into EMERGENCY. Its other media are watched for `link` components: a link that goes down makes
 //! the component OFFLINE (a serial driver whose device is unplugged).
+//!
+//! With `dsaav`, DSAAV components report by RPC too, and a passive component whose section in the
+//! DSAAV configuration has a `Server` key is polled there with the health call (the others by the
+//! bus command); control stations ask the service for the severity.
 
 use crate::datasets::Catalogue;
-use crate::dsaav::health::{ComponentState, Event, Monitor, Rules};
+use crate::dsaav::config_service::ConfigClient;
+use crate::dsaav::health::{ComponentState, Event, Mode, Monitor, Rules};
+use crate::dsaav::health_service::{self, Status};
+use crate::dsaav::rpc::{CallOptions, RpcClient};
 use crate::module::{Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl};
 use crate::registry::{Built, ModuleConfig, ModuleType};
+use crate::runtime::AbortOnDrop;
 use async_trait::async_trait;
+use seabus_medium::dsaav::wire::Address;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Message, Topic};
+use seabus_medium::{DataMap, Medium, Message, Topic};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
+use tokio::sync::mpsc;
 use tokio::time::Instant;
 
 /// The `health-monitor` module type.
@@ -41,7 +55,26 @@ struct HealthMonitor {
     rules: Option<Rules>,
     monitor: Option<Monitor>,
     poll_topic: Topic,
+    /// The port index of the DSAAV medium and the service's port there.
+    dsaav: Option<(usize, u16)>,
+    /// The health service, while it runs.
+    service: Option<Service>,
 }
+
+/// The DSAAV side: reports and poll answers arrive on `updates`; status calls are answered from
+/// `status`; passive components are polled at `addresses`, once the configuration gave them.
+struct Service {
+    updates: mpsc::Receiver<(String, ComponentState)>,
+    sender: mpsc::Sender<(String, ComponentState)>,
+    status: Status,
+    addresses: Arc<Mutex<HashMap<String, Address>>>,
+    rpc: Arc<RpcClient>,
+    /// The server and the configuration lookup, stopped with the module.
+    _tasks: [AbortOnDrop; 2],
+}
+
+/// Reports and poll answers waiting for the monitor, at most.
+const UPDATES: usize = 1024;
 
 fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
     let p = &cfg.params;
@@ -55,6 +88,19 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         return Err(file.error(format!("`{}` does not exist", path.display())));
     }
     let rules = Rules::load(&path)?;
+    let dsaav = match p.get("dsaav") {
+        None => None,
+        Some(d) => {
+            let Some(i) = cfg.media.iter().position(|m| m == d.value.trim()) else {
+                return Err(d.error(format!(
+                    "`{}` is not one of the module's media: {}",
+                    d.value.trim(),
+                    cfg.media.join(", ")
+                )));
+            };
+            Some((i, p.parse("port", "a port 0–65535")?.unwrap_or(1)))
+        }
+    };
     let decl = Declaration::new(ModuleKind::Service)
         .consumes(TopicDecl::topic("seabus.module.*"))
         .consumes(TopicDecl::topic("seabus.health.*"))
@@ -66,6 +112,8 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             monitor: None,
             poll_topic: Topic::new("seabus.health.poll")
                 .map_err(|e| cfg.pos.error(e.to_string()))?,
+            dsaav,
+            service: None,
         }),
     })
 }
@@ -101,8 +149,25 @@ impl HealthMonitor {
                 }
                 Event::Emergency { action: None } => tracing::error!("vehicle in EMERGENCY"),
                 Event::Poll { component } => {
-                    let ask = DataMap::new().with("component", component.as_ref());
-                    ctx.command(&self.poll_topic, ask).await?;
+                    let at = self.service.as_ref().and_then(|s| {
+                        let known = s.addresses.lock().unwrap_or_else(|p| p.into_inner());
+                        known.get(component.as_ref()).copied()
+                    });
+                    match (at, &self.service) {
+                        (Some(at), Some(s)) => {
+                            let (rpc, to) = (s.rpc.clone(), s.sender.clone());
+                            let opts = poll_options(&self.monitor, &component);
+                            tokio::spawn(async move {
+                                if let Some(state) = health_service::poll(&rpc, at, opts).await {
+                                    let _ = to.try_send((component.to_string(), state));
+                                }
+                            });
+                        }
+                        _ => {
+                            let ask = DataMap::new().with("component", component.as_ref());
+                            ctx.command(&self.poll_topic, ask).await?;
+                        }
+                    }
                 }
             }
         }
@@ -121,6 +186,90 @@ impl HealthMonitor {
     }
 }
 
+impl Service {
+    /// Serves the health service on `port` of `medium` and looks up, through the configuration
+    /// service, where the rules' passive components answer health calls.
+    fn start(medium: &Medium, port: u16, rules: &Rules) -> Service {
+        let (sender, updates) = mpsc::channel(UPDATES);
+        let status: Status = Arc::default();
+        let addresses: Arc<Mutex<HashMap<String, Address>>> = Arc::default();
+        let server = {
+            let (m, tx, st) = (medium.clone(), sender.clone(), status.clone());
+            tokio::spawn(async move { health_service::serve(&m, port, tx, st).await })
+        };
+        let passive: Vec<String> = rules
+            .components
+            .iter()
+            .filter(|c| matches!(c.mode, Mode::Passive { .. }))
+            .map(|c| c.name.to_string())
+            .collect();
+        let lookup = {
+            let (m, known) = (medium.clone(), addresses.clone());
+            tokio::spawn(async move { find_passive(&m, port, passive, known).await })
+        };
+        Service {
+            updates,
+            sender,
+            status,
+            addresses,
+            rpc: Arc::new(RpcClient::new(medium, port)),
+            _tasks: [
+                AbortOnDrop(server.abort_handle()),
+                AbortOnDrop(lookup.abort_handle()),
+            ],
+        }
+    }
+}
+
+/// Finds the configuration server (trying again until it answers) and asks it where each of
+/// `passive` is served: its section's `Server` key. Components without one are polled on the bus.
+async fn find_passive(
+    medium: &Medium,
+    port: u16,
+    passive: Vec<String>,
+    known: Arc<Mutex<HashMap<String, Address>>>,
+) {
+    if passive.is_empty() {
+        return;
+    }
+    let opts = CallOptions::default();
+    let cfg = loop {
+        match ConfigClient::discover(medium, port, opts).await {
+            Ok(c) => break c,
+            Err(e) => tracing::debug!("health monitor: no configuration server yet: {e}"),
+        }
+    };
+    for name in passive {
+        match cfg.server_of(&name, &name).await {
+            Ok(at) => {
+                tracing::debug!(component = %name, "polled by DSAAV at {at}");
+                known
+                    .lock()
+                    .unwrap_or_else(|p| p.into_inner())
+                    .insert(name, at);
+            }
+            Err(e) => tracing::debug!(component = %name, "polled on the bus: {e}"),
+        }
+    }
+}
+
+/// How a DSAAV poll of `component` waits: no longer than its poll period.
+fn poll_options(monitor: &Option<Monitor>, component: &str) -> CallOptions {
+    let poll = monitor
+        .as_ref()
+        .and_then(|m| m.rules().component(component))
+        .and_then(|c| match c.mode {
+            Mode::Passive { poll, .. } => Some(poll),
+            _ => None,
+        })
+        .unwrap_or(Duration::from_secs(1));
+    CallOptions {
+        timeout: poll,
+        first_retry: (poll / 8).max(Duration::from_millis(10)),
+        max_retry: poll / 2,
+    }
+}
+
 #[async_trait]
 impl Module for HealthMonitor {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
@@ -134,6 +283,12 @@ impl Module for HealthMonitor {
         };
         ctx.every(PUBLISH, rules.period);
         ctx.every(CHECK, CHECK_EVERY);
+        if let Some((i, port)) = self.dsaav {
+            let Some(medium) = ctx.port(i).map(|p| p.medium().clone()) else {
+                return Err(ModuleError::msg("the DSAAV medium has no port"));
+            };
+            self.service = Some(Service::start(&medium, port, &rules));
+        }
         self.monitor = Some(Monitor::new(rules, Instant::now()));
         self.publish(ctx).await
     }
@@ -189,7 +344,16 @@ impl Module for HealthMonitor {
                 events.extend(monitor.link(medium.name(), &medium.link_state(), now));
             }
         }
+        if let Some(service) = self.service.as_mut() {
+            while let Ok((component, state)) = service.updates.try_recv() {
+                events.extend(monitor.report(&component, state, now));
+            }
+        }
         events.extend(monitor.tick(now));
+        if let Some(service) = &self.service {
+            *service.status.lock().unwrap_or_else(|p| p.into_inner()) =
+                health_service::status(monitor.severity(), monitor.components());
+        }
         self.act(ctx, events).await
     }
 }
