@@ -102,7 +102,7 @@ impl FaultConfig {
 struct Scheduled {
     due: Instant,
     order: u64,
-    msg: Message,
+    msg: Option<Message>,
     frame: Option<Bytes>,
     from: u64,
     wait: bool,
@@ -181,7 +181,7 @@ impl Faults {
     pub async fn apply(
         &self,
         inner: &Arc<Inner>,
-        msg: Message,
+        msg: Option<Message>,
         frame: Option<Bytes>,
         from: u64,
         wait: bool,

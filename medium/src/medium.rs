@@ -2,9 +2,11 @@
 //!
 //! A [`Medium`] is shared by every interface attached to it. Sending hands a message to every other
 //! local interface whose subscriptions match (sharing the payload, never copying it) and, when the
-//! medium has a [`Transport`], encodes it and puts it on the wire. Messages the transport reads from
-//! the wire come back in through an [`Ingress`] and fan out the same way. Each medium kind only
-//! implements its transport: its wire format and its I/O tasks.
+//! medium has a [`Transport`], encodes it and puts it on the wire; a transport whose receivers read
+//! something other than was sent (headers the wire adds, addressing) gives its local interfaces
+//! what a receiver on this node would read instead ([`Transport::local_copy`]). Messages the
+//! transport reads from the wire come back in through an [`Ingress`] and fan out the same way. Each
+//! medium kind only implements its transport: its wire format and its I/O tasks.
 
 use crate::fault::{FaultConfig, Faults};
 use crate::message::{Kind, Message, Origin, Provenance, Stamp};
@@ -146,6 +148,12 @@ pub trait Transport: Send + Sync + 'static {
     fn encode(&self, msg: &Message) -> Result<Bytes, SendError>;
     /// Puts an encoded frame on the wire.
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>>;
+    /// What the medium's local interfaces get of `msg`, just encoded as `frame`: what a receiver on
+    /// this node would read of the frame, `None` when it would read nothing. By default `msg` itself.
+    fn local_copy(&self, msg: Message, frame: &Bytes) -> Option<Message> {
+        let _ = frame;
+        Some(msg)
+    }
     /// Releases the wire (sockets, devices) when the medium is closed.
     fn close(&self) {}
     /// A local interface subscribed to something: a transport that listens to its wire only
@@ -612,9 +620,12 @@ impl Inner {
         if self.closed.load(Ordering::Acquire) {
             return Err(self.closed_error());
         }
-        let frame = match self.transport.get() {
-            Some(t) => Some(t.encode(&msg)?),
-            None => None,
+        let (msg, frame) = match self.transport.get() {
+            Some(t) => {
+                let frame = t.encode(&msg)?;
+                (t.local_copy(msg, &frame), Some(frame))
+            }
+            None => (Some(msg), None),
         };
         self.counters.published.fetch_add(1, Ordering::Relaxed);
         match &self.faults {
@@ -670,11 +681,12 @@ impl Inner {
         blocked
     }
 
-    /// Hands a message to local interfaces (all but `from`) and the frame to the wire. A local
-    /// sender (`from` set) waits for room in full command queues; the wire's reader never waits.
+    /// Hands the local copy of a message, if any, to local interfaces (all but `from`) and the frame
+    /// to the wire. A local sender (`from` set) waits for room in full command queues; the wire's
+    /// reader never waits.
     pub(crate) async fn dispatch(
         &self,
-        msg: Message,
+        msg: Option<Message>,
         frame: Option<Bytes>,
         from: Option<u64>,
         wait: bool,
@@ -682,9 +694,11 @@ impl Inner {
         if self.closed.load(Ordering::Acquire) {
             return Err(self.closed_error());
         }
-        for (queue, m) in self.fan_out(msg, from, wait) {
-            if let Pushed::Queued = queue.push_wait(m).await {
-                self.counters.delivered.fetch_add(1, Ordering::Relaxed);
+        if let Some(msg) = msg {
+            for (queue, m) in self.fan_out(msg, from, wait) {
+                if let Pushed::Queued = queue.push_wait(m).await {
+                    self.counters.delivered.fetch_add(1, Ordering::Relaxed);
+                }
             }
         }
         if let (Some(frame), Some(t)) = (frame, self.transport.get()) {

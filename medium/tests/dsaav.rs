@@ -204,3 +204,73 @@ async fn malformed_frames_and_unknown_keys_are_counted_and_the_rest_goes_on() {
         );
     }
 }
+
+/// A medium's own interfaces see what it sends as a receiver on its node reads it from the wire:
+/// the header keys, the values as the wire carries them; a message to another node not at all.
+#[tokio::test]
+async fn local_interfaces_see_what_a_receiver_on_the_node_would() {
+    let bus = format!("dsaav+inproc://l{}", fastrand::u32(..));
+    let one = open(&format!("{bus}?node=1&port=7"));
+    let two = open(&format!("{bus}?node=2"));
+    let mut here = one.attach("here").subscribed("dsaav.**").unwrap();
+    let mut there = two.attach("there").subscribed("dsaav.**").unwrap();
+    let sender = one.attach("sender");
+    // to node 2: node 2 gets it, node 1's interfaces do not
+    sender
+        .send(
+            "dsaav.data",
+            DataMap::new().with("@dst", "2:3").with("count", 1i64),
+        )
+        .await
+        .unwrap();
+    let m = next(&mut there).await;
+    assert_eq!(m.payload.as_map().unwrap().get_i64("count"), Some(1));
+    // to a port of node 1, from port 9
+    sender
+        .send(
+            "dsaav.data",
+            DataMap::new()
+                .with("@dst", "1:4")
+                .with("@port", 9i64)
+                .with("gain", 0.1f64)
+                .with("count", 2i64),
+        )
+        .await
+        .unwrap();
+    let m = next(&mut here).await;
+    let map = m.payload.as_map().unwrap();
+    assert_eq!(
+        map.get_i64("count"),
+        Some(2),
+        "the message to node 2 was delivered here"
+    );
+    assert_eq!(map.get_str("@src"), Some("1:9"));
+    assert_eq!(map.get_str("@dst"), Some("1:4"));
+    assert!(map.get_i64("@id").is_some_and(|id| id > 0));
+    assert_eq!(map.get("@port"), None, "not a header the wire gives");
+    assert_eq!(
+        map.get_f64("gain"),
+        Some(f64::from(0.1f32)),
+        "as the wire carries it"
+    );
+    // a broadcast, its type by number: the same here as on node 2
+    sender
+        .send(
+            "dsaav.2",
+            DataMap::new()
+                .with("@channel", 4i64)
+                .with("@ref", 8i64)
+                .with("count", 3i64),
+        )
+        .await
+        .unwrap();
+    let (mine, theirs) = (next(&mut here).await, next(&mut there).await);
+    assert_eq!(mine.topic.as_str(), "dsaav.rpc-request");
+    assert_eq!(mine.topic, theirs.topic);
+    assert_eq!(mine.payload.as_map(), theirs.payload.as_map());
+    assert_eq!(mine.payload.as_map().unwrap().get_str("@src"), Some("1:7"));
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    assert!(here.try_recv().is_err(), "nothing else here");
+    assert!(there.try_recv().is_err(), "nothing else there");
+    assert_eq!(one.stats().transmitted, 3);
+}

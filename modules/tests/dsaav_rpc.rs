@@ -161,3 +161,61 @@ async fn timeouts_failures_unreliable_calls_and_discovery() {
     assert_eq!(at, SERVER);
     assert_eq!(reply.get_i64("count"), Some(42));
 }
+
+/// A reliable call from port 5 of node 1 to a server on port 0 of the same medium: answered, and
+/// run once.
+async fn call_within_one_node(url: &str) {
+    let medium = open(url);
+    let runs = Arc::new(Mutex::new(Vec::new()));
+    let r = runs.clone();
+    let server = medium.clone();
+    tokio::spawn(async move {
+        rpc::serve(&server, 0, &[1], move |call| {
+            let n = call.params.get_i64("count").unwrap_or(0);
+            r.lock().unwrap().push((call.from, n));
+            Ok(DataMap::new().with("count", n + 1))
+        })
+        .await
+    });
+    let client = RpcClient::new(&medium, 5);
+    let opts = CallOptions {
+        timeout: Duration::from_secs(3),
+        ..CallOptions::default()
+    };
+    let reply = client
+        .call(
+            Address { node: 1, port: 0 },
+            1,
+            &DataMap::new().with("count", 41i64),
+            opts,
+        )
+        .await
+        .expect("the call is answered");
+    assert_eq!(reply.get_i64("count"), Some(42));
+    assert_eq!(reply.get_str("@src"), Some("1:0"));
+    assert_eq!(reply.get_str("@dst"), Some("1:5"));
+    // retries, if any, were answered from memory
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    assert_eq!(
+        *runs.lock().unwrap(),
+        [(Address { node: 1, port: 5 }, 41)],
+        "the handler ran once, for the caller"
+    );
+    medium.close();
+}
+
+#[tokio::test]
+async fn a_call_between_two_ports_of_one_node_is_answered_in_process() {
+    call_within_one_node(&format!("{}?node=1", backbone())).await;
+}
+
+#[tokio::test]
+async fn a_call_between_two_ports_of_one_node_is_answered_over_udp() {
+    call_within_one_node(&format!(
+        "dsaav+udp://239.255.{}.{}:{}?ttl=0&node=1",
+        fastrand::u8(1..250),
+        fastrand::u8(1..250),
+        fastrand::u16(20_000..60_000)
+    ))
+    .await;
+}

@@ -18,7 +18,10 @@
 //! and `@id` / `@ref` the message and reference ids (ids count up by themselves otherwise). A
 //! received key the dictionary does not know arrives as `k<NUMBER>` and is counted
 //! (`dsaav-unknown-key`); frames that do not read are counted by reason. A medium receives what is
-//! addressed to its node and every channel broadcast, and never its own frames.
+//! addressed to its node and every channel broadcast, and never its own frames. Its own interfaces
+//! see what it sends as a receiver on its node would read it from the wire (with `@src`, `@id`, …),
+//! so two ports of one node talk as two nodes do, and a message addressed to another node is not
+//! seen here at all.
 
 pub mod dict;
 pub mod wire;
@@ -216,6 +219,14 @@ pub fn topic_of(dict: &Dictionary, kind: u16) -> String {
     format!("dsaav.{}", dict.type_name(kind))
 }
 
+/// Whether node `node` receives frame `f`: addressed to it, or a channel broadcast.
+fn is_for(f: &Frame, node: u16) -> bool {
+    match f.dst {
+        Destination::To(a) => a.node == node,
+        Destination::Channel(_) => true,
+    }
+}
+
 /// Turns a frame into the datamap a seabus receiver gets, with the keys the dictionary did not
 /// know.
 pub fn from_frame(dict: &Dictionary, f: &Frame) -> (DataMap, Vec<u16>) {
@@ -345,6 +356,38 @@ impl Transport for DsaavTransport {
             .map_err(|e| io_send(&self.name, e))
     }
 
+    /// What a receiver on this node reads of the frame: the header keys the wire gives (`@src`,
+    /// `@id`, …), the values as the wire carries them; nothing for a frame to another node.
+    fn local_copy(&self, msg: Message, frame: &Bytes) -> Option<Message> {
+        let f = match Frame::decode(frame) {
+            Ok(f) => f,
+            Err(e) => {
+                tracing::error!(
+                    medium = %self.name,
+                    "a frame this medium encoded does not read: {e}"
+                );
+                return None;
+            }
+        };
+        if !is_for(&f, self.cfg.node) {
+            return None;
+        }
+        let topic = topic_of(&self.cfg.dict, f.kind);
+        let topic = if msg.topic.as_str() == topic {
+            msg.topic
+        } else {
+            Topic::new(&topic).ok()?
+        };
+        let (map, _) = from_frame(&self.cfg.dict, &f);
+        Some(Message {
+            topic,
+            // the wire carries no kind: what it delivers is data
+            kind: Kind::Data,
+            payload: Payload::from(map),
+            ..msg
+        })
+    }
+
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
         Box::pin(async move {
             match &self.link {
@@ -409,11 +452,7 @@ impl Receiver {
             }
         };
         let src = f.src.node;
-        let mine = match f.dst {
-            Destination::To(a) => a.node == self.node,
-            Destination::Channel(_) => true,
-        };
-        if src == self.node || !mine {
+        if src == self.node || !is_for(&f, self.node) {
             return (true, Some(src));
         }
         let (map, unknown) = from_frame(&self.dict, &f);
