@@ -831,8 +831,58 @@ mod tests {
         let e = check(&s, &Registry::new(), &Catalogue::default()).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "sys.xml:1:45: unexpected element <gizmo> inside <seabus>; expected <medium>, <module>, <bridge>"
+            "sys.xml:1:45: unexpected element <gizmo> inside <seabus>; expected <medium>, <module>, <bridge>, <log>"
         );
+    }
+
+    #[test]
+    fn the_log_element_names_a_dsaav_medium() {
+        let s = parse(
+            r#"<seabus><medium name="bus" url="inproc://"/><medium name="n1" url="dsaav+inproc://v?node=1"/>
+<log medium="n1" port="7"/></seabus>"#,
+        )
+        .unwrap();
+        let log = s.log.clone().unwrap();
+        assert_eq!((log.medium.as_str(), log.port), ("n1", 7));
+        check(&s, &Registry::new(), &Catalogue::default()).unwrap();
+        let default_port = parse(
+            r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log medium="n1"/></seabus>"#,
+        )
+        .unwrap();
+        assert_eq!(default_port.log.map(|l| l.port), Some(DEFAULT_LOG_PORT));
+
+        let errors = [
+            (
+                r#"<seabus><medium name="bus" url="inproc://"/><log medium="bus"/></seabus>"#,
+                "sys.xml:1:45: <log> sends to the DSAAV logging service: `bus` is not a DSAAV medium (dsaav+eth, dsaav+udp or dsaav+inproc)",
+            ),
+            (
+                r#"<seabus><medium name="bus" url="inproc://"/><log medium="n7"/></seabus>"#,
+                "sys.xml:1:45: no medium called `n7`; media: bus",
+            ),
+        ];
+        for (text, want) in errors {
+            let s = parse(text).unwrap();
+            let e = check(&s, &Registry::new(), &Catalogue::default()).unwrap_err();
+            assert_eq!(e.to_string(), want);
+        }
+        let parse_errors = [
+            (
+                r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log medium="n1" port="x"/></seabus>"#,
+                "sys.xml:1:75: attribute `port`: `x` is not a port 0–65535",
+            ),
+            (
+                r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log medium="n1"/><log medium="n1"/></seabus>"#,
+                "sys.xml:1:76: a system has one <log>; the first is at line 1",
+            ),
+            (
+                r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log/></seabus>"#,
+                "sys.xml:1:58: <log> is missing attribute `medium`",
+            ),
+        ];
+        for (text, want) in parse_errors {
+            assert_eq!(parse(text).unwrap_err().to_string(), want);
+        }
     }
 
     fn cycles_of(text: &str) -> Vec<Cycle> {

@@ -1103,15 +1103,19 @@ Logging.LogLevel = LOG_DEBUG  # override log level
         check_paper_plumbing(&db);
         assert_eq!(db.server_of("MyDepthController", "Health"), Ok(at(1, 1)));
         assert!(db.app_data().is_empty());
-        // Same sections and settings as the paper's extract, plus the health monitor.
-        let mut expected = paper().config_data().clone();
-        let paper_text = expected.to_text();
-        expected.set("Health", "Server", "1:1").expect("names");
+        // Same sections and settings as the paper's extract, plus the health monitor and the
+        // controller's address for its polls.
+        assert_eq!(
+            db.server_of("MyDepthController", "MyDepthController"),
+            Ok(at(5, 0))
+        );
+        let paper_text = paper().config_data().to_text();
         let mut shipped = db.config_data().clone();
         assert_eq!(
             shipped.remove_section("Health").map(|s| s.settings.len()),
             Some(1)
         );
+        assert!(shipped.remove("MyDepthController", "Server").is_some());
         assert_eq!(shipped.to_text(), paper_text);
     }
 

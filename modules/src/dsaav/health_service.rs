@@ -158,3 +158,35 @@ impl Reporter {
         }
     }
 }
+
+/// A component's health from whether its data keeps coming: HEALTHY while it had data within
+/// `grace`, UNAVAILABLE after — so that a component just started, or one missing a single
+/// reading, does not alarm the vehicle.
+#[derive(Debug, Clone)]
+pub struct DataHealth {
+    last: tokio::time::Instant,
+    grace: std::time::Duration,
+}
+
+impl DataHealth {
+    /// Watching from now, with `grace` for the first data.
+    pub fn new(grace: std::time::Duration) -> DataHealth {
+        DataHealth {
+            last: tokio::time::Instant::now(),
+            grace,
+        }
+    }
+
+    /// Notes whether data came this time; the state that follows.
+    pub fn update(&mut self, got_data: bool) -> ComponentState {
+        let now = tokio::time::Instant::now();
+        if got_data {
+            self.last = now;
+        }
+        if now - self.last <= self.grace {
+            ComponentState::Healthy
+        } else {
+            ComponentState::Unavailable
+        }
+    }
+}

@@ -15,7 +15,7 @@
 
 use super::config_service::ConfigClient;
 use super::health::ComponentState;
-use super::health_service::{self, Reporter, health_reply};
+use super::health_service::{self, DataHealth, Reporter, health_reply};
 use super::logging::{Level, Logger};
 use super::rpc::{self, CallOptions};
 use super::sentuator::{self, Device, Sentuator, SentuatorClient, quantity};
@@ -58,6 +58,8 @@ pub const DEPTH_CONTROLLER: ModuleType = ModuleType {
 const TICK: Duration = Duration::from_millis(100);
 /// The port components send their health updates from.
 const HEALTH_PORT: u16 = 10;
+/// How long a component may go without depth before it is UNAVAILABLE.
+const GRACE: Duration = Duration::from_secs(1);
 
 /// Largest elevator angle, degrees.
 const MAX_ELEVATOR: f64 = 30.0;
@@ -231,6 +233,7 @@ struct DepthFilter {
     source: Option<(SentuatorClient, Address)>,
     server: Option<Box<dyn std::any::Any + Send>>,
     reporter: Option<Reporter>,
+    health: DataHealth,
 }
 
 fn build_filter(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
@@ -244,6 +247,7 @@ fn build_filter(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             source: None,
             server: None,
             reporter: None,
+            health: DataHealth::new(GRACE),
         }),
     })
 }
@@ -293,21 +297,18 @@ impl Module for DepthFilter {
         let Some((client, at)) = &self.source else {
             return Ok(());
         };
-        let state = match client.get(*at).await {
-            Ok(r) => match r.get_f64("depth") {
-                Some(d) => {
-                    let mut f = self.filtered.lock().unwrap_or_else(|e| e.into_inner());
-                    let a = self.smoothing;
-                    *f = Some(f.map_or(d, |old| a * old + (1.0 - a) * d));
-                    ComponentState::Healthy
-                }
-                None => ComponentState::Unavailable,
-            },
+        let got = match client.get(*at).await {
+            Ok(r) => r.get_f64("depth").map(|d| {
+                let mut f = self.filtered.lock().unwrap_or_else(|e| e.into_inner());
+                let a = self.smoothing;
+                *f = Some(f.map_or(d, |old| a * old + (1.0 - a) * d));
+            }),
             Err(e) => {
                 tracing::warn!(component = %self.component, "depth: {e}");
-                ComponentState::Unavailable
+                None
             }
         };
+        let state = self.health.update(got.is_some());
         if let Some(r) = &mut self.reporter {
             r.update(state).await;
         }
@@ -324,6 +325,7 @@ struct DepthController {
 struct Controller {
     /// Its health as it answers health calls: HEALTHY while it reads depth, else UNAVAILABLE.
     health: Arc<AtomicU8>,
+    depth_health: DataHealth,
     /// Its health server, stopped with the module.
     _server: Option<AbortOnDrop>,
     sentuators: SentuatorClient,
@@ -393,6 +395,7 @@ impl Module for DepthController {
         };
         self.state = Some(Controller {
             health,
+            depth_health: DataHealth::new(GRACE),
             _server: server,
             sentuators: SentuatorClient::new(&m, 8, opts()),
             depth_at,
@@ -404,7 +407,7 @@ impl Module for DepthController {
     }
 
     async fn on_timer(&mut self, _: &mut Context, _: TimerId) -> Result<(), ModuleError> {
-        let Some(c) = &self.state else {
+        let Some(c) = &mut self.state else {
             return Ok(());
         };
         let depth = match c.sentuators.get(c.depth_at).await {
@@ -414,11 +417,7 @@ impl Module for DepthController {
                 None
             }
         };
-        let state = if depth.is_some() {
-            ComponentState::Healthy
-        } else {
-            ComponentState::Unavailable
-        };
+        let state = c.depth_health.update(depth.is_some());
         c.health.store(state.code(), Ordering::Relaxed);
         let Some(depth) = depth else {
             return Ok(());
