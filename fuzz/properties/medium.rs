@@ -581,3 +581,47 @@ pub fn dsaav_frame(data: &[u8]) -> bool {
         }
     }
 }
+
+/// slcan lines: any byte stream splits into lines the same whole and in pieces, every line parses
+/// or is refused without a panic, a frame line's frame encodes to a line that parses to the same
+/// frame and timestamp, and the frame's message form gives it back. True when some line held a
+/// frame.
+pub fn slcan_lines(data: &[u8]) -> bool {
+    use seabus_medium::Payload;
+    use seabus_medium::can::frame::CanFrame;
+    use seabus_medium::can::slcan::{self, Line, Lines};
+    let split = |pieces: &mut dyn Iterator<Item = &[u8]>| {
+        let mut lines = Lines::new();
+        let mut out: Vec<Result<Vec<u8>, u64>> = Vec::new();
+        for p in pieces {
+            lines.push(p, &mut |l| out.push(l.map(<[u8]>::to_vec)));
+        }
+        out
+    };
+    let whole = split(&mut std::iter::once(data));
+    let bytewise = split(&mut data.chunks(3));
+    assert_eq!(
+        whole, bytewise,
+        "lines differ when the bytes come in pieces"
+    );
+    let mut frames = false;
+    for line in whole.into_iter().flatten() {
+        assert!(line.len() <= slcan::MAX_LINE, "a line past the maximum");
+        let Ok(Line::Frame(frame, time)) = slcan::parse_line(&line) else {
+            continue;
+        };
+        frames = true;
+        let encoded = slcan::encode_frame(&frame, time).expect("a parsed frame encodes");
+        let again =
+            slcan::parse_line(&encoded[..encoded.len() - 1]).expect("an encoded line parses");
+        assert_eq!(
+            again,
+            Line::Frame(frame.clone(), time),
+            "slcan round trip changed the frame"
+        );
+        let back = CanFrame::from_message(&frame.topic(), &Payload::from(frame.to_map(None)))
+            .expect("a frame's message gives it back");
+        assert_eq!(back, frame, "message round trip changed the frame");
+    }
+    frames
+}

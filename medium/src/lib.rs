@@ -13,7 +13,8 @@
 //!   ([`queue`]: data drops oldest, commands hold the sender back) and drops duplicates by provenance
 //!   ([`dedup`]).
 //! - Media: in-process (no transport), [`udp`], [`serial`] (serial devices and pseudo-terminals,
-//!   with NMEA, line, COBS or SLIP framing), [`lcm`] (LCM's UDP multicast, its types and event
+//!   with NMEA, line, COBS or SLIP framing), [`can`] (CAN frames through slcan adapters, or a
+//!   pseudo-terminal behaving as one), [`lcm`] (LCM's UDP multicast, its types and event
 //!   logs) and [`dsaav`] (DSAAV IComms on raw Ethernet, UDP or in-process). Any medium opens from
 //!   a URL ([`url`], [`Medium::open`]) and can carry a fault stage ([`fault`]) for tests.
 //! - [`xml`] — a small positioned XML tree for the files users write (every error names file, line
@@ -21,6 +22,7 @@
 
 pub mod active;
 pub mod binary;
+pub mod can;
 pub mod datamap;
 pub mod dedup;
 pub mod dsaav;

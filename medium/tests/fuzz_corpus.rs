@@ -39,4 +39,7 @@ seed_tests! {
     /// DSAAV frames decode or are refused without a panic, and decoded frames encode to the same
     /// bytes.
     dsaav_frame_seeds => dsaav_frame,
+    /// slcan byte streams split into the same lines whole and in pieces, lines parse or are refused
+    /// without a panic, and frames survive slcan and message round trips.
+    slcan_lines_seeds => slcan_lines,
 }

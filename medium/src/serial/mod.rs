@@ -81,15 +81,35 @@ pub struct SerialConfig {
     pub reopen: Duration,
 }
 
+/// The device path of a `SCHEME:///path` URL.
+pub(crate) fn device_path(url: &MediumUrl) -> Result<PathBuf, UrlError> {
+    if !url.host.is_empty() || url.path.len() < 2 {
+        return Err(url.error(format!(
+            "expected {}:///path/to/device (three slashes, an absolute path)",
+            url.scheme
+        )));
+    }
+    Ok(PathBuf::from(&url.path))
+}
+
+/// The `reopen` option: the wait between attempts to reopen a lost device (default 500 ms).
+pub(crate) fn take_reopen(url: &mut MediumUrl) -> Result<Duration, UrlError> {
+    match url.take("reopen") {
+        None => Ok(Duration::from_millis(500)),
+        Some(r) => crate::parse::parse_duration(&r)
+            .filter(|d| !d.is_zero())
+            .ok_or_else(|| {
+                url.error(format!(
+                    "option `reopen={r}`: expected a duration such as 500ms"
+                ))
+            }),
+    }
+}
+
 impl SerialConfig {
     /// Reads the settings from a `serial://` or `pty://` URL (taking its options).
     pub fn from_url(url: &mut MediumUrl) -> Result<SerialConfig, UrlError> {
-        if !url.host.is_empty() || url.path.len() < 2 {
-            return Err(url.error(format!(
-                "expected {}:///path/to/device (three slashes, an absolute path)",
-                url.scheme
-            )));
-        }
+        let path = device_path(url)?;
         let framing = url
             .take_parsed("framing", "nmea, lines, cobs or slip")?
             .unwrap_or(Framing::Nmea);
@@ -156,19 +176,10 @@ impl SerialConfig {
             .to_string()
         });
         Topic::new(&topic).map_err(|e| url.error(format!("option `topic={topic}`: {e}")))?;
-        let reopen = match url.take("reopen") {
-            None => Duration::from_millis(500),
-            Some(r) => crate::parse::parse_duration(&r)
-                .filter(|d| !d.is_zero())
-                .ok_or_else(|| {
-                    url.error(format!(
-                        "option `reopen={r}`: expected a duration such as 500ms"
-                    ))
-                })?,
-        };
+        let reopen = take_reopen(url)?;
         url.finish(&OPTIONS)?;
         Ok(SerialConfig {
-            path: PathBuf::from(&url.path),
+            path,
             baud,
             data_bits,
             parity,
@@ -245,20 +256,79 @@ impl FrameTopics {
     }
 }
 
-/// What the transport writes, and whether the line is up.
-struct Shared {
+/// The writing side of a line (a serial device or a pseudo-terminal): whether it is up, the queue
+/// of frames its task writes, and for a pseudo-terminal the link to remove when the medium closes.
+/// The serial and slcan transports share it.
+pub(crate) struct LineWriter {
     name: Arc<str>,
-    framing: Framing,
-    up: AtomicBool,
     path: String,
+    /// Whether the line is open; its task sets it.
+    pub(crate) up: Arc<AtomicBool>,
+    writer: mpsc::Sender<Bytes>,
+    link: std::sync::Mutex<Option<PathBuf>>,
+}
+
+impl LineWriter {
+    /// A writer for medium `name` on `path`, queueing into `writer`; `link` is a pseudo-terminal's.
+    pub(crate) fn new(
+        name: Arc<str>,
+        path: String,
+        up: Arc<AtomicBool>,
+        writer: mpsc::Sender<Bytes>,
+        link: Option<PathBuf>,
+    ) -> LineWriter {
+        LineWriter {
+            name,
+            path,
+            up,
+            writer,
+            link: std::sync::Mutex::new(link),
+        }
+    }
+
+    /// An I/O error of this medium.
+    pub(crate) fn error(&self, reason: impl Into<String>) -> SendError {
+        SendError::Io {
+            medium: self.name.to_string(),
+            reason: reason.into(),
+        }
+    }
+
+    /// Queues an encoded frame; fails at once while the line is down.
+    pub(crate) fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            if !self.up.load(Ordering::Acquire) {
+                return Err(SendError::LinkDown {
+                    medium: self.name.to_string(),
+                    reason: format!("{} is not open", self.path),
+                });
+            }
+            self.writer
+                .send(frame)
+                .await
+                .map_err(|_| SendError::Closed(self.name.to_string()))
+        })
+    }
+
+    /// Marks the line down and removes a pseudo-terminal's link.
+    pub(crate) fn close(&self) {
+        self.up.store(false, Ordering::Release);
+        if let Some(link) = self.link.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            let _ = std::fs::remove_file(link);
+        }
+    }
+}
+
+impl Drop for LineWriter {
+    fn drop(&mut self) {
+        self.close();
+    }
 }
 
 /// The transport of both serial schemes.
 pub struct SerialTransport {
-    shared: Arc<Shared>,
-    writer: mpsc::Sender<Bytes>,
-    /// for `pty://`: the link to remove when the medium closes
-    link: std::sync::Mutex<Option<PathBuf>>,
+    framing: Framing,
+    line: LineWriter,
 }
 
 impl Transport for SerialTransport {
@@ -267,46 +337,22 @@ impl Transport for SerialTransport {
             Payload::Bytes(b) => b,
             Payload::Xml(x) => x.as_bytes(),
             Payload::Map(_) => {
-                return Err(SendError::Io {
-                    medium: self.shared.name.to_string(),
-                    reason: "a serial line carries bytes or text, not a datamap".into(),
-                });
+                return Err(self
+                    .line
+                    .error("a serial line carries bytes or text, not a datamap"));
             }
         };
-        framing::encode(self.shared.framing, raw)
+        framing::encode(self.framing, raw)
             .map(Bytes::from)
-            .map_err(|reason| SendError::Io {
-                medium: self.shared.name.to_string(),
-                reason: reason.into(),
-            })
+            .map_err(|reason| self.line.error(reason))
     }
 
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
-        Box::pin(async move {
-            if !self.shared.up.load(Ordering::Acquire) {
-                return Err(SendError::LinkDown {
-                    medium: self.shared.name.to_string(),
-                    reason: format!("{} is not open", self.shared.path),
-                });
-            }
-            self.writer
-                .send(frame)
-                .await
-                .map_err(|_| SendError::Closed(self.shared.name.to_string()))
-        })
+        self.line.transmit(frame)
     }
 
     fn close(&self) {
-        self.shared.up.store(false, Ordering::Release);
-        if let Some(link) = self.link.lock().unwrap_or_else(|p| p.into_inner()).take() {
-            let _ = std::fs::remove_file(link);
-        }
-    }
-}
-
-impl Drop for SerialTransport {
-    fn drop(&mut self) {
-        self.close();
+        self.line.close();
     }
 }
 
@@ -314,20 +360,34 @@ impl Drop for SerialTransport {
 pub(crate) fn open_serial(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
     let cfg = SerialConfig::from_url(&mut o.url)?;
     let (writer, rx) = mpsc::channel(WRITE_QUEUE);
-    let shared = Arc::new(Shared {
-        name: o.name.clone(),
-        framing: cfg.framing,
-        up: AtomicBool::new(false),
-        path: cfg.path.display().to_string(),
-    });
+    let up = Arc::new(AtomicBool::new(false));
+    let path = cfg.path.display().to_string();
     o.ingress
-        .init_link(LinkState::Down(format!("{} not opened yet", shared.path)));
-    let task = tokio::spawn(keep_open(cfg, shared.clone(), rx, o.ingress.clone()));
+        .init_link(LinkState::Down(format!("{path} not opened yet")));
+    let framing = cfg.framing;
+    let ingress = o.ingress.clone();
+    let task = tokio::spawn(keep_open(
+        {
+            let cfg = cfg.clone();
+            move || open_device(&cfg)
+        },
+        cfg.reopen,
+        up.clone(),
+        rx,
+        o.ingress.clone(),
+        move |port, rx| {
+            let (cfg, ingress) = (cfg.clone(), ingress.clone());
+            Box::pin(async move {
+                // each opening starts framing afresh
+                let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
+                pump(port, &cfg, &mut framer, rx, &ingress).await
+            })
+        },
+    ));
     o.ingress.own_task(task.abort_handle());
     Ok(Arc::new(SerialTransport {
-        shared,
-        writer,
-        link: std::sync::Mutex::new(None),
+        framing,
+        line: LineWriter::new(o.name.clone(), path, up, writer, None),
     }))
 }
 
@@ -342,20 +402,24 @@ fn open_device(cfg: &SerialConfig) -> Result<SerialStream, String> {
         .map_err(|e| format!("cannot open {path}: {e}"))
 }
 
-async fn keep_open(
-    cfg: SerialConfig,
-    shared: Arc<Shared>,
+/// Keeps a device open with `open`, running `pump` on it while it is (the line `up`), and after it
+/// fails waits `reopen` and opens it again, until the medium closes. Frames queued while the line
+/// was lost are dropped with it.
+pub(crate) async fn keep_open(
+    open: impl Fn() -> Result<SerialStream, String>,
+    reopen: Duration,
+    up: Arc<AtomicBool>,
     mut rx: mpsc::Receiver<Bytes>,
     ingress: Ingress,
+    mut pump: impl for<'r> FnMut(SerialStream, &'r mut mpsc::Receiver<Bytes>) -> BoxFuture<'r, String>,
 ) {
-    let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
     loop {
-        let reason = match open_device(&cfg) {
+        let reason = match open() {
             Ok(port) => {
-                shared.up.store(true, Ordering::Release);
+                up.store(true, Ordering::Release);
                 ingress.set_link(LinkState::Up);
-                let reason = pump(port, &cfg, &mut framer, &mut rx, &ingress).await;
-                shared.up.store(false, Ordering::Release);
+                let reason = pump(port, &mut rx).await;
+                up.store(false, Ordering::Release);
                 reason
             }
             Err(e) => e,
@@ -364,10 +428,8 @@ async fn keep_open(
             return;
         }
         ingress.set_link(LinkState::Down(reason));
-        // what waited to be written belongs to the lost link
         while rx.try_recv().is_ok() {}
-        framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
-        tokio::time::sleep(cfg.reopen).await;
+        tokio::time::sleep(reopen).await;
     }
 }
 
@@ -415,49 +477,66 @@ async fn pump<P: AsyncRead + AsyncWrite>(
 /// Opens a `pty://` medium: a new pseudo-terminal whose other end is linked at the URL's path.
 pub(crate) fn open_pty(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
     let cfg = SerialConfig::from_url(&mut o.url)?;
+    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
+    let up = Arc::new(AtomicBool::new(true));
+    let framing = cfg.framing;
+    let path = cfg.path.display().to_string();
+    let link = cfg.path.clone();
+    let ingress = o.ingress.clone();
+    run_pty(&o, &link, up.clone(), rx, move |port, rx| {
+        Box::pin(async move {
+            let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
+            pump(port, &cfg, &mut framer, rx, &ingress).await
+        })
+    })?;
+    Ok(Arc::new(SerialTransport {
+        framing,
+        line: LineWriter::new(o.name.clone(), path, up, writer, Some(link)),
+    }))
+}
+
+/// Makes a pseudo-terminal linked at `at` and runs `pump` on its master side until it fails (the
+/// line `up` meanwhile; the link down with the reason after).
+pub(crate) fn run_pty(
+    o: &Opening,
+    at: &Path,
+    up: Arc<AtomicBool>,
+    mut rx: mpsc::Receiver<Bytes>,
+    pump: impl for<'r> FnOnce(SerialStream, &'r mut mpsc::Receiver<Bytes>) -> BoxFuture<'r, String>
+    + Send
+    + 'static,
+) -> Result<(), OpenError> {
+    let (master, held) = new_pty(o, at)?;
+    let ingress = o.ingress.clone();
+    let task = tokio::spawn(async move {
+        let _held = held;
+        let reason = pump(master, &mut rx).await;
+        up.store(false, Ordering::Release);
+        ingress.set_link(LinkState::Down(reason));
+    });
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    Ok(())
+}
+
+/// A new pseudo-terminal whose other end is linked at `at`: its master side, and the other end
+/// held open (by a plain file, without the lock a serial port takes, so that any program can open
+/// it) so that the terminal lives while nobody has it open.
+pub(crate) fn new_pty(o: &Opening, at: &Path) -> Result<(SerialStream, std::fs::File), OpenError> {
     let (master, slave) = SerialStream::pair()
         .map_err(|e| std::io::Error::other(e.to_string()))
         .map_err(o.io_error("creating a pseudo-terminal"))?;
     let slave_path = tokio_serial::SerialPort::name(&slave)
         .ok_or_else(|| std::io::Error::other("the pseudo-terminal has no name"))
         .map_err(o.io_error("naming the pseudo-terminal"))?;
-    // the other end stays open here too, so that the terminal lives while nobody has it open; it
-    // is held by a plain file, without the lock a serial port takes, so that any program can open it
     let held = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
         .open(&slave_path)
         .map_err(o.io_error(format!("opening {slave_path}")))?;
     drop(slave);
-    link(&cfg.path, Path::new(&slave_path))
-        .map_err(o.io_error(format!("linking {}", cfg.path.display())))?;
-    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
-    let shared = Arc::new(Shared {
-        name: o.name.clone(),
-        framing: cfg.framing,
-        up: AtomicBool::new(true),
-        path: cfg.path.display().to_string(),
-    });
-    let link_path = cfg.path.clone();
-    let task = tokio::spawn({
-        let ingress = o.ingress.clone();
-        let shared = shared.clone();
-        async move {
-            let _held = held;
-            let mut rx = rx;
-            let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
-            let reason = pump(master, &cfg, &mut framer, &mut rx, &ingress).await;
-            shared.up.store(false, Ordering::Release);
-            ingress.set_link(LinkState::Down(reason));
-        }
-    });
-    o.ingress.own_task(task.abort_handle());
-    o.ingress.set_link(LinkState::Up);
-    Ok(Arc::new(SerialTransport {
-        shared,
-        writer,
-        link: std::sync::Mutex::new(Some(link_path)),
-    }))
+    link(at, Path::new(&slave_path)).map_err(o.io_error(format!("linking {}", at.display())))?;
+    Ok((master, held))
 }
 
 /// Links `at` to `target`, replacing an earlier link but never a file or directory.

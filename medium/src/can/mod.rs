@@ -1,0 +1,597 @@
+//! CAN media: frames ([`frame`]: 11- and 29-bit identifiers, remote, error and CAN FD frames) as
+//! messages on topics `can.ID`, read from and written to the wire by a backend:
+//!
+//! ```text
+//! slcan:///dev/ttyACM0?bitrate=500000               a serial adapter speaking slcan (CANable, …)
+//! slcan+pty:///tmp/canable                          a new pseudo-terminal behaving as an slcan adapter,
+//!                                                   its other end linked at /tmp/canable for any
+//!                                                   CAN tool (python-can, …) to open
+//! ```
+//!
+//! [`slcan`] is the adapters' line protocol. Options of every backend: `filter` — identifiers to
+//! keep, `ID:MASK` pairs in hex separated by commas (`filter=123:7ff,18ff0000:1fff0000`); a frame
+//! passes when `frame_id & MASK == ID & MASK` for one of them (error frames always pass). Options of
+//! `slcan://`: `bitrate` (default 500000), `data_bitrate` (CAN FD: 2000000 or 5000000),
+//! `firmware` (`lawicel` or `canable`: their codes for 750 k, 800 k and 83.3 k differ),
+//! `listen_only`, `timestamps` (ask the adapter for its timestamps, given as `time_ms`), `baud`
+//! (the serial line's speed, default 115200; USB adapters ignore it), `reopen` (default 500ms).
+//!
+//! The slcan host opens the adapter with `C`, `S`*n* (and `Y`*n*), `Z0`/`Z1`, then `O` or `L`, and
+//! closes it with `C`; an adapter's BEL (refused) is counted and logged. The pseudo-terminal
+//! adapter answers a host as an adapter does: commands get CR or BEL (a bit rate only while closed),
+//! `V`, `N` and `F` get answers, frames pass only while the channel is open, with timestamps after
+//! `Z1`. It accepts what python-can sends to open a channel (`C`, `S6`, an empty line, `O`, `O`).
+
+pub mod frame;
+pub mod slcan;
+
+use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::Message;
+use crate::payload::Payload;
+use crate::serial::{self, LineWriter};
+use crate::topic::Topic;
+use crate::url::{MediumUrl, UrlError};
+use bytes::Bytes;
+use frame::{CanFrame, FrameKind};
+use slcan::{Command, Firmware, Line, Lines};
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
+use tokio::sync::mpsc;
+use tokio_serial::SerialStream;
+
+/// Frames waiting to be written; a sender waits when the line is this far behind.
+const WRITE_QUEUE: usize = 256;
+
+/// One `ID:MASK` filter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Filter {
+    /// The identifier bits wanted.
+    pub id: u32,
+    /// Which bits are compared.
+    pub mask: u32,
+}
+
+/// Which frames a CAN medium keeps: all when empty.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Filters(pub Vec<Filter>);
+
+impl Filters {
+    /// Reads `ID:MASK,ID:MASK…` (hex).
+    pub fn parse(text: &str) -> Result<Filters, String> {
+        text.split(',')
+            .map(str::trim)
+            .filter(|s| !s.is_empty())
+            .map(|pair| {
+                let (id, mask) = pair
+                    .split_once(':')
+                    .ok_or_else(|| format!("`{pair}` is not ID:MASK"))?;
+                let hex = |s: &str| {
+                    u32::from_str_radix(s.trim().trim_start_matches("0x"), 16)
+                        .ok()
+                        .filter(|v| *v <= frame::MAX_EXTENDED_ID)
+                        .ok_or_else(|| format!("`{s}` in `{pair}` is not a hex identifier"))
+                };
+                Ok(Filter {
+                    id: hex(id)?,
+                    mask: hex(mask)?,
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()
+            .map(Filters)
+    }
+
+    /// Whether `frame` passes.
+    pub fn pass(&self, frame: &CanFrame) -> bool {
+        self.0.is_empty()
+            || frame.kind() == FrameKind::Error
+            || self.0.iter().any(|f| frame.id() & f.mask == f.id & f.mask)
+    }
+}
+
+/// The settings every CAN backend reads from its URL.
+fn take_filters(url: &mut MediumUrl) -> Result<Filters, UrlError> {
+    match url.take("filter") {
+        None => Ok(Filters::default()),
+        Some(text) => Filters::parse(&text).map_err(|e| url.error(format!("option `filter`: {e}"))),
+    }
+}
+
+/// Whether the medium talks to an adapter or is one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    /// `slcan://`: seabus is the host of an adapter on a serial device.
+    Host,
+    /// `slcan+pty://`: seabus is the adapter, on a pseudo-terminal it makes.
+    Adapter,
+}
+
+/// An slcan medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlcanConfig {
+    /// The device, or where the pseudo-terminal is linked.
+    pub path: PathBuf,
+    /// Host or adapter.
+    pub role: Role,
+    /// The classic bit rate.
+    pub bitrate: u32,
+    /// The CAN FD data bit rate.
+    pub data_bitrate: Option<u32>,
+    /// The adapter's firmware.
+    pub firmware: Firmware,
+    /// Open listen-only.
+    pub listen_only: bool,
+    /// Ask for the adapter's timestamps.
+    pub timestamps: bool,
+    /// The serial line's speed.
+    pub baud: u32,
+    /// Wait between attempts to reopen the device.
+    pub reopen: Duration,
+    /// Frames kept.
+    pub filters: Filters,
+}
+
+impl SlcanConfig {
+    /// Reads the settings of an `slcan://` or `slcan+pty://` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<SlcanConfig, UrlError> {
+        let path = serial::device_path(url)?;
+        let role = if url.scheme == "slcan+pty" {
+            Role::Adapter
+        } else {
+            Role::Host
+        };
+        let firmware = match url.take("firmware").as_deref() {
+            None | Some("lawicel") => Firmware::Lawicel,
+            Some("canable") => Firmware::Canable,
+            Some(f) => {
+                return Err(url.error(format!(
+                    "option `firmware={f}`: expected lawicel or canable"
+                )));
+            }
+        };
+        let bitrate: u32 = url
+            .take_parsed("bitrate", "a bit rate such as 500000")?
+            .unwrap_or(500_000);
+        slcan::bitrate_code(bitrate, firmware)
+            .map_err(|e| url.error(format!("option `bitrate`: {e}")))?;
+        let data_bitrate: Option<u32> = url.take_parsed("data_bitrate", "2000000 or 5000000")?;
+        if let Some(d) = data_bitrate
+            && !slcan::DATA_BITRATES.iter().any(|(b, _)| *b == d)
+        {
+            return Err(url.error(format!(
+                "option `data_bitrate={d}`: expected 2000000 or 5000000"
+            )));
+        }
+        let baud: u32 = url
+            .take_parsed("baud", "a line speed such as 115200")?
+            .unwrap_or(115_200);
+        let reopen = serial::take_reopen(url)?;
+        let cfg = SlcanConfig {
+            path,
+            role,
+            bitrate,
+            data_bitrate,
+            firmware,
+            listen_only: url.take_flag("listen_only")?.unwrap_or(false),
+            timestamps: url.take_flag("timestamps")?.unwrap_or(false),
+            baud,
+            reopen,
+            filters: take_filters(url)?,
+        };
+        url.finish(&[])?;
+        Ok(cfg)
+    }
+
+    /// What a host sends to open the adapter.
+    pub fn opening(&self) -> Vec<Command> {
+        let mut v = vec![
+            Command::Close,
+            Command::Bitrate(slcan::bitrate_code(self.bitrate, self.firmware).unwrap_or(6)),
+        ];
+        if let Some(code) = self
+            .data_bitrate
+            .and_then(|d| slcan::DATA_BITRATES.iter().find(|(b, _)| *b == d))
+        {
+            v.push(Command::DataBitrate(code.1));
+        }
+        v.push(Command::Timestamps(self.timestamps));
+        v.push(if self.listen_only {
+            Command::ListenOnly
+        } else {
+            Command::Open
+        });
+        v
+    }
+}
+
+/// Topics of received frames, made once per identifier.
+#[derive(Default)]
+struct Topics(HashMap<(u32, bool, bool), Topic>);
+
+impl Topics {
+    fn of(&mut self, f: &CanFrame) -> Option<Topic> {
+        let key = (f.id(), f.is_extended(), f.kind() == FrameKind::Error);
+        if let Some(t) = self.0.get(&key) {
+            return Some(t.clone());
+        }
+        if self.0.len() > 8192 {
+            self.0.clear();
+        }
+        let t = Topic::new(&f.topic()).ok()?;
+        self.0.insert(key, t.clone());
+        Some(t)
+    }
+}
+
+/// Delivers received frames that pass the filters.
+struct Receiver {
+    ingress: Ingress,
+    filters: Filters,
+    topics: Topics,
+}
+
+impl Receiver {
+    fn frame(&mut self, f: &CanFrame, time_ms: Option<u32>) {
+        if !self.filters.pass(f) {
+            return;
+        }
+        if let Some(topic) = self.topics.of(f) {
+            self.ingress
+                .originate(topic, Payload::from(f.to_map(time_ms)));
+        }
+    }
+}
+
+/// The transport of the slcan schemes.
+pub struct SlcanTransport {
+    line: LineWriter,
+}
+
+impl Transport for SlcanTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let frame = CanFrame::from_message(msg.topic.as_str(), &msg.payload)
+            .map_err(|reason| self.line.error(reason))?;
+        slcan::encode_frame(&frame, None)
+            .map(Bytes::from)
+            .map_err(|reason| self.line.error(reason))
+    }
+
+    fn transmit(&self, line: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        self.line.transmit(line)
+    }
+
+    fn close(&self) {
+        self.line.close();
+    }
+}
+
+/// What runs on each opening of the line: a fresh receiver and the pump.
+fn runner(
+    cfg: SlcanConfig,
+    ingress: Ingress,
+) -> impl for<'r> FnMut(SerialStream, &'r mut mpsc::Receiver<Bytes>) -> BoxFuture<'r, String>
++ Send
++ 'static {
+    move |port, rx| {
+        let (cfg, ingress) = (cfg.clone(), ingress.clone());
+        Box::pin(async move {
+            let mut receiver = Receiver {
+                ingress,
+                filters: cfg.filters.clone(),
+                topics: Topics::default(),
+            };
+            pump(port, &cfg, rx, &mut receiver).await
+        })
+    }
+}
+
+/// Opens an `slcan://` (host) or `slcan+pty://` (adapter) medium.
+pub(crate) fn open_slcan(mut o: Opening) -> Result<Arc<SlcanTransport>, OpenError> {
+    let cfg = SlcanConfig::from_url(&mut o.url)?;
+    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
+    let path = cfg.path.display().to_string();
+    let run = runner(cfg.clone(), o.ingress.clone());
+    let (up, link) = match cfg.role {
+        Role::Host => {
+            let up = Arc::new(AtomicBool::new(false));
+            o.ingress
+                .init_link(LinkState::Down(format!("{path} not opened yet")));
+            let (device, baud) = (path.clone(), cfg.baud);
+            let open = move || {
+                tokio_serial::SerialPortBuilderExt::open_native_async(tokio_serial::new(
+                    &device, baud,
+                ))
+                .map_err(|e| format!("cannot open {device}: {e}"))
+            };
+            let task = tokio::spawn(serial::keep_open(
+                open,
+                cfg.reopen,
+                up.clone(),
+                rx,
+                o.ingress.clone(),
+                run,
+            ));
+            o.ingress.own_task(task.abort_handle());
+            (up, None)
+        }
+        Role::Adapter => {
+            let up = Arc::new(AtomicBool::new(true));
+            let link = cfg.path.clone();
+            serial::run_pty(&o, &link, up.clone(), rx, run)?;
+            (up, Some(link))
+        }
+    };
+    Ok(Arc::new(SlcanTransport {
+        line: LineWriter::new(o.name.clone(), path, up, writer, link),
+    }))
+}
+
+/// The adapter side's state: whether its channel is open, with timestamps.
+#[derive(Debug, Default)]
+struct AdapterState {
+    open: bool,
+    timestamps: bool,
+    started: Option<std::time::Instant>,
+}
+
+impl AdapterState {
+    /// The reply to a host's command (CR done, BEL refused, or an answer).
+    fn command(&mut self, c: &Command) -> Option<Vec<u8>> {
+        let ok = || Some(b"\r".to_vec());
+        let refused = || Some(vec![0x07]);
+        match c {
+            Command::Open | Command::ListenOnly => {
+                self.open = true;
+                ok()
+            }
+            Command::Close => {
+                self.open = false;
+                ok()
+            }
+            Command::Bitrate(n) if !self.open && *n <= 9 => ok(),
+            Command::DataBitrate(_) if !self.open => ok(),
+            Command::Timestamps(on) if !self.open => {
+                self.timestamps = *on;
+                ok()
+            }
+            Command::Version(v) if v.is_empty() => Some(Command::Version("1013".into()).line()),
+            Command::Serial(v) if v.is_empty() => Some(Command::Serial("SB01".into()).line()),
+            Command::Status(v) if v.is_empty() => Some(Command::Status("00".into()).line()),
+            // a host's flush, and the acknowledgements adapters send, need no answer
+            Command::Empty | Command::Sent | Command::Refused => None,
+            _ => refused(),
+        }
+    }
+
+    fn stamp(&mut self) -> Option<u16> {
+        let t = self.started.get_or_insert_with(std::time::Instant::now);
+        self.timestamps
+            .then(|| (t.elapsed().as_millis() % 60_000) as u16)
+    }
+}
+
+/// Reads lines into the medium and writes frames out, until the stream fails; returns why.
+async fn pump<P: AsyncRead + AsyncWrite>(
+    port: P,
+    cfg: &SlcanConfig,
+    rx: &mut mpsc::Receiver<Bytes>,
+    receiver: &mut Receiver,
+) -> String {
+    let (mut reader, mut writer) = tokio::io::split(port);
+    let path = cfg.path.display().to_string();
+    let mut adapter = AdapterState::default();
+    if cfg.role == Role::Host {
+        let opening: Vec<u8> = cfg.opening().iter().flat_map(Command::line).collect();
+        if let Err(e) = writer.write_all(&opening).await {
+            return format!("{path}: {e}");
+        }
+    }
+    let mut lines = Lines::new();
+    let mut buf = vec![0u8; 4096];
+    let mut replies: Vec<u8> = Vec::new();
+    loop {
+        tokio::select! {
+            n = reader.read(&mut buf) => match n {
+                Ok(0) => return format!("{path}: end of stream"),
+                Ok(n) => {
+                    lines.push(&buf[..n], &mut |line| {
+                        let line = match line {
+                            Ok(l) => l,
+                            Err(offset) => {
+                                receiver.ingress.reject(
+                                    "slcan-line-too-long",
+                                    format_args!("{path} at byte {offset}: a line longer than {} characters", slcan::MAX_LINE),
+                                );
+                                return;
+                            }
+                        };
+                        match (slcan::parse_line(line), cfg.role) {
+                            (Ok(Line::Frame(f, t)), Role::Host) => receiver.frame(&f, t.map(u32::from)),
+                            (Ok(Line::Frame(f, _)), Role::Adapter) => {
+                                if adapter.open {
+                                    receiver.frame(&f, None);
+                                    // frames are acknowledged as the CANable firmware does
+                                    replies.extend_from_slice(if f.is_extended() { b"Z\r" } else { b"z\r" });
+                                } else {
+                                    receiver.ingress.reject("slcan-channel-closed", format_args!("{path}: a frame while the channel is closed (send O first)"));
+                                    replies.push(0x07);
+                                }
+                            }
+                            (Ok(Line::Command(Command::Refused)), Role::Host) => receiver.ingress.reject(
+                                "slcan-refused",
+                                format_args!("{path}: the adapter refused a command (BEL)"),
+                            ),
+                            (Ok(Line::Command(Command::Other(c, _))), Role::Host) => receiver.ingress.reject(
+                                "slcan-unknown-line",
+                                format_args!("{path}: a line starting {c:?} is neither a frame nor a reply"),
+                            ),
+                            (Ok(Line::Command(_)), Role::Host) => {}
+                            (Ok(Line::Command(c)), Role::Adapter) => {
+                                if let Some(r) = adapter.command(&c) {
+                                    replies.extend_from_slice(&r);
+                                }
+                            }
+                            (Err(e), _) => {
+                                receiver.ingress.reject(e.reason, format_args!("{path}: {e}"));
+                                if cfg.role == Role::Adapter {
+                                    replies.push(0x07);
+                                }
+                            }
+                        }
+                    });
+                    if !replies.is_empty() {
+                        if let Err(e) = writer.write_all(&replies).await {
+                            return format!("{path}: {e}");
+                        }
+                        replies.clear();
+                    }
+                }
+                Err(e) => return format!("{path}: {e}"),
+            },
+            line = rx.recv() => match line {
+                Some(line) => {
+                    if cfg.role == Role::Adapter && !adapter.open {
+                        // nobody has opened the channel: the frame has nowhere to go
+                        continue;
+                    }
+                    let stamped;
+                    let line = match adapter.stamp() {
+                        Some(t) if cfg.role == Role::Adapter => {
+                            stamped = slcan::with_timestamp(&line, t);
+                            &stamped[..]
+                        }
+                        _ => &line[..],
+                    };
+                    if let Err(e) = writer.write_all(line).await {
+                        return format!("{path}: {e}");
+                    }
+                }
+                None => {
+                    if cfg.role == Role::Host {
+                        let _ = writer.write_all(&Command::Close.line()).await;
+                    }
+                    return format!("{path}: closed");
+                }
+            },
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(url: &str) -> Result<SlcanConfig, UrlError> {
+        SlcanConfig::from_url(&mut MediumUrl::parse(url).unwrap())
+    }
+
+    #[test]
+    fn slcan_options_are_read_and_checked() {
+        let c = cfg("slcan:///dev/ttyACM0?bitrate=250000&timestamps=true&filter=123:7ff").unwrap();
+        assert_eq!(
+            (c.bitrate, c.role, c.timestamps),
+            (250_000, Role::Host, true)
+        );
+        assert_eq!(
+            c.opening(),
+            [
+                Command::Close,
+                Command::Bitrate(5),
+                Command::Timestamps(true),
+                Command::Open
+            ]
+        );
+        let c = cfg("slcan+pty:///tmp/can0").unwrap();
+        assert_eq!((c.bitrate, c.role), (500_000, Role::Adapter));
+        let fd = cfg(
+            "slcan:///dev/x?firmware=canable&bitrate=750000&data_bitrate=2000000&listen_only=1",
+        )
+        .unwrap();
+        assert_eq!(
+            fd.opening(),
+            [
+                Command::Close,
+                Command::Bitrate(7),
+                Command::DataBitrate(2),
+                Command::Timestamps(false),
+                Command::ListenOnly
+            ]
+        );
+        for (url, want) in [
+            (
+                "slcan:///dev/x?bitrate=750000",
+                "750000 bit/s has no slcan code",
+            ),
+            (
+                "slcan:///dev/x?firmware=peak",
+                "expected lawicel or canable",
+            ),
+            (
+                "slcan:///dev/x?data_bitrate=4000000",
+                "expected 2000000 or 5000000",
+            ),
+            ("slcan:///dev/x?filter=12", "`12` is not ID:MASK"),
+            (
+                "slcan:///dev/x?filter=1:zz",
+                "`zz` in `1:zz` is not a hex identifier",
+            ),
+            ("slcan://dev/x", "three slashes"),
+            ("slcan:///dev/x?speed=1", "speed"),
+        ] {
+            let e = cfg(url).unwrap_err().to_string();
+            assert!(e.contains(want), "{url}: {e}");
+        }
+    }
+
+    #[test]
+    fn filters_keep_matching_identifiers() {
+        let f = Filters::parse("123:7ff, 18ff0000:1fff0000").unwrap();
+        let d = |id, ext| CanFrame::data(id, ext, &[]).unwrap();
+        assert!(f.pass(&d(0x123, false)));
+        assert!(!f.pass(&d(0x124, false)));
+        assert!(f.pass(&d(0x18FF_50E5, true)));
+        assert!(!f.pass(&d(0x18FE_50E5, true)));
+        assert!(f.pass(&CanFrame::error(0x4, &[])));
+        assert!(Filters::default().pass(&d(0x124, false)));
+    }
+
+    #[test]
+    fn the_adapter_answers_as_adapters_do() {
+        let mut a = AdapterState::default();
+        // python-can's opening: C, S6, an empty line, O, O
+        let replies: Vec<Option<Vec<u8>>> = [
+            Command::Close,
+            Command::Bitrate(6),
+            Command::Empty,
+            Command::Open,
+            Command::Open,
+        ]
+        .iter()
+        .map(|c| a.command(c))
+        .collect();
+        assert_eq!(
+            replies,
+            [
+                Some(b"\r".to_vec()),
+                Some(b"\r".to_vec()),
+                None,
+                Some(b"\r".to_vec()),
+                Some(b"\r".to_vec())
+            ]
+        );
+        assert!(a.open);
+        // no bit rate change while open
+        assert_eq!(a.command(&Command::Bitrate(4)), Some(vec![0x07]));
+        assert_eq!(
+            a.command(&Command::Version(String::new())),
+            Some(b"V1013\r".to_vec())
+        );
+        assert_eq!(
+            a.command(&Command::Other('X', String::new())),
+            Some(vec![0x07])
+        );
+    }
+}
