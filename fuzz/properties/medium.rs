@@ -625,3 +625,23 @@ pub fn slcan_lines(data: &[u8]) -> bool {
     }
     frames
 }
+
+/// cannelloni packets: any bytes decode or are refused without a panic, naming an offset inside
+/// them, and a packet that decodes encodes back to as many bytes, which decode to the same packet
+/// (FD flag bits other than BRS and ESI are not kept). True when `data` decodes.
+pub fn cannelloni_packets(data: &[u8]) -> bool {
+    use seabus_medium::can::cannelloni;
+    match cannelloni::decode(data) {
+        Err(e) => {
+            assert!(e.offset <= data.len(), "error offset past the packet: {e}");
+            false
+        }
+        Ok(p) => {
+            let again = cannelloni::encode(p.seq, &p.frames);
+            assert_eq!(again.len(), data.len(), "re-encoded to another length");
+            let back = cannelloni::decode(&again).expect("an encoded packet decodes");
+            assert_eq!(back, p, "a decoded packet encodes to another packet");
+            true
+        }
+    }
+}

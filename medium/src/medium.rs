@@ -544,6 +544,11 @@ const SCHEMES: &[Scheme] = &[
         open: |o| Ok(Some(crate::can::open_slcan(o)? as Arc<dyn Transport>)),
     },
     Scheme {
+        name: "cannelloni",
+        check: |url| crate::can::CannelloniConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::can::open_cannelloni(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
         name: "pty",
         check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::serial::open_pty(o)? as Arc<dyn Transport>)),

@@ -42,4 +42,7 @@ seed_tests! {
     /// slcan byte streams split into the same lines whole and in pieces, lines parse or are refused
     /// without a panic, and frames survive slcan and message round trips.
     slcan_lines_seeds => slcan_lines,
+    /// cannelloni packets decode or are refused without a panic, and decoded packets encode to
+    /// the same bytes.
+    cannelloni_packets_seeds => cannelloni_packets,
 }

@@ -6,6 +6,7 @@
 //! slcan+pty:///tmp/canable                          a new pseudo-terminal behaving as an slcan adapter,
 //!                                                   its other end linked at /tmp/canable for any
 //!                                                   CAN tool (python-can, …) to open
+//! cannelloni://10.0.0.2:20000                       CAN over UDP with a cannelloni peer
 //! ```
 //!
 //! [`slcan`] is the adapters' line protocol. Options of every backend: `filter` — identifiers to
@@ -16,12 +17,18 @@
 //! `listen_only`, `timestamps` (ask the adapter for its timestamps, given as `time_ms`), `baud`
 //! (the serial line's speed, default 115200; USB adapters ignore it), `reopen` (default 500ms).
 //!
+//! Options of `cannelloni://PEER:PORT` (the peer's IPv4 address and port, default port 20000):
+//! `bind` (the local address, default `0.0.0.0` on the peer's port). Each frame sent goes in a
+//! packet of its own; packets from other addresses than the peer's are counted and dropped
+//! ([`cannelloni`] is the packet format).
+//!
 //! The slcan host opens the adapter with `C`, `S`*n* (and `Y`*n*), `Z0`/`Z1`, then `O` or `L`, and
 //! closes it with `C`; an adapter's BEL (refused) is counted and logged. The pseudo-terminal
 //! adapter answers a host as an adapter does: commands get CR or BEL (a bit rate only while closed),
 //! `V`, `N` and `F` get answers, frames pass only while the channel is open, with timestamps after
 //! `Z1`. It accepts what python-can sends to open a channel (`C`, `S6`, an empty line, `O`, `O`).
 
+pub mod cannelloni;
 pub mod frame;
 pub mod slcan;
 
@@ -478,6 +485,134 @@ async fn pump<P: AsyncRead + AsyncWrite>(
             },
         }
     }
+}
+
+/// A cannelloni medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CannelloniConfig {
+    /// The peer frames are sent to, and the only one they are taken from.
+    pub peer: std::net::SocketAddr,
+    /// The local address.
+    pub bind: std::net::SocketAddr,
+    /// Frames kept.
+    pub filters: Filters,
+}
+
+impl CannelloniConfig {
+    /// Reads the settings of a `cannelloni://PEER:PORT` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<CannelloniConfig, UrlError> {
+        let ip: std::net::Ipv4Addr = url.host.parse().map_err(|_| {
+            url.error(format!(
+                "`{}` is not the peer's IPv4 address (cannelloni://10.0.0.2:20000)",
+                url.host
+            ))
+        })?;
+        let port = url.port.unwrap_or(cannelloni::DEFAULT_PORT);
+        let bind = match url.take("bind") {
+            None => std::net::SocketAddr::from(([0, 0, 0, 0], port)),
+            Some(b) => b.parse().map_err(|_| {
+                url.error(format!(
+                    "option `bind={b}`: expected an address and port such as 0.0.0.0:20000"
+                ))
+            })?,
+        };
+        let cfg = CannelloniConfig {
+            peer: std::net::SocketAddr::from((ip, port)),
+            bind,
+            filters: take_filters(url)?,
+        };
+        url.finish(&[])?;
+        Ok(cfg)
+    }
+}
+
+/// The transport of `cannelloni://`.
+pub struct CannelloniTransport {
+    name: Arc<str>,
+    socket: Arc<tokio::net::UdpSocket>,
+    peer: std::net::SocketAddr,
+    seq: std::sync::atomic::AtomicU8,
+}
+
+impl Transport for CannelloniTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let frame = CanFrame::from_message(msg.topic.as_str(), &msg.payload).map_err(|reason| {
+            SendError::Io {
+                medium: self.name.to_string(),
+                reason,
+            }
+        })?;
+        let seq = self.seq.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(Bytes::from(cannelloni::encode(seq, &[frame])))
+    }
+
+    fn transmit(&self, packet: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            self.socket
+                .send_to(&packet, self.peer)
+                .await
+                .map(|_| ())
+                .map_err(|e| SendError::Io {
+                    medium: self.name.to_string(),
+                    reason: format!("sending to {}: {e}", self.peer),
+                })
+        })
+    }
+}
+
+/// Opens a `cannelloni://` medium.
+pub(crate) fn open_cannelloni(mut o: Opening) -> Result<Arc<CannelloniTransport>, OpenError> {
+    let cfg = CannelloniConfig::from_url(&mut o.url)?;
+    let socket = std::net::UdpSocket::bind(cfg.bind)
+        .and_then(|s| {
+            s.set_nonblocking(true)?;
+            tokio::net::UdpSocket::from_std(s)
+        })
+        .map_err(o.io_error(format!("binding {}", cfg.bind)))?;
+    let socket = Arc::new(socket);
+    let mut receiver = Receiver {
+        ingress: o.ingress.clone(),
+        filters: cfg.filters.clone(),
+        topics: Topics::default(),
+    };
+    let (rx_socket, peer) = (socket.clone(), cfg.peer);
+    let task = tokio::spawn(async move {
+        let mut buf = vec![0u8; 65_536];
+        loop {
+            let (n, from) = match rx_socket.recv_from(&mut buf).await {
+                Ok(r) => r,
+                Err(e) => {
+                    tracing::debug!("cannelloni receive: {e}");
+                    continue;
+                }
+            };
+            if from.ip() != peer.ip() {
+                receiver.ingress.reject(
+                    "cannelloni-unknown-peer",
+                    format_args!("a packet from {from}, not the peer {peer}"),
+                );
+                continue;
+            }
+            match cannelloni::decode(&buf[..n]) {
+                Ok(p) => {
+                    for f in &p.frames {
+                        receiver.frame(f, None);
+                    }
+                }
+                Err(e) => receiver
+                    .ingress
+                    .reject(e.reason, format_args!("packet from {from}: {e}")),
+            }
+        }
+    });
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    Ok(Arc::new(CannelloniTransport {
+        name: o.name.clone(),
+        socket,
+        peer: cfg.peer,
+        seq: std::sync::atomic::AtomicU8::new(0),
+    }))
 }
 
 #[cfg(test)]
