@@ -549,6 +549,15 @@ const SCHEMES: &[Scheme] = &[
         open: |o| Ok(Some(crate::can::open_cannelloni(o)? as Arc<dyn Transport>)),
     },
     Scheme {
+        name: "socketcan",
+        check: |url| crate::can::socketcan::SocketCanConfig::from_url(url).map(|_| ()),
+        open: |o| {
+            Ok(Some(
+                crate::can::socketcan::open_socketcan(o)? as Arc<dyn Transport>
+            ))
+        },
+    },
+    Scheme {
         name: "pty",
         check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::serial::open_pty(o)? as Arc<dyn Transport>)),

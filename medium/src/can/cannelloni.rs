@@ -9,7 +9,7 @@
 //! 0x04 newer Linux kernels set on every FD frame, are ignored), and the data (`len & 0x7F` bytes;
 //! none for a remote frame, whose length is the requested length).
 
-use super::frame::{CanFrame, FrameKind, MAX_EXTENDED_ID, MAX_STANDARD_ID};
+use super::frame::{CanFrame, FrameKind, LINUX_EFF, LINUX_ERR, LINUX_RTR};
 
 /// The protocol version.
 pub const VERSION: u8 = 2;
@@ -20,11 +20,11 @@ pub const HEADER: usize = 5;
 /// The default UDP port.
 pub const DEFAULT_PORT: u16 = 20_000;
 /// Extended identifier flag of the Linux `can_id`.
-pub const EFF: u32 = 0x8000_0000;
+pub const EFF: u32 = LINUX_EFF;
 /// Remote frame flag.
-pub const RTR: u32 = 0x4000_0000;
+pub const RTR: u32 = LINUX_RTR;
 /// Error frame flag.
-pub const ERR: u32 = 0x2000_0000;
+pub const ERR: u32 = LINUX_ERR;
 /// The CAN FD bit of the length byte.
 pub const FD_LEN: u8 = 0x80;
 /// Bit-rate switch.
@@ -125,89 +125,34 @@ fn decode_frame(d: &[u8], start: usize) -> Result<(CanFrame, usize), PacketError
     let head = d.get(start..start + 5).ok_or_else(|| short(d.len()))?;
     let can_id = u32::from_be_bytes([head[0], head[1], head[2], head[3]]);
     let len_byte = head[4];
-    let fd = len_byte & FD_LEN != 0;
     let len = usize::from(len_byte & !FD_LEN);
     let mut at = start + 5;
-    let flags = if fd {
+    let flags = if len_byte & FD_LEN != 0 {
         let f = *d.get(at).ok_or_else(|| short(d.len()))?;
         at += 1;
-        f
+        Some(f)
     } else {
+        None
+    };
+    // a remote frame's length is the one it asks for: it carries no data
+    let data_len = if can_id & RTR != 0 && can_id & ERR == 0 {
         0
-    };
-    let extended = can_id & EFF != 0;
-    let id = can_id
-        & if extended {
-            MAX_EXTENDED_ID
-        } else {
-            MAX_STANDARD_ID
-        };
-    if !extended && can_id & MAX_EXTENDED_ID > MAX_STANDARD_ID && can_id & ERR == 0 {
-        return Err(bad(
-            start,
-            "cannelloni-bad-frame",
-            format!(
-                "identifier {:#x} without the extended flag",
-                can_id & MAX_EXTENDED_ID
-            ),
-        ));
-    }
-    let frame_error =
-        |e: super::frame::FrameError| bad(start, "cannelloni-bad-frame", e.to_string());
-    if can_id & RTR != 0 && can_id & ERR == 0 {
-        if fd {
-            return Err(bad(
-                start + 4,
-                "cannelloni-bad-frame",
-                "a remote frame marked CAN FD (CAN FD has no remote frames)",
-            ));
-        }
-        let dlc = u8::try_from(len).unwrap_or(u8::MAX);
-        return Ok((
-            CanFrame::remote(id, extended, dlc).map_err(frame_error)?,
-            at,
-        ));
-    }
-    let data = d.get(at..at + len).ok_or_else(|| short(d.len()))?;
-    at += len;
-    let frame = if can_id & ERR != 0 {
-        if len > 8 || fd {
-            return Err(bad(
-                start + 4,
-                "cannelloni-bad-frame",
-                format!(
-                    "an error frame of {len} bytes{}",
-                    if fd { ", marked CAN FD" } else { "" }
-                ),
-            ));
-        }
-        CanFrame::error(can_id & MAX_EXTENDED_ID, data)
-    } else if fd {
-        CanFrame::fd(id, extended, data, flags & BRS != 0, flags & ESI != 0).map_err(frame_error)?
     } else {
-        CanFrame::data(id, extended, data).map_err(frame_error)?
+        len
     };
-    Ok((frame, at))
+    let data = d.get(at..at + data_len).ok_or_else(|| short(d.len()))?;
+    let frame = CanFrame::from_linux(can_id, len, data, flags)
+        .map_err(|e| bad(start, "cannelloni-bad-frame", e))?;
+    Ok((frame, at + data_len))
 }
 
 /// Appends one frame.
 fn encode_frame(f: &CanFrame, out: &mut Vec<u8>) {
-    let mut can_id = f.id();
-    if f.is_extended() {
-        can_id |= EFF;
-    }
     let len = match f.kind() {
-        FrameKind::Remote { dlc } => {
-            can_id |= RTR;
-            dlc
-        }
-        FrameKind::Error => {
-            can_id |= ERR;
-            f.payload().len() as u8
-        }
-        FrameKind::Data => f.payload().len() as u8,
+        FrameKind::Remote { dlc } => dlc,
+        _ => f.payload().len() as u8,
     };
-    out.extend_from_slice(&can_id.to_be_bytes());
+    out.extend_from_slice(&f.linux_id().to_be_bytes());
     if f.is_fd() {
         out.push(len | FD_LEN);
         out.push((u8::from(f.brs()) * BRS) | (u8::from(f.esi()) * ESI));

@@ -26,6 +26,12 @@ pub const MAX_EXTENDED_ID: u32 = 0x1FFF_FFFF;
 pub const MAX_CLASSIC: usize = 8;
 /// Longest CAN FD payload.
 pub const MAX_FD: usize = 64;
+/// The Linux `can_id` flag of an extended identifier.
+pub const LINUX_EFF: u32 = 0x8000_0000;
+/// The Linux `can_id` flag of a remote frame.
+pub const LINUX_RTR: u32 = 0x4000_0000;
+/// The Linux `can_id` flag of an error frame.
+pub const LINUX_ERR: u32 = 0x2000_0000;
 /// The topic of error frames.
 pub const ERROR_TOPIC: &str = "can.error";
 
@@ -214,6 +220,62 @@ impl CanFrame {
             FrameKind::Remote { dlc } => dlc,
             _ => len_to_dlc(self.data.len()).unwrap_or(0),
         }
+    }
+
+    /// The Linux `can_id` word of this frame: the identifier with the EFF (extended), RTR
+    /// (remote) and ERR (error) flags, as SocketCAN and cannelloni carry it.
+    pub fn linux_id(&self) -> u32 {
+        let mut word = self.id;
+        if self.extended {
+            word |= LINUX_EFF;
+        }
+        match self.kind {
+            FrameKind::Remote { .. } => word | LINUX_RTR,
+            FrameKind::Error => word | LINUX_ERR,
+            FrameKind::Data => word,
+        }
+    }
+
+    /// The frame a Linux `can_id` word stands for, with its length (a remote frame's requested
+    /// length), data (none for a remote frame) and CAN FD flags (`None` for a classic frame; bit
+    /// 0x01 bit-rate switch, 0x02 error-state indicator, other bits ignored).
+    pub fn from_linux(
+        can_id: u32,
+        len: usize,
+        data: &[u8],
+        fd_flags: Option<u8>,
+    ) -> Result<CanFrame, String> {
+        let extended = can_id & LINUX_EFF != 0;
+        let bits = can_id & MAX_EXTENDED_ID;
+        if can_id & LINUX_ERR != 0 {
+            if fd_flags.is_some() || data.len() > MAX_CLASSIC {
+                return Err(format!(
+                    "an error frame of {} bytes{}",
+                    data.len(),
+                    if fd_flags.is_some() {
+                        ", marked CAN FD"
+                    } else {
+                        ""
+                    }
+                ));
+            }
+            return Ok(CanFrame::error(bits, data));
+        }
+        if !extended && bits > MAX_STANDARD_ID {
+            return Err(format!("identifier {bits:#x} without the extended flag"));
+        }
+        if can_id & LINUX_RTR != 0 {
+            if fd_flags.is_some() {
+                return Err("a remote frame marked CAN FD (CAN FD has no remote frames)".into());
+            }
+            let dlc = u8::try_from(len).unwrap_or(u8::MAX);
+            return CanFrame::remote(bits, extended, dlc).map_err(|e| e.to_string());
+        }
+        match fd_flags {
+            Some(f) => CanFrame::fd(bits, extended, data, f & 0x01 != 0, f & 0x02 != 0),
+            None => CanFrame::data(bits, extended, data),
+        }
+        .map_err(|e| e.to_string())
     }
 
     /// The message topic of this frame (`can.123`, `can.18ff50e5`, `can.error`).

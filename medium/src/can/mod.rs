@@ -7,6 +7,7 @@
 //!                                                   its other end linked at /tmp/canable for any
 //!                                                   CAN tool (python-can, …) to open
 //! cannelloni://10.0.0.2:20000                       CAN over UDP with a cannelloni peer
+//! socketcan://can0                                  a Linux CAN interface ([`socketcan`])
 //! ```
 //!
 //! [`slcan`] is the adapters' line protocol. Options of every backend: `filter` — identifiers to
@@ -31,6 +32,7 @@
 pub mod cannelloni;
 pub mod frame;
 pub mod slcan;
+pub mod socketcan;
 
 use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
 use crate::message::Message;

@@ -1,0 +1,278 @@
+//! SocketCAN: a Linux CAN interface (`socketcan://can0`) through the `socketcan` crate, with CAN FD
+//! frames enabled and the medium's filters given to the kernel. [`to_socketcan`] and
+//! [`from_socketcan`] convert frames both ways through the Linux `can_id` word.
+//!
+//! When the interface is missing or goes down the link goes down and the medium opens it again
+//! every `reopen` (default 500 ms); a kernel without CAN support says so in the link's reason.
+
+use super::frame::{CanFrame, FrameKind};
+use super::{Filters, Receiver, Topics};
+use crate::medium::{BoxFuture, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::Message;
+use crate::url::{MediumUrl, UrlError};
+use bytes::Bytes;
+use socketcan::frame::{can_frame_default, canfd_frame_default};
+use socketcan::{CanAnyFrame, EmbeddedFrame, Frame, SocketOptions};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+use tokio::sync::mpsc;
+
+/// Frames waiting to be written; a sender waits when the interface is this far behind.
+const WRITE_QUEUE: usize = 256;
+
+/// The frame as the `socketcan` crate holds it.
+pub fn to_socketcan(f: &CanFrame) -> CanAnyFrame {
+    let data = f.payload();
+    if f.is_fd() {
+        let mut raw = canfd_frame_default();
+        raw.can_id = f.linux_id();
+        raw.len = data.len() as u8;
+        raw.flags = u8::from(f.brs()) | (u8::from(f.esi()) << 1);
+        raw.data[..data.len()].copy_from_slice(data);
+        CanAnyFrame::from(raw)
+    } else {
+        let mut raw = can_frame_default();
+        raw.can_id = f.linux_id();
+        raw.can_dlc = match f.kind() {
+            FrameKind::Remote { dlc } => dlc,
+            _ => data.len() as u8,
+        };
+        raw.data[..data.len()].copy_from_slice(data);
+        CanAnyFrame::from(raw)
+    }
+}
+
+/// The frame the `socketcan` crate read.
+pub fn from_socketcan(f: &CanAnyFrame) -> Result<CanFrame, String> {
+    match f {
+        CanAnyFrame::Normal(d) => CanFrame::from_linux(d.id_word(), d.len(), d.data(), None),
+        CanAnyFrame::Remote(r) => CanFrame::from_linux(r.id_word(), r.dlc(), &[], None),
+        CanAnyFrame::Error(e) => CanFrame::from_linux(e.id_word(), e.len(), e.data(), None),
+        CanAnyFrame::Fd(fd) => {
+            let flags = u8::from(fd.is_brs()) | (u8::from(fd.is_esi()) << 1);
+            CanFrame::from_linux(fd.id_word(), fd.len(), fd.data(), Some(flags))
+        }
+    }
+}
+
+/// A SocketCAN medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SocketCanConfig {
+    /// The interface (`can0`, `vcan0`).
+    pub iface: String,
+    /// Wait between attempts to reopen the interface.
+    pub reopen: Duration,
+    /// Frames kept (given to the kernel).
+    pub filters: Filters,
+}
+
+impl SocketCanConfig {
+    /// Reads the settings of a `socketcan://IFACE` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<SocketCanConfig, UrlError> {
+        let iface = url.host.clone();
+        if iface.is_empty() || iface.len() > 15 || !url.path.is_empty() {
+            return Err(url.error("expected socketcan://IFACE, an interface name such as can0"));
+        }
+        let cfg = SocketCanConfig {
+            iface,
+            reopen: crate::serial::take_reopen(url)?,
+            filters: super::take_filters(url)?,
+        };
+        url.finish(&[])?;
+        Ok(cfg)
+    }
+}
+
+/// The transport of `socketcan://`.
+pub struct SocketCanTransport {
+    name: Arc<str>,
+    iface: String,
+    up: Arc<AtomicBool>,
+    writer: mpsc::Sender<CanAnyFrame>,
+}
+
+impl Transport for SocketCanTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let frame = CanFrame::from_message(msg.topic.as_str(), &msg.payload).map_err(|reason| {
+            SendError::Io {
+                medium: self.name.to_string(),
+                reason,
+            }
+        })?;
+        // the frame travels to the writer in cannelloni's form: the Linux id word, length, data
+        Ok(Bytes::from(super::cannelloni::encode(0, &[frame])))
+    }
+
+    fn transmit(&self, encoded: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            if !self.up.load(Ordering::Acquire) {
+                return Err(SendError::LinkDown {
+                    medium: self.name.to_string(),
+                    reason: format!("{} is not open", self.iface),
+                });
+            }
+            let packet = super::cannelloni::decode(&encoded).map_err(|e| SendError::Io {
+                medium: self.name.to_string(),
+                reason: e.to_string(),
+            })?;
+            let Some(frame) = packet.frames.first() else {
+                return Ok(());
+            };
+            self.writer
+                .send(to_socketcan(frame))
+                .await
+                .map_err(|_| SendError::Closed(self.name.to_string()))
+        })
+    }
+}
+
+/// Opens a `socketcan://` medium: a task keeps the interface open.
+pub(crate) fn open_socketcan(mut o: Opening) -> Result<Arc<SocketCanTransport>, OpenError> {
+    let cfg = SocketCanConfig::from_url(&mut o.url)?;
+    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
+    let up = Arc::new(AtomicBool::new(false));
+    o.ingress
+        .init_link(LinkState::Down(format!("{} not opened yet", cfg.iface)));
+    let receiver = Receiver {
+        ingress: o.ingress.clone(),
+        filters: cfg.filters.clone(),
+        topics: Topics::default(),
+    };
+    let task = tokio::spawn(keep_open(cfg.clone(), up.clone(), rx, receiver));
+    o.ingress.own_task(task.abort_handle());
+    Ok(Arc::new(SocketCanTransport {
+        name: o.name.clone(),
+        iface: cfg.iface,
+        up,
+        writer,
+    }))
+}
+
+/// Whether this kernel makes CAN sockets at all.
+pub fn kernel_has_can() -> bool {
+    // SAFETY: a socket made and closed at once
+    unsafe {
+        let fd = libc::socket(libc::AF_CAN, libc::SOCK_RAW, libc::CAN_RAW);
+        if fd < 0 {
+            return false;
+        }
+        libc::close(fd);
+        true
+    }
+}
+
+fn open_socket(cfg: &SocketCanConfig) -> Result<socketcan::tokio::CanFdSocket, String> {
+    let socket = socketcan::tokio::CanFdSocket::open(&cfg.iface).map_err(|e| {
+        if kernel_has_can() {
+            format!("cannot open {}: {e}", cfg.iface)
+        } else {
+            format!(
+                "{}: this kernel has no SocketCAN support (no AF_CAN sockets); use slcan or cannelloni",
+                cfg.iface
+            )
+        }
+    })?;
+    if !cfg.filters.0.is_empty() {
+        let filters: Vec<socketcan::CanFilter> = cfg
+            .filters
+            .0
+            .iter()
+            .map(|f| socketcan::CanFilter::new(f.id, f.mask))
+            .collect();
+        socket
+            .set_filters(&filters)
+            .map_err(|e| format!("{}: setting filters: {e}", cfg.iface))?;
+    }
+    Ok(socket)
+}
+
+async fn keep_open(
+    cfg: SocketCanConfig,
+    up: Arc<AtomicBool>,
+    mut rx: mpsc::Receiver<CanAnyFrame>,
+    mut receiver: Receiver,
+) {
+    loop {
+        let reason = match open_socket(&cfg) {
+            Ok(socket) => {
+                up.store(true, Ordering::Release);
+                receiver.ingress.set_link(LinkState::Up);
+                let reason = loop {
+                    tokio::select! {
+                        read = socket.read_frame() => match read {
+                            Ok(f) => match from_socketcan(&f) {
+                                Ok(frame) => receiver.frame(&frame, None),
+                                Err(e) => receiver.ingress.reject(
+                                    "socketcan-bad-frame",
+                                    format_args!("{}: {e}", cfg.iface),
+                                ),
+                            },
+                            Err(e) => break format!("{}: {e}", cfg.iface),
+                        },
+                        frame = rx.recv() => match frame {
+                            Some(f) => {
+                                if let Err(e) = socket.write_frame(&f).await {
+                                    break format!("{}: {e}", cfg.iface);
+                                }
+                            }
+                            None => return,
+                        },
+                    }
+                };
+                up.store(false, Ordering::Release);
+                reason
+            }
+            Err(e) => e,
+        };
+        if !receiver.ingress.is_open() {
+            return;
+        }
+        receiver.ingress.set_link(LinkState::Down(reason));
+        while rx.try_recv().is_ok() {}
+        tokio::time::sleep(cfg.reopen).await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frames() -> Vec<CanFrame> {
+        vec![
+            CanFrame::data(0x123, false, &[1, 2, 3]).unwrap(),
+            CanFrame::data(0x18FF_50E5, true, &[0xAA; 8]).unwrap(),
+            CanFrame::remote(0x7FF, false, 4).unwrap(),
+            CanFrame::remote(0x1ABC, true, 0).unwrap(),
+            CanFrame::fd(0x10, true, &[7; 64], true, true).unwrap(),
+            CanFrame::fd(0x11, false, &[], false, false).unwrap(),
+            CanFrame::error(0x4, &[0, 4, 0, 0, 0, 0, 0, 0]),
+        ]
+    }
+
+    #[test]
+    fn frames_convert_to_socketcan_and_back() {
+        for f in frames() {
+            let any = to_socketcan(&f);
+            assert_eq!(any.id_word(), f.linux_id(), "{f}");
+            match (&any, f.kind(), f.is_fd()) {
+                (CanAnyFrame::Normal(_), FrameKind::Data, false)
+                | (CanAnyFrame::Remote(_), FrameKind::Remote { .. }, false)
+                | (CanAnyFrame::Error(_), FrameKind::Error, false)
+                | (CanAnyFrame::Fd(_), FrameKind::Data, true) => {}
+                other => panic!("{f}: {other:?}"),
+            }
+            assert_eq!(from_socketcan(&any).unwrap(), f);
+        }
+    }
+
+    #[test]
+    fn urls_name_an_interface() {
+        let cfg = |u: &str| SocketCanConfig::from_url(&mut MediumUrl::parse(u).unwrap());
+        let c = cfg("socketcan://can0?filter=123:7ff").unwrap();
+        assert_eq!((c.iface.as_str(), c.filters.0.len()), ("can0", 1));
+        assert!(cfg("socketcan:///can0").is_err());
+        assert!(cfg("socketcan://averyveryverylongname0").is_err());
+        assert!(cfg("socketcan://can0?bitrate=1").is_err());
+    }
+}
