@@ -8,6 +8,7 @@
 //!   reckoning) and the `vehicle-sim` module that follows course commands and publishes navigation,
 //!   battery and state datasets.
 
+pub mod can;
 pub mod iver;
 pub mod nmea;
 pub mod sim;

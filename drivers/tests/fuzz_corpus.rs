@@ -15,4 +15,7 @@ seed_tests! {
     /// Remote Helm sentences read as frontseat sentences and as commands without a panic, as they
     /// are and as the body of a sentence, and what reads survives a write/read round trip.
     remote_helm_seeds => remote_helm,
+    /// CAN signals made from the seed decode without a panic, their raw bits read back, and their
+    /// values encode back to the same raw bits.
+    dbc_signals_seeds => dbc_signals,
 }

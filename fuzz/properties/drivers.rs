@@ -101,3 +101,58 @@ pub fn remote_helm(data: &[u8]) -> bool {
     }
     read
 }
+
+/// CAN signals: a signal made from the first five bytes (start bit, size, byte order, raw type,
+/// factor, offset) that fits in the rest (the frame data) decodes without a panic; its raw bits
+/// written into empty data read back the same; and its physical value encodes back to the same raw
+/// bits (integer fields of up to 52 bits, whose values a float holds exactly). True when the
+/// signal fits.
+pub fn dbc_signals(data: &[u8]) -> bool {
+    use seabus_drivers::can::dbc::{Mux, RawType, Signal, fits};
+    if data.len() < 6 {
+        return false;
+    }
+    let (head, frame) = data.split_at(5);
+    let frame = &frame[..frame.len().min(64)];
+    let start = u32::from(head[0]);
+    let size = 1 + u32::from(head[1] % 64);
+    let little = head[2] & 1 == 1;
+    let raw_type = match (head[2] >> 1) & 3 {
+        2 if size == 32 => RawType::Float,
+        3 if size == 64 => RawType::Double,
+        1 | 3 => RawType::Signed,
+        _ => RawType::Unsigned,
+    };
+    let factor = [1.0, 2.0, -1.0, 0.5, 0.25][usize::from(head[3] % 5)];
+    let offset = f64::from(head[4] as i8);
+    if !fits(start.into(), size.into(), little, frame.len()) {
+        return false;
+    }
+    let signal = Signal {
+        name: "S".into(),
+        start,
+        size,
+        little_endian: little,
+        raw_type,
+        factor,
+        offset,
+        min: 0.0,
+        max: 0.0,
+        unit: String::new(),
+        mux: Mux::Plain,
+        values: Default::default(),
+        start_value: 0,
+    };
+    let raw = signal.raw_bits(frame);
+    let mut empty = vec![0u8; frame.len()];
+    signal.put_bits(&mut empty, raw);
+    assert_eq!(signal.raw_bits(&empty), raw, "raw bits do not read back");
+    let value = signal.decode(frame);
+    if matches!(raw_type, RawType::Signed | RawType::Unsigned) && size <= 52 {
+        let back = signal
+            .encode_value(&value)
+            .unwrap_or_else(|e| panic!("a decoded value does not encode: {e}"));
+        assert_eq!(back, raw, "{value} encodes to other raw bits");
+    }
+    true
+}
