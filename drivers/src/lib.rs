@@ -1,6 +1,8 @@
 //! seabus-drivers: device drivers, which marshal a device's data into standard datasets and its
 //! commands back to the device, and the simulators that stand in for devices.
 //!
+//! - [`can`] — CAN devices described by DBC files: signal decoding and encoding, the `can-device`
+//!   module.
 //! - [`iver`] — the Iver2/Iver3 frontseat: Remote Helm protocol, backseat driver, simulated frontseat.
 //! - [`nmea`] — NMEA 0183 sentences and the GPS, heading and echo-sounder drivers built on them.
 //! - [`units`] — unit conversions of device protocols.
@@ -23,5 +25,6 @@ pub fn register(reg: &mut Registry) {
         .add_module(nmea::sensors::HEADING)
         .add_module(nmea::sensors::SOUNDER)
         .add_module(iver::driver::TYPE)
-        .add_module(iver::sim::TYPE);
+        .add_module(iver::sim::TYPE)
+        .add_module(can::device::TYPE);
 }
