@@ -141,7 +141,7 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
 }
 
 impl CanDevice {
-    async fn from_can(&mut self, ctx: &mut Context, msg: &Message) -> Result<(), ModuleError> {
+    async fn on_frame(&mut self, ctx: &mut Context, msg: &Message) -> Result<(), ModuleError> {
         let Ok(frame) = CanFrame::from_message(msg.topic.as_str(), &msg.payload) else {
             return Ok(());
         };
@@ -226,7 +226,7 @@ impl Module for CanDevice {
         msg: Message,
     ) -> Result<(), ModuleError> {
         if port == 0 {
-            self.from_can(ctx, &msg).await
+            self.on_frame(ctx, &msg).await
         } else if msg.kind == Kind::Command {
             self.command(ctx, &msg).await
         } else {
