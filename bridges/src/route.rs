@@ -7,7 +7,11 @@
 //!    forwarded at most once, whichever way it comes back;
 //! 3. a message that has crossed `hops` bridges is not forwarded again;
 //! 4. a message is never sent to the medium it was first published on, nor back to the side it came
-//!    from (a route leads from one medium to the other).
+//!    from (a route leads from one medium to the other);
+//! 5. media whose wire carries no provenance (CAN, serial lines) cannot say a message came from the
+//!    bridge: the bridge remembers what it sent to such a medium ([`EchoMemory`]) and drops the same
+//!    frame coming back from it within [`ECHO_WINDOW`] — once per frame sent, so a device sending
+//!    the same frame loses at most that one.
 //!
 //! Every second (the `report` parameter) it publishes its counters and latency on
 //! `seabus.bridge.<name>` on both its media.
@@ -43,6 +47,76 @@ const REPORT: TimerId = 1;
 /// Rate-limit entries (route, topic) kept before the expired ones are forgotten early.
 const MAX_RATE_ENTRIES: usize = 10_000;
 
+/// How long the bridge remembers a frame it sent to a medium without provenance.
+pub const ECHO_WINDOW: Duration = Duration::from_secs(1);
+/// Frames remembered per medium, at most.
+const ECHO_ENTRIES: usize = 4096;
+
+/// Whether a medium's wire carries no seabus provenance, so that the bridge must remember what it
+/// sent there: CAN and serial lines.
+pub fn headerless(url: &str) -> bool {
+    let scheme = url.split("://").next().unwrap_or("");
+    matches!(
+        scheme,
+        "slcan" | "slcan+pty" | "cannelloni" | "socketcan" | "serial" | "pty"
+    )
+}
+
+/// A message's fingerprint as the wire sees it: a CAN frame by its identifier, kind and data,
+/// anything else by topic and payload bytes.
+fn fingerprint(topic: &Topic, payload: &Payload) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    match seabus_medium::can::frame::CanFrame::from_message(topic.as_str(), payload) {
+        Ok(frame) => frame.to_string().hash(&mut h),
+        Err(_) => {
+            topic.as_str().hash(&mut h);
+            match payload {
+                Payload::Bytes(b) => b.hash(&mut h),
+                Payload::Xml(x) => x.hash(&mut h),
+                Payload::Map(m) => seabus_medium::binary::encode(m).ok().hash(&mut h),
+            }
+        }
+    }
+    h.finish()
+}
+
+/// What a bridge sent to a medium without provenance, for [`ECHO_WINDOW`].
+#[derive(Debug, Default)]
+pub struct EchoMemory {
+    sent: std::collections::VecDeque<(u64, Instant)>,
+}
+
+impl EchoMemory {
+    fn forget_old(&mut self, now: Instant) {
+        while self.sent.front().is_some_and(|(_, t)| {
+            now.duration_since(*t) > ECHO_WINDOW || self.sent.len() > ECHO_ENTRIES
+        }) {
+            self.sent.pop_front();
+        }
+    }
+
+    /// Notes a message sent.
+    pub fn sent(&mut self, topic: &Topic, payload: &Payload) {
+        let now = Instant::now();
+        self.forget_old(now);
+        self.sent.push_back((fingerprint(topic, payload), now));
+    }
+
+    /// Whether a message read is the echo of one sent (which is then forgotten).
+    pub fn is_echo(&mut self, topic: &Topic, payload: &Payload) -> bool {
+        self.forget_old(Instant::now());
+        let f = fingerprint(topic, payload);
+        match self.sent.iter().position(|(g, _)| *g == f) {
+            Some(i) => {
+                self.sent.remove(i);
+                true
+            }
+            None => false,
+        }
+    }
+}
+
 /// A route compiled for one direction.
 struct Leg {
     from: usize,
@@ -71,6 +145,7 @@ struct Counters {
     late: u64,
     hop_limited: u64,
     returned: u64,
+    echoes: u64,
     unrouted: u64,
     errors: u64,
 }
@@ -92,6 +167,8 @@ pub struct RouteBridge {
     types: Option<Arc<ResolvedTypes>>,
     /// Messages not carried across, by reason (logged without flooding).
     problems: Tally,
+    /// What was sent to each side whose medium carries no provenance.
+    echo: [Option<EchoMemory>; 2],
 }
 
 fn build(spec: &BridgeSpec, _: &Catalogue) -> Result<Built, FileError> {
@@ -162,6 +239,7 @@ impl RouteBridge {
                 .collect(),
             types,
             problems: Tally::new(),
+            echo: [0, 1].map(|i| headerless(&spec.urls[i]).then(EchoMemory::default)),
         };
         Ok((bridge, decl))
     }
@@ -187,6 +265,12 @@ impl RouteBridge {
             // copies it received twice; a copy that crossed over both ways is dropped by the
             // receivers' windows, and the hop limit bounds any path.
             Seen::Late => self.counters.late += 1,
+        }
+        if let Some(memory) = &mut self.echo[port]
+            && memory.is_echo(&msg.topic, &msg.payload)
+        {
+            self.counters.echoes += 1;
+            return Verdict::Drop("echo of what it sent");
         }
         let Some(i) = self.legs.iter().position(|l| {
             l.from == port && l.topics.matches(&msg.topic) && l.kind.is_none_or(|k| k == msg.kind)
@@ -270,6 +354,9 @@ impl RouteBridge {
         out.topic = topic;
         out.payload = payload;
         out.provenance.hops = out.provenance.hops.saturating_add(1);
+        if let Some(memory) = &mut self.echo[to] {
+            memory.sent(&out.topic, &out.payload);
+        }
         Verdict::Forward(to, out)
     }
 
@@ -284,6 +371,7 @@ impl RouteBridge {
             .with("late", c.late as i64)
             .with("hop_limited", c.hop_limited as i64)
             .with("returned", c.returned as i64)
+            .with("echoes", c.echoes as i64)
             .with("rate_limited", rate_limited as i64)
             .with("unrouted", c.unrouted as i64)
             .with("errors", c.errors as i64)
@@ -452,6 +540,33 @@ mod tests {
             stamp: Stamp::now(),
             payload: Payload::from(DataMap::new().with("hdg", 1.5f64)),
         }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_echo_is_dropped_once_per_frame_sent_and_only_for_a_while() {
+        let mut m = EchoMemory::default();
+        let topic = Topic::new("can.123").unwrap();
+        let frame = |d: &[u8]| Payload::from(DataMap::new().with("data", Value::Bytes(d.to_vec())));
+        // bytes and a datamap of the same frame are the same on the wire
+        m.sent(&topic, &Payload::from(vec![1u8, 2]));
+        assert!(!m.is_echo(&topic, &frame(&[1, 3])), "other data");
+        assert!(
+            !m.is_echo(&Topic::new("can.124").unwrap(), &frame(&[1, 2])),
+            "other id"
+        );
+        assert!(m.is_echo(&topic, &frame(&[1, 2])));
+        assert!(
+            !m.is_echo(&topic, &frame(&[1, 2])),
+            "one echo per frame sent"
+        );
+        m.sent(&topic, &frame(&[1, 2]));
+        tokio::time::advance(ECHO_WINDOW + Duration::from_millis(1)).await;
+        assert!(
+            !m.is_echo(&topic, &frame(&[1, 2])),
+            "forgotten after the window"
+        );
+        assert!(headerless("slcan:///dev/ttyACM0") && headerless("cannelloni://1.2.3.4:5"));
+        assert!(!headerless("udp://239.1.1.1:5") && !headerless("inproc://"));
     }
 
     #[test]
