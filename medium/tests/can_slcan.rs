@@ -11,7 +11,7 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 fn bytes(v: &[u8]) -> Value {
-    Value::Bytes(v.to_vec().into())
+    Value::Bytes(v.to_vec())
 }
 
 fn open(url: &str) -> Medium {
