@@ -534,6 +534,11 @@ const SCHEMES: &[Scheme] = &[
         open: |o| Ok(Some(crate::serial::open_serial(o)? as Arc<dyn Transport>)),
     },
     Scheme {
+        name: "pty",
+        check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::serial::open_pty(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
         name: "slcan",
         check: |url| crate::can::SlcanConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::can::open_slcan(o)? as Arc<dyn Transport>)),
@@ -556,11 +561,6 @@ const SCHEMES: &[Scheme] = &[
                 crate::can::socketcan::open_socketcan(o)? as Arc<dyn Transport>
             ))
         },
-    },
-    Scheme {
-        name: "pty",
-        check: |url| crate::serial::SerialConfig::from_url(url).map(|_| ()),
-        open: |o| Ok(Some(crate::serial::open_pty(o)? as Arc<dyn Transport>)),
     },
 ];
 
