@@ -31,6 +31,7 @@ pub mod json;
 pub mod lcm;
 pub mod medium;
 pub mod message;
+pub mod moos;
 pub mod parse;
 pub mod payload;
 pub mod queue;

@@ -45,4 +45,7 @@ seed_tests! {
     /// cannelloni packets decode or are refused without a panic, and decoded packets encode to
     /// the same bytes.
     cannelloni_packets_seeds => cannelloni_packets,
+    /// MOOS packets read, wait for more or are refused without a panic, and packets read encode
+    /// back to the same bytes.
+    moos_packets_seeds => moos_packets,
 }

@@ -1,0 +1,3 @@
+//! MOOS: [`wire`] is the V10 message and packet format.
+
+pub mod wire;
