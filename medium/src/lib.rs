@@ -14,7 +14,7 @@
 //!   ([`dedup`]).
 //! - Media: in-process (no transport), [`udp`], [`serial`] (serial devices and pseudo-terminals,
 //!   with NMEA, line, COBS or SLIP framing), [`can`] (CAN frames through slcan adapters, or a
-//!   pseudo-terminal behaving as one), [`lcm`] (LCM's UDP multicast, its types and event
+//!   pseudo-terminal behaving as one, cannelloni, SocketCAN), [`moos`] (a client of a MOOSDB), [`lcm`] (LCM's UDP multicast, its types and event
 //!   logs) and [`dsaav`] (DSAAV IComms on raw Ethernet, UDP or in-process). Any medium opens from
 //!   a URL ([`url`], [`Medium::open`]) and can carry a fault stage ([`fault`]) for tests.
 //! - [`xml`] — a small positioned XML tree for the files users write (every error names file, line

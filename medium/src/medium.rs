@@ -539,6 +539,11 @@ const SCHEMES: &[Scheme] = &[
         open: |o| Ok(Some(crate::serial::open_pty(o)? as Arc<dyn Transport>)),
     },
     Scheme {
+        name: "moos",
+        check: |url| crate::moos::MoosConfig::from_url(url).map(|_| ()),
+        open: |o| Ok(Some(crate::moos::client::open(o)? as Arc<dyn Transport>)),
+    },
+    Scheme {
         name: "slcan",
         check: |url| crate::can::SlcanConfig::from_url(url).map(|_| ()),
         open: |o| Ok(Some(crate::can::open_slcan(o)? as Arc<dyn Transport>)),

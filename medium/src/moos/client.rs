@@ -1,0 +1,478 @@
+//! The MOOS medium: an asynchronous V10 client of a MOOSDB (`moos://HOST:9000?name=seabus`).
+//!
+//! It connects, sends the handshake and its name, and on the welcome takes the clock skew the DB
+//! measured; then it registers for what its URL's `register` lists (variable names, or patterns
+//! with `*` and `?` registered by wildcard; each may end `:SECONDS`, the minimum interval between
+//! notifications). Every second it sends a timing message, which keeps the connection alive and
+//! refines the skew (new = 0.9 old + 0.1 measured). When the DB goes away the link goes down, sends
+//! fail at once, and the medium connects again every `reopen` and registers again.
+//!
+//! A MOOS variable is a topic of the same name. Values become payloads as [`super`] describes;
+//! notifications the medium itself published (the DB sends back what a client registered for) are
+//! not delivered again.
+
+use super::wire::{self, MoosMsg, Packet, Read, data, kind};
+use super::{from_moos, to_moos};
+use crate::medium::{BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport};
+use crate::message::Message;
+use crate::topic::Topic;
+use crate::url::{MediumUrl, UrlError};
+use bytes::Bytes;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::time::Duration;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio::sync::mpsc;
+
+/// Messages waiting to be sent; a sender waits when the connection is this far behind.
+const WRITE_QUEUE: usize = 4096;
+/// How often a timing message goes to the DB.
+const TIMING_EVERY: Duration = Duration::from_secs(1);
+
+/// One registration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Registration {
+    /// A variable name, or a pattern with `*` and `?`.
+    pub pattern: String,
+    /// The minimum interval between notifications, seconds.
+    pub interval: f64,
+}
+
+/// A MOOS medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MoosConfig {
+    /// The DB's address.
+    pub host: String,
+    /// The DB's port.
+    pub port: u16,
+    /// This client's name (unique among the DB's clients).
+    pub name: String,
+    /// What it registers for.
+    pub register: Vec<Registration>,
+    /// Wait between attempts to connect.
+    pub reopen: Duration,
+}
+
+impl MoosConfig {
+    /// Reads the settings of a `moos://HOST:PORT` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<MoosConfig, UrlError> {
+        if url.host.is_empty() {
+            return Err(url.error("expected moos://HOST:PORT (the MOOSDB, port 9000 by default)"));
+        }
+        let name = url.take("name").unwrap_or_else(|| "seabus".to_string());
+        if name.is_empty() || name.contains(char::is_whitespace) {
+            return Err(url.error(format!(
+                "option `name={name}`: a client name without blanks"
+            )));
+        }
+        let register = match url.take("register") {
+            None => vec![Registration {
+                pattern: "*".into(),
+                interval: 0.0,
+            }],
+            Some(list) => list
+                .split(',')
+                .map(str::trim)
+                .filter(|s| !s.is_empty())
+                .map(|item| {
+                    let (pattern, interval) = match item.rsplit_once(':') {
+                        Some((p, i)) => {
+                            let i: f64 = i.parse().ok().filter(|i: &f64| *i >= 0.0).ok_or_else(|| {
+                                url.error(format!(
+                                    "option `register`: `{item}`: the interval is seconds, 0 or more"
+                                ))
+                            })?;
+                            (p, i)
+                        }
+                        None => (item, 0.0),
+                    };
+                    Ok(Registration {
+                        pattern: pattern.to_string(),
+                        interval,
+                    })
+                })
+                .collect::<Result<Vec<_>, UrlError>>()?,
+        };
+        let cfg = MoosConfig {
+            host: url.host.clone(),
+            port: url.port.unwrap_or(9000),
+            name,
+            register,
+            reopen: crate::serial::take_reopen(url)?,
+        };
+        url.finish(&[])?;
+        Ok(cfg)
+    }
+}
+
+/// The clock skew (MOOS time − local time) as f64 bits, shared with the connection task.
+#[derive(Default)]
+struct Skew(AtomicU64);
+
+impl Skew {
+    fn get(&self) -> f64 {
+        f64::from_bits(self.0.load(Ordering::Relaxed))
+    }
+    fn set(&self, s: f64) {
+        self.0.store(s.to_bits(), Ordering::Relaxed);
+    }
+}
+
+fn local_now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// The transport of `moos://`.
+pub struct MoosTransport {
+    name: Arc<str>,
+    client: Arc<str>,
+    db: String,
+    up: Arc<AtomicBool>,
+    skew: Arc<Skew>,
+    writer: mpsc::Sender<Bytes>,
+}
+
+impl MoosTransport {
+    fn error(&self, reason: impl Into<String>) -> SendError {
+        SendError::Io {
+            medium: self.name.to_string(),
+            reason: reason.into(),
+        }
+    }
+}
+
+impl Transport for MoosTransport {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let (data_type, value, string) = to_moos(&msg.payload).map_err(|e| self.error(e))?;
+        let m = MoosMsg {
+            id: 0,
+            kind: kind::NOTIFY,
+            data_type,
+            source: self.client.as_bytes().to_vec(),
+            key: msg.topic.as_str().as_bytes().to_vec(),
+            time: local_now() + self.skew.get(),
+            value,
+            string,
+            ..MoosMsg::default()
+        };
+        if m.encoded_len() + wire::PACKET_HEADER > wire::MAX_PACKET {
+            return Err(SendError::TooLarge {
+                medium: self.name.to_string(),
+                size: m.encoded_len(),
+                max: wire::MAX_PACKET - wire::PACKET_HEADER,
+            });
+        }
+        let mut out = Vec::with_capacity(m.encoded_len());
+        m.encode_into(&mut out);
+        Ok(Bytes::from(out))
+    }
+
+    fn transmit(&self, message: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            if !self.up.load(Ordering::Acquire) {
+                return Err(SendError::LinkDown {
+                    medium: self.name.to_string(),
+                    reason: format!("not connected to the MOOSDB at {}", self.db),
+                });
+            }
+            self.writer
+                .send(message)
+                .await
+                .map_err(|_| SendError::Closed(self.name.to_string()))
+        })
+    }
+
+    fn close(&self) {
+        self.up.store(false, Ordering::Release);
+    }
+}
+
+/// Opens a `moos://` medium: a task keeps the connection to the DB.
+pub(crate) fn open(mut o: Opening) -> Result<Arc<MoosTransport>, OpenError> {
+    let cfg = MoosConfig::from_url(&mut o.url)?;
+    let (writer, rx) = mpsc::channel(WRITE_QUEUE);
+    let up = Arc::new(AtomicBool::new(false));
+    let skew = Arc::new(Skew::default());
+    let db = format!("{}:{}", cfg.host, cfg.port);
+    o.ingress.init_link(LinkState::Down(format!(
+        "not connected to the MOOSDB at {db} yet"
+    )));
+    let task = tokio::spawn(keep_connected(
+        cfg.clone(),
+        up.clone(),
+        skew.clone(),
+        rx,
+        o.ingress.clone(),
+    ));
+    o.ingress.own_task(task.abort_handle());
+    Ok(Arc::new(MoosTransport {
+        name: o.name.clone(),
+        client: Arc::from(cfg.name.as_str()),
+        db,
+        up,
+        skew,
+        writer,
+    }))
+}
+
+async fn keep_connected(
+    cfg: MoosConfig,
+    up: Arc<AtomicBool>,
+    skew: Arc<Skew>,
+    mut rx: mpsc::Receiver<Bytes>,
+    ingress: Ingress,
+) {
+    let db = format!("{}:{}", cfg.host, cfg.port);
+    loop {
+        let reason = match connect(&cfg, &skew).await {
+            Ok((sock, buf)) => {
+                up.store(true, Ordering::Release);
+                ingress.set_link(LinkState::Up);
+                let reason = session(sock, buf, &cfg, &skew, &mut rx, &ingress).await;
+                up.store(false, Ordering::Release);
+                reason
+            }
+            Err(e) => e,
+        };
+        if !ingress.is_open() {
+            return;
+        }
+        ingress.set_link(LinkState::Down(format!("MOOSDB at {db}: {reason}")));
+        while rx.try_recv().is_ok() {}
+        tokio::time::sleep(cfg.reopen).await;
+    }
+}
+
+/// Reads packets until one is whole.
+async fn read_packet(sock: &mut TcpStream, buf: &mut Vec<u8>) -> Result<Packet, String> {
+    loop {
+        match wire::read_packet(buf) {
+            Ok(Read::Packet(p, n)) => {
+                buf.drain(..n);
+                return Ok(p);
+            }
+            Ok(Read::Incomplete(_)) => {}
+            Err(e) => return Err(format!("malformed packet: {e}")),
+        }
+        let mut chunk = [0u8; 65_536];
+        match tokio::time::timeout(Duration::from_secs(5), sock.read(&mut chunk)).await {
+            Err(_) => return Err("no answer for 5 s".into()),
+            Ok(Ok(0)) => return Err("the connection closed".into()),
+            Ok(Ok(n)) => buf.extend_from_slice(&chunk[..n]),
+            Ok(Err(e)) => return Err(e.to_string()),
+        }
+    }
+}
+
+/// Connects, shakes hands and registers; returns the connection and what it read beyond.
+async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), String> {
+    let mut sock = tokio::time::timeout(
+        Duration::from_secs(5),
+        TcpStream::connect((cfg.host.as_str(), cfg.port)),
+    )
+    .await
+    .map_err(|_| "no connection within 5 s".to_string())?
+    .map_err(|e| format!("cannot connect: {e}"))?;
+    let _ = sock.set_nodelay(true);
+    let intro = MoosMsg {
+        id: -1,
+        kind: kind::DATA,
+        data_type: data::STRING,
+        key: b"asynchronous".to_vec(),
+        time: local_now(),
+        string: cfg.name.as_bytes().to_vec(),
+        ..MoosMsg::default()
+    };
+    let mut hello = wire::handshake().to_vec();
+    hello.extend(
+        Packet {
+            messages: vec![intro],
+        }
+        .encode(),
+    );
+    sock.write_all(&hello)
+        .await
+        .map_err(|e| format!("handshake: {e}"))?;
+    let mut buf = Vec::new();
+    let answer = read_packet(&mut sock, &mut buf).await?;
+    let Some(first) = answer.messages.first() else {
+        return Err("an empty answer to the handshake".into());
+    };
+    match first.kind {
+        kind::WELCOME => skew.set(first.value),
+        kind::POISON => {
+            return Err(format!(
+                "refused: {}",
+                String::from_utf8_lossy(&first.string)
+            ));
+        }
+        k => {
+            return Err(format!(
+                "answered the handshake with a `{}` message",
+                k as char
+            ));
+        }
+    }
+    let mut registrations = Vec::new();
+    for r in &cfg.register {
+        registrations.push(if r.pattern.contains(['*', '?']) {
+            MoosMsg {
+                kind: kind::WILDCARD_REGISTER,
+                data_type: data::STRING,
+                key: cfg.name.as_bytes().to_vec(),
+                string: format!(
+                    "AppPattern=*,VarPattern={},Interval={}",
+                    r.pattern, r.interval
+                )
+                .into_bytes(),
+                time: local_now() + skew.get(),
+                ..MoosMsg::default()
+            }
+        } else {
+            MoosMsg {
+                kind: kind::REGISTER,
+                data_type: data::DOUBLE,
+                key: r.pattern.as_bytes().to_vec(),
+                value: r.interval,
+                time: local_now() + skew.get(),
+                ..MoosMsg::default()
+            }
+        });
+    }
+    sock.write_all(
+        &Packet {
+            messages: registrations,
+        }
+        .encode(),
+    )
+    .await
+    .map_err(|e| format!("registering: {e}"))?;
+    Ok((sock, buf))
+}
+
+/// Carries messages both ways until the connection fails; returns why.
+async fn session(
+    mut sock: TcpStream,
+    mut buf: Vec<u8>,
+    cfg: &MoosConfig,
+    skew: &Skew,
+    rx: &mut mpsc::Receiver<Bytes>,
+    ingress: &Ingress,
+) -> String {
+    let (mut reader, mut writer) = sock.split();
+    let mut timing = tokio::time::interval(TIMING_EVERY);
+    let mut topics: HashMap<Vec<u8>, Option<Topic>> = HashMap::new();
+    let mut chunk = vec![0u8; 65_536];
+    // when the last timing request went, local time
+    let mut asked = None;
+    loop {
+        loop {
+            match wire::read_packet(&buf) {
+                Ok(Read::Packet(p, n)) => {
+                    buf.drain(..n);
+                    for m in p.messages {
+                        match m.kind {
+                            kind::NOTIFY => deliver(&m, cfg, &mut topics, ingress),
+                            kind::TIMING => {
+                                if let Some(rq) = asked.take() {
+                                    let rx_t = local_now();
+                                    let measured = 0.5 * ((m.time - rx_t) + (m.time - rq));
+                                    skew.set(0.9 * skew.get() + 0.1 * measured);
+                                }
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                Ok(Read::Incomplete(_)) => break,
+                Err(e) => {
+                    ingress.reject(e.reason, format_args!("from the MOOSDB: {e}"));
+                    return format!("malformed packet: {e}");
+                }
+            }
+        }
+        tokio::select! {
+            read = reader.read(&mut chunk) => match read {
+                Ok(0) => return "the connection closed".into(),
+                Ok(n) => buf.extend_from_slice(&chunk[..n]),
+                Err(e) => return e.to_string(),
+            },
+            first = rx.recv() => {
+                let Some(first) = first else { return "closed".into() };
+                // what waits goes in one packet
+                let mut body = first.to_vec();
+                let mut count = 1i32;
+                while body.len() < 1 << 20 && let Ok(m) = rx.try_recv() {
+                    body.extend_from_slice(&m);
+                    count += 1;
+                }
+                let mut packet = Vec::with_capacity(body.len() + wire::PACKET_HEADER);
+                packet.extend_from_slice(&((body.len() + wire::PACKET_HEADER) as i32).to_le_bytes());
+                packet.extend_from_slice(&count.to_le_bytes());
+                packet.push(0);
+                packet.extend_from_slice(&body);
+                if let Err(e) = writer.write_all(&packet).await {
+                    return e.to_string();
+                }
+            }
+            _ = timing.tick() => {
+                let now = local_now();
+                asked = Some(now);
+                let t = MoosMsg {
+                    kind: kind::TIMING,
+                    data_type: data::DOUBLE,
+                    key: b"_async_timing".to_vec(),
+                    time: now,
+                    ..MoosMsg::default()
+                };
+                if let Err(e) = writer.write_all(&Packet { messages: vec![t] }.encode()).await {
+                    return e.to_string();
+                }
+            }
+        }
+    }
+}
+
+/// Delivers a notification as a message on the variable's topic.
+fn deliver(
+    m: &MoosMsg,
+    cfg: &MoosConfig,
+    topics: &mut HashMap<Vec<u8>, Option<Topic>>,
+    ingress: &Ingress,
+) {
+    // the DB sends back what this client published when it registered for it
+    if m.source == cfg.name.as_bytes() {
+        return;
+    }
+    if topics.len() > 65_536 {
+        topics.clear();
+    }
+    let topic = topics
+        .entry(m.key.clone())
+        .or_insert_with(|| {
+            std::str::from_utf8(&m.key)
+                .ok()
+                .and_then(|k| Topic::new(k).ok())
+        })
+        .clone();
+    let Some(topic) = topic else {
+        ingress.reject(
+            "moos-bad-key",
+            format_args!("variable `{}` is not a topic name", m.key_str()),
+        );
+        return;
+    };
+    match from_moos(m) {
+        Ok(payload) => {
+            ingress.originate(topic, payload);
+        }
+        Err(e) => ingress.reject(
+            "moos-bad-value",
+            format_args!("variable `{}`: {e}", m.key_str()),
+        ),
+    }
+}

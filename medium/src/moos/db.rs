@@ -1,0 +1,429 @@
+//! A small MOOSDB: the server side of the V10 protocol as the protocol notes describe it — the
+//! handshake and welcome (or refusal of a name already taken), notifications with each variable's
+//! type fixed by its first write, registration with a minimum interval, wildcard registration by
+//! application and variable pattern, the current value sent on registration, timing replies, and
+//! disconnection after five seconds of silence. It stands in for a real MOOSDB in tests and lets a
+//! user try MOOS clients without installing MOOS.
+
+use super::wire::{self, MoosMsg, Packet, Read, data, kind};
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::sync::mpsc;
+
+/// How long a client may stay silent before the server drops it.
+pub const SILENCE: Duration = Duration::from_secs(5);
+/// Messages waiting for a slow client, at most; the newest are dropped past that.
+const CLIENT_QUEUE: usize = 65_536;
+
+/// `*` any run of characters, `?` any one.
+pub fn glob(pattern: &str, text: &str) -> bool {
+    let (p, t): (Vec<char>, Vec<char>) = (pattern.chars().collect(), text.chars().collect());
+    let (mut pi, mut ti, mut star, mut mark) = (0, 0, None, 0);
+    while ti < t.len() {
+        if pi < p.len() && (p[pi] == '?' || p[pi] == t[ti]) {
+            pi += 1;
+            ti += 1;
+        } else if pi < p.len() && p[pi] == '*' {
+            star = Some(pi);
+            mark = ti;
+            pi += 1;
+        } else if let Some(s) = star {
+            pi = s + 1;
+            mark += 1;
+            ti = mark;
+        } else {
+            return false;
+        }
+    }
+    p[pi..].iter().all(|c| *c == '*')
+}
+
+/// What a client asked for.
+#[derive(Debug, Clone)]
+enum Sub {
+    Exact {
+        key: String,
+        interval: f64,
+    },
+    Pattern {
+        app: String,
+        var: String,
+        interval: f64,
+    },
+}
+
+impl Sub {
+    fn interval_for(&self, key: &str, source: &str) -> Option<f64> {
+        match self {
+            Sub::Exact { key: k, interval } => (k == key).then_some(*interval),
+            Sub::Pattern { app, var, interval } => {
+                (glob(var, key) && glob(app, source)).then_some(*interval)
+            }
+        }
+    }
+}
+
+struct Client {
+    tx: mpsc::Sender<MoosMsg>,
+    subs: Vec<Sub>,
+    /// When each variable was last sent to it.
+    last: HashMap<String, Instant>,
+}
+
+#[derive(Default)]
+struct State {
+    vars: HashMap<String, MoosMsg>,
+    clients: HashMap<String, Client>,
+    refused_writes: u64,
+}
+
+impl State {
+    /// Sends `m` to every client whose registrations want it now.
+    fn deliver(&mut self, m: &MoosMsg) {
+        let key = m.key_str();
+        let source = String::from_utf8_lossy(&m.source).into_owned();
+        let now = Instant::now();
+        for c in self.clients.values_mut() {
+            let Some(interval) = c
+                .subs
+                .iter()
+                .filter_map(|s| s.interval_for(&key, &source))
+                .reduce(f64::min)
+            else {
+                continue;
+            };
+            let due = c
+                .last
+                .get(&key)
+                .is_none_or(|t| now.duration_since(*t).as_secs_f64() >= interval);
+            if due {
+                c.last.insert(key.clone(), now);
+                let _ = c.tx.try_send(m.clone());
+            }
+        }
+    }
+}
+
+/// A running MOOSDB.
+pub struct MoosDb {
+    addr: SocketAddr,
+    state: Arc<Mutex<State>>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+fn now_s() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+impl MoosDb {
+    /// Starts serving on `bind` (port 0 for any free one). Must be called inside a tokio runtime.
+    pub async fn start(bind: SocketAddr) -> std::io::Result<MoosDb> {
+        let listener = TcpListener::bind(bind).await?;
+        let addr = listener.local_addr()?;
+        let state: Arc<Mutex<State>> = Arc::default();
+        let st = state.clone();
+        let task = tokio::spawn(async move {
+            let mut conns = tokio::task::JoinSet::new();
+            loop {
+                tokio::select! {
+                    accepted = listener.accept() => {
+                        if let Ok((sock, _)) = accepted {
+                            let _ = sock.set_nodelay(true);
+                            conns.spawn(serve(sock, st.clone()));
+                        }
+                    }
+                    Some(_) = conns.join_next(), if !conns.is_empty() => {}
+                }
+            }
+        });
+        Ok(MoosDb { addr, state, task })
+    }
+
+    /// Where it listens.
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The names of the clients connected now.
+    pub fn clients(&self) -> Vec<String> {
+        let st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        let mut v: Vec<String> = st.clients.keys().cloned().collect();
+        v.sort();
+        v
+    }
+
+    /// A variable's last value.
+    pub fn value(&self, key: &str) -> Option<MoosMsg> {
+        let st = self.state.lock().unwrap_or_else(|p| p.into_inner());
+        st.vars.get(key).cloned()
+    }
+
+    /// Writes refused because they changed a variable's type.
+    pub fn refused_writes(&self) -> u64 {
+        self.state
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .refused_writes
+    }
+}
+
+impl Drop for MoosDb {
+    fn drop(&mut self) {
+        // the listener and every connection go with the server's task
+        self.task.abort();
+    }
+}
+
+/// Reads one packet (at most `SILENCE` away).
+async fn next_packet(sock: &mut TcpStream, buf: &mut Vec<u8>) -> Result<Packet, String> {
+    loop {
+        match wire::read_packet(buf) {
+            Ok(Read::Packet(p, n)) => {
+                buf.drain(..n);
+                return Ok(p);
+            }
+            Ok(Read::Incomplete(_)) => {}
+            Err(e) => return Err(format!("malformed packet: {e}")),
+        }
+        let mut chunk = [0u8; 65_536];
+        match tokio::time::timeout(SILENCE, sock.read(&mut chunk)).await {
+            Err(_) => return Err("silent for 5 s".into()),
+            Ok(Ok(0)) => return Err("closed".into()),
+            Ok(Ok(n)) => buf.extend_from_slice(&chunk[..n]),
+            Ok(Err(e)) => return Err(e.to_string()),
+        }
+    }
+}
+
+async fn send(sock: &mut TcpStream, messages: Vec<MoosMsg>) -> std::io::Result<()> {
+    sock.write_all(&Packet { messages }.encode()).await
+}
+
+/// One client's connection, from the handshake until it goes.
+async fn serve(mut sock: TcpStream, state: Arc<Mutex<State>>) {
+    let mut hello = [0u8; wire::HANDSHAKE_LEN];
+    let shook = tokio::time::timeout(SILENCE, sock.read_exact(&mut hello)).await;
+    let expected = wire::handshake();
+    if !matches!(shook, Ok(Ok(_))) || !hello.eq_ignore_ascii_case(&expected) {
+        return;
+    }
+    let mut buf = Vec::new();
+    let Ok(intro) = next_packet(&mut sock, &mut buf).await else {
+        return;
+    };
+    let Some(first) = intro.messages.first().filter(|m| m.kind == kind::DATA) else {
+        return;
+    };
+    let name = String::from_utf8_lossy(&first.string).into_owned();
+    let (tx, mut rx) = mpsc::channel(CLIENT_QUEUE);
+    let taken = {
+        let mut st = state.lock().unwrap_or_else(|p| p.into_inner());
+        if st.clients.contains_key(&name) || name.is_empty() {
+            true
+        } else {
+            st.clients.insert(
+                name.clone(),
+                Client {
+                    tx,
+                    subs: Vec::new(),
+                    last: HashMap::new(),
+                },
+            );
+            false
+        }
+    };
+    if taken {
+        let poison = MoosMsg {
+            kind: kind::POISON,
+            data_type: data::STRING,
+            string: format!("a client called `{name}` is already connected").into_bytes(),
+            ..MoosMsg::default()
+        };
+        let _ = send(&mut sock, vec![poison]).await;
+        return;
+    }
+    let welcome = MoosMsg {
+        id: -1,
+        kind: kind::WELCOME,
+        data_type: data::DOUBLE,
+        source_aux: b"hostname=seabus-moosdb".to_vec(),
+        community: b"#1".to_vec(),
+        time: now_s(),
+        value: now_s() - first.time,
+        string: b"asynchronous".to_vec(),
+        ..MoosMsg::default()
+    };
+    let reason = if send(&mut sock, vec![welcome]).await.is_err() {
+        "closed".to_string()
+    } else {
+        run(&mut sock, &mut buf, &name, &state, &mut rx).await
+    };
+    tracing::debug!(client = %name, "moosdb: client gone: {reason}");
+    state
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .clients
+        .remove(&name);
+}
+
+async fn run(
+    sock: &mut TcpStream,
+    buf: &mut Vec<u8>,
+    name: &str,
+    state: &Arc<Mutex<State>>,
+    rx: &mut mpsc::Receiver<MoosMsg>,
+) -> String {
+    let (reader, mut writer) = sock.split();
+    let mut reader = reader;
+    let mut chunk = vec![0u8; 65_536];
+    loop {
+        // whole packets already read are handled before reading more
+        loop {
+            match wire::read_packet(buf) {
+                Ok(Read::Packet(p, n)) => {
+                    buf.drain(..n);
+                    let replies = handle(p, name, state);
+                    if !replies.is_empty()
+                        && writer
+                            .write_all(&Packet { messages: replies }.encode())
+                            .await
+                            .is_err()
+                    {
+                        return "closed".into();
+                    }
+                }
+                Ok(Read::Incomplete(_)) => break,
+                Err(e) => return format!("malformed packet: {e}"),
+            }
+        }
+        tokio::select! {
+            read = tokio::time::timeout(SILENCE, reader.read(&mut chunk)) => match read {
+                Err(_) => return "silent for 5 s".into(),
+                Ok(Ok(0)) => return "closed".into(),
+                Ok(Ok(n)) => buf.extend_from_slice(&chunk[..n]),
+                Ok(Err(e)) => return e.to_string(),
+            },
+            Some(first) = rx.recv() => {
+                let mut messages = vec![first];
+                while let Ok(m) = rx.try_recv() {
+                    messages.push(m);
+                }
+                if writer.write_all(&Packet { messages }.encode()).await.is_err() {
+                    return "closed".into();
+                }
+            }
+        }
+    }
+}
+
+/// Acts on a client's packet; returns what is sent back to it at once.
+fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
+    let mut st = state.lock().unwrap_or_else(|p| p.into_inner());
+    let mut replies = Vec::new();
+    for mut m in p.messages {
+        let key = m.key_str();
+        match m.kind {
+            kind::NOTIFY => {
+                if let Some(old) = st.vars.get(&key)
+                    && old.data_type != m.data_type
+                {
+                    st.refused_writes += 1;
+                    continue;
+                }
+                if m.community.is_empty() {
+                    m.community = b"#1".to_vec();
+                }
+                st.vars.insert(key, m.clone());
+                st.deliver(&m);
+            }
+            kind::REGISTER | kind::WILDCARD_REGISTER => {
+                let sub = if m.kind == kind::REGISTER {
+                    Sub::Exact {
+                        key: key.clone(),
+                        interval: m.value.max(0.0),
+                    }
+                } else {
+                    let text = String::from_utf8_lossy(&m.string).into_owned();
+                    let field = |f: &str| {
+                        text.split(',')
+                            .filter_map(|kv| kv.split_once('='))
+                            .find(|(k, _)| k.trim() == f)
+                            .map(|(_, v)| v.trim().to_string())
+                    };
+                    Sub::Pattern {
+                        app: field("AppPattern").unwrap_or_else(|| "*".into()),
+                        var: field("VarPattern").unwrap_or_else(|| "*".into()),
+                        interval: field("Interval")
+                            .and_then(|i| i.parse().ok())
+                            .unwrap_or(0.0f64)
+                            .max(0.0),
+                    }
+                };
+                // the current values it now wants go at once
+                let current: Vec<MoosMsg> = st
+                    .vars
+                    .values()
+                    .filter(|v| {
+                        sub.interval_for(&v.key_str(), &String::from_utf8_lossy(&v.source))
+                            .is_some()
+                    })
+                    .cloned()
+                    .collect();
+                if let Some(c) = st.clients.get_mut(name) {
+                    c.subs.push(sub);
+                    let now = Instant::now();
+                    for v in &current {
+                        c.last.insert(v.key_str(), now);
+                    }
+                }
+                replies.extend(current);
+            }
+            kind::UNREGISTER | kind::WILDCARD_UNREGISTER => {
+                let pattern = String::from_utf8_lossy(&m.string).into_owned();
+                if let Some(c) = st.clients.get_mut(name) {
+                    c.subs.retain(|s| match s {
+                        Sub::Exact { key: k, .. } => !(m.kind == kind::UNREGISTER && *k == key),
+                        Sub::Pattern { var, .. } => {
+                            !(m.kind == kind::WILDCARD_UNREGISTER && pattern.contains(var.as_str()))
+                        }
+                    });
+                }
+            }
+            kind::TIMING => replies.push(MoosMsg {
+                kind: kind::TIMING,
+                data_type: data::DOUBLE,
+                key: m.key.clone(),
+                time: now_s(),
+                value: m.time,
+                value2: 0.0,
+                ..MoosMsg::default()
+            }),
+            _ => {}
+        }
+    }
+    replies
+}
+
+#[cfg(test)]
+mod tests {
+    use super::glob;
+
+    #[test]
+    fn globs() {
+        assert!(glob("*", "NAV_X"));
+        assert!(glob("NAV_*", "NAV_X"));
+        assert!(!glob("NAV_*", "DESIRED_X"));
+        assert!(glob("NAV_?", "NAV_X"));
+        assert!(!glob("NAV_?", "NAV_XY"));
+        assert!(glob("*_X", "NAV_X"));
+        assert!(glob("N*V*X", "NAV_X"));
+        assert!(glob("", ""));
+        assert!(!glob("", "A"));
+    }
+}
