@@ -5,9 +5,11 @@
 //!   the system file (`depth_ft*0.3048 as depth`);
 //! - `square` drives a vehicle around a square with course commands, leg by leg, from its position;
 //! - `health-monitor` watches every module and medium by a health rules file and publishes the
-//!   vehicle's severity.
+//!   vehicle's severity;
+//! - `external` runs another program as a module, speaking JSON lines on its stdin and stdout.
 
 pub mod convert;
+pub mod external;
 pub mod generator;
 pub mod health_monitor;
 pub mod square;
@@ -19,5 +21,6 @@ pub fn register(reg: &mut Registry) {
     reg.add_module(generator::TYPE)
         .add_module(convert::TYPE)
         .add_module(square::TYPE)
-        .add_module(health_monitor::TYPE);
+        .add_module(health_monitor::TYPE)
+        .add_module(external::TYPE);
 }
