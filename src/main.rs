@@ -1,6 +1,7 @@
 //! `seabus`: the command-line program. It parses arguments and wires a system file to the runtime;
 //! everything else lives in the library crates.
 
+mod export;
 mod logtail;
 mod record;
 mod spy;
@@ -85,6 +86,11 @@ enum Command {
     /// the damage are sent, and its byte offset is shown); 2 when the arguments, file or medium
     /// cannot be used; 3 when the medium refused events.
     Replay(record::ReplayArgs),
+    /// A time window of logger or record logs as JSON lines or a CSV per topic.
+    ///
+    /// Exit 0; 1 when a log is damaged (the events before the damage are exported) or the output
+    /// cannot be written; 2 when the arguments or files cannot be used.
+    Export(export::ExportArgs),
     /// The DSAAV central log.
     Log {
         #[command(subcommand)]
@@ -223,6 +229,7 @@ fn main() -> ExitCode {
             Command::Pub(args) => publish(args).await,
             Command::Record(args) => record::record(args).await,
             Command::Replay(args) => record::replay(args).await,
+            Command::Export(args) => export::export(args),
             Command::Log {
                 command:
                     LogCommand::Tail {

@@ -11,10 +11,8 @@
 //! paced by the log's timestamps.
 
 use seabus_medium::lcm::ChannelRegex;
-use seabus_medium::lcm::eventlog::{Damage, Reader, WriteError, Writer};
-use seabus_medium::{
-    Interface, Kind, Medium, Message, Node, Payload, SendError, Stamp, Topic, binary,
-};
+use seabus_medium::lcm::eventlog::{Damage, Reader, WriteError, Writer, event_data};
+use seabus_medium::{Interface, Kind, Medium, Message, Node, Payload, SendError, Stamp, Topic};
 use std::collections::{HashMap, HashSet};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -220,25 +218,17 @@ impl Recording {
         {
             return Ok(());
         }
-        let encoded;
-        let data: &[u8] = match &m.payload {
-            Payload::Bytes(b) => b,
-            Payload::Xml(x) => x.as_bytes(),
-            Payload::Map(map) => match binary::encode(map) {
-                Ok(v) => {
-                    encoded = v;
-                    &encoded
-                }
-                Err(e) => {
-                    self.unwritable += 1;
-                    tracing::warn!(topic = %m.topic, "not recorded: {e}");
-                    return Ok(());
-                }
-            },
+        let data = match event_data(&m.payload) {
+            Ok(d) => d,
+            Err(e) => {
+                self.unwritable += 1;
+                tracing::warn!(topic = %m.topic, "not recorded: {e}");
+                return Ok(());
+            }
         };
         // arrival time, never going back (a log player waits on the differences)
         self.last_stamp = now_micros().max(self.last_stamp);
-        self.writer.write(self.last_stamp, &m.topic, data)?;
+        self.writer.write(self.last_stamp, &m.topic, &data)?;
         if !self.seen.contains(&m.topic) {
             self.seen.insert(m.topic.clone());
         }

@@ -343,6 +343,19 @@ pub enum WriteError {
     Io(#[from] io::Error),
 }
 
+/// What a payload is in an event's data: bytes as they are (on an LCM medium, the LCM message),
+/// a datamap in seabus's binary form (which opens with its magic `SM`), XML as its text.
+pub fn event_data(
+    payload: &crate::Payload,
+) -> Result<std::borrow::Cow<'_, [u8]>, crate::datamap::TooDeep> {
+    use std::borrow::Cow;
+    Ok(match payload {
+        crate::Payload::Bytes(b) => Cow::Borrowed(&b[..]),
+        crate::Payload::Xml(x) => Cow::Borrowed(x.as_bytes()),
+        crate::Payload::Map(m) => Cow::Owned(crate::binary::encode(m)?),
+    })
+}
+
 /// Writes events to a log through a buffer, numbering them from 0 as `lcm-logger` does.
 ///
 /// Call [`Writer::flush`] (or [`Writer::finish`]) at the end: events still in the buffer when a

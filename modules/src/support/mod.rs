@@ -6,12 +6,14 @@
 //! - `square` drives a vehicle around a square with course commands, leg by leg, from its position;
 //! - `health-monitor` watches every module and medium by a health rules file and publishes the
 //!   vehicle's severity;
-//! - `external` runs another program as a module, speaking JSON lines on its stdin and stdout.
+//! - `external` runs another program as a module, speaking JSON lines on its stdin and stdout;
+//! - `logger` keeps one binary log of everything and a CSV per topic, stamped by seabus.
 
 pub mod convert;
 pub mod external;
 pub mod generator;
 pub mod health_monitor;
+pub mod logger;
 pub mod square;
 
 use crate::registry::Registry;
@@ -22,5 +24,6 @@ pub fn register(reg: &mut Registry) {
         .add_module(convert::TYPE)
         .add_module(square::TYPE)
         .add_module(health_monitor::TYPE)
-        .add_module(external::TYPE);
+        .add_module(external::TYPE)
+        .add_module(logger::TYPE);
 }

@@ -1,0 +1,224 @@
+//! `seabus export`: a time window of the binary logs the `logger` module (or `seabus record`)
+//! writes, as JSON lines or as one CSV per topic.
+
+use seabus_medium::lcm::eventlog::Reader;
+use seabus_medium::{DataMap, Pattern, Topic, Value, binary, json};
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+/// What `seabus export` was asked to do.
+#[derive(clap::Args)]
+pub struct ExportArgs {
+    /// Log files, or directories whose `.lcmlog` files are read (in name order).
+    #[arg(required = true)]
+    pub logs: Vec<PathBuf>,
+    /// Only events from this time on: seconds since 1970, or RFC 3339 (2026-11-21T10:00:00Z).
+    #[arg(long, value_name = "TIME")]
+    pub from: Option<String>,
+    /// Only events before this time.
+    #[arg(long, value_name = "TIME")]
+    pub to: Option<String>,
+    /// Only topics matching this pattern.
+    #[arg(long, default_value = "**")]
+    pub topics: String,
+    /// `json` (one object per event, on standard output or `--out`) or `csv` (a file per topic in
+    /// the `--out` directory).
+    #[arg(long, default_value = "json")]
+    pub format: String,
+    /// Where to write: a file for JSON, a directory for CSV.
+    #[arg(long, value_name = "PATH")]
+    pub out: Option<PathBuf>,
+}
+
+/// Reads a time: seconds since 1970 or RFC 3339.
+fn parse_time(text: &str) -> Option<f64> {
+    text.parse::<f64>().ok().or_else(|| {
+        humantime::parse_rfc3339_weak(text)
+            .ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map(|d| d.as_secs_f64())
+    })
+}
+
+/// The files a path names.
+fn files(path: &Path) -> std::io::Result<Vec<PathBuf>> {
+    if !path.is_dir() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut v: Vec<PathBuf> = std::fs::read_dir(path)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "lcmlog"))
+        .collect();
+    v.sort();
+    Ok(v)
+}
+
+/// An event's payload as a datamap: a binary datamap decoded, other bytes as `{"bytes": hex}`.
+fn payload_of(data: &[u8]) -> DataMap {
+    if data.starts_with(&binary::MAGIC)
+        && let Ok(m) = binary::decode(data)
+    {
+        return m;
+    }
+    DataMap::new().with(
+        "bytes",
+        data.iter().map(|b| format!("{b:02x}")).collect::<String>(),
+    )
+}
+
+/// The `--format csv` output: one file per topic.
+struct CsvFiles {
+    dir: PathBuf,
+    files: BTreeMap<String, (std::io::BufWriter<std::fs::File>, Vec<String>)>,
+}
+
+impl CsvFiles {
+    fn row(&mut self, topic: &str, time: f64, map: &DataMap) -> std::io::Result<()> {
+        if !self.files.contains_key(topic) {
+            let columns: Vec<String> = map.iter().map(|(k, _)| k.to_string()).collect();
+            let mut out = std::io::BufWriter::new(std::fs::File::create(
+                self.dir.join(format!("{topic}.csv")),
+            )?);
+            writeln!(out, "time,{}", columns.join(","))?;
+            self.files.insert(topic.to_string(), (out, columns));
+        }
+        let Some((out, columns)) = self.files.get_mut(topic) else {
+            return Ok(());
+        };
+        let mut row = format!("{time:.6}");
+        for c in columns.iter() {
+            row.push(',');
+            if let Some(v) = map.get(c) {
+                let text = match v {
+                    Value::Str(s) => s.to_string(),
+                    other => other.to_string(),
+                };
+                if text.contains([',', '"', '\n']) {
+                    row.push_str(&format!("\"{}\"", text.replace('"', "\"\"")));
+                } else {
+                    row.push_str(&text);
+                }
+            }
+        }
+        writeln!(out, "{row}")
+    }
+}
+
+/// Runs `seabus export`.
+pub fn export(args: ExportArgs) -> ExitCode {
+    let usage = |what: String| {
+        eprintln!("seabus export: {what}");
+        ExitCode::from(2)
+    };
+    let time = |t: &Option<String>, which: &str| -> Result<Option<f64>, String> {
+        t.as_deref()
+            .map(|s| {
+                parse_time(s).ok_or_else(|| {
+                    format!("--{which} `{s}`: expected seconds since 1970 or an RFC 3339 time")
+                })
+            })
+            .transpose()
+    };
+    let (from, to) = match (time(&args.from, "from"), time(&args.to, "to")) {
+        (Ok(f), Ok(t)) => (f, t),
+        (Err(e), _) | (_, Err(e)) => return usage(e),
+    };
+    let pattern = match Pattern::new(&args.topics) {
+        Ok(p) => p,
+        Err(e) => return usage(format!("--topics `{}`: {e}", args.topics)),
+    };
+    let mut csv = match args.format.as_str() {
+        "json" => None,
+        "csv" => {
+            let Some(dir) = &args.out else {
+                return usage("--format csv needs --out DIR".into());
+            };
+            if let Err(e) = std::fs::create_dir_all(dir) {
+                return usage(format!("{}: {e}", dir.display()));
+            }
+            Some(CsvFiles {
+                dir: dir.clone(),
+                files: BTreeMap::new(),
+            })
+        }
+        f => return usage(format!("--format `{f}`: expected json or csv")),
+    };
+    let mut json_out: Box<dyn Write> = match (&csv, &args.out) {
+        (None, Some(path)) => match std::fs::File::create(path) {
+            Ok(f) => Box::new(std::io::BufWriter::new(f)),
+            Err(e) => return usage(format!("{}: {e}", path.display())),
+        },
+        _ => Box::new(std::io::BufWriter::new(std::io::stdout().lock())),
+    };
+    let mut damaged = false;
+    let mut exported = 0u64;
+    for path in &args.logs {
+        let list = match files(path) {
+            Ok(l) => l,
+            Err(e) => return usage(format!("{}: {e}", path.display())),
+        };
+        for file in list {
+            let mut reader = match Reader::open(&file) {
+                Ok(r) => r,
+                Err(e) => return usage(format!("{}: {e}", file.display())),
+            };
+            loop {
+                let event = match reader.next_event() {
+                    Ok(Some(e)) => e,
+                    Ok(None) => break,
+                    Err(d) => {
+                        eprintln!("seabus export: {}: {d}", file.display());
+                        damaged = true;
+                        break;
+                    }
+                };
+                let t = event.timestamp as f64 / 1e6;
+                if from.is_some_and(|f| t < f) || to.is_some_and(|e| t >= e) {
+                    continue;
+                }
+                let Ok(topic) = Topic::new(event.channel) else {
+                    continue;
+                };
+                if !pattern.matches(&topic) {
+                    continue;
+                }
+                let map = payload_of(event.data);
+                let written = match &mut csv {
+                    Some(c) => c.row(event.channel, t, &map),
+                    None => {
+                        let line = DataMap::new()
+                            .with("time", t)
+                            .with("topic", event.channel)
+                            .with("payload", Value::Map(map));
+                        match json::to_json(&line) {
+                            Ok(j) => writeln!(json_out, "{j}"),
+                            Err(_) => Ok(()),
+                        }
+                    }
+                };
+                if let Err(e) = written {
+                    eprintln!("seabus export: cannot write: {e}");
+                    return ExitCode::from(1);
+                }
+                exported += 1;
+            }
+        }
+    }
+    let flushed = json_out.flush().and_then(|()| {
+        csv.iter_mut()
+            .flat_map(|c| c.files.values_mut())
+            .try_for_each(|(f, _)| f.flush())
+    });
+    if let Err(e) = flushed {
+        eprintln!("seabus export: cannot write: {e}");
+        return ExitCode::from(1);
+    }
+    eprintln!("seabus export: {exported} events");
+    if damaged {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
