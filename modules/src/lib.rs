@@ -21,6 +21,7 @@
 
 pub mod datasets;
 pub mod dsaav;
+pub mod estimate;
 pub mod geo;
 pub mod module;
 pub mod params;

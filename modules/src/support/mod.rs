@@ -7,13 +7,16 @@
 //! - `health-monitor` watches every module and medium by a health rules file and publishes the
 //!   vehicle's severity;
 //! - `external` runs another program as a module, speaking JSON lines on its stdin and stdout;
-//! - `logger` keeps one binary log of everything and a CSV per topic, stamped by seabus.
+//! - `logger` keeps one binary log of everything and a CSV per topic, stamped by seabus;
+//! - `depth-kalman` and `position-ekf` estimate depth and vertical speed, and position with the
+//!   compass bias, keeping the raw topics.
 
 pub mod convert;
 pub mod external;
 pub mod generator;
 pub mod health_monitor;
 pub mod logger;
+pub mod navigation;
 pub mod square;
 
 use crate::registry::Registry;
@@ -25,5 +28,7 @@ pub fn register(reg: &mut Registry) {
         .add_module(square::TYPE)
         .add_module(health_monitor::TYPE)
         .add_module(external::TYPE)
-        .add_module(logger::TYPE);
+        .add_module(logger::TYPE)
+        .add_module(navigation::DEPTH)
+        .add_module(navigation::POSITION);
 }
