@@ -5,7 +5,10 @@
 //!   driven by white acceleration noise) from noisy depth readings;
 //! - [`PositionEkf`] — an extended Kalman filter of position (north, east in metres from an
 //!   origin) and compass bias, dead-reckoning with DVL velocity and heading while submerged and
-//!   corrected by GPS fixes at the surface, which also teach it the compass bias.
+//!   corrected by GPS fixes at the surface, which also teach it the compass bias;
+//! - [`tilt_compensated`], [`HeadingSmoother`] and [`Deviation`] — a compass heading with the
+//!   tilt taken out, smoothed without lag through turns, and corrected by a deviation table that
+//!   can be learnt from GPS course over ground.
 
 use nalgebra::{Matrix2, Matrix2x3, Matrix3, Vector2, Vector3};
 
@@ -132,6 +135,128 @@ impl PositionEkf {
     }
 }
 
+/// The heading a magnetometer gives once its tilt is taken out: `mag` the field in the vehicle
+/// frame (x forward, y starboard, z down; any unit), roll and pitch in degrees (starboard down and
+/// bow up positive). Degrees clockwise from magnetic north, in [0, 360).
+pub fn tilt_compensated(mag: [f64; 3], roll_deg: f64, pitch_deg: f64) -> f64 {
+    let (sr, cr) = roll_deg.to_radians().sin_cos();
+    let (sp, cp) = pitch_deg.to_radians().sin_cos();
+    let [mx, my, mz] = mag;
+    let xh = mx * cp + my * sr * sp + mz * cr * sp;
+    let yh = my * cr - mz * sr;
+    crate::geo::wrap360((-yh).atan2(xh).to_degrees())
+}
+
+/// Smooths a heading without the lag of plain averaging: the rate of turn carries the estimate
+/// through turns, and each reading pulls it by `gain` (0–1) of the difference.
+#[derive(Debug, Clone)]
+pub struct HeadingSmoother {
+    gain: f64,
+    estimate: Option<f64>,
+}
+
+impl HeadingSmoother {
+    /// A smoother taking `gain` of each reading's difference.
+    pub fn new(gain: f64) -> HeadingSmoother {
+        HeadingSmoother {
+            gain: gain.clamp(0.0, 1.0),
+            estimate: None,
+        }
+    }
+
+    /// Takes a reading `dt` seconds after the last, turning at `rate` deg/s (when known).
+    pub fn update(&mut self, dt: f64, heading: f64, rate: Option<f64>) -> f64 {
+        use crate::geo::{wrap180, wrap360};
+        let e = match self.estimate {
+            None => heading,
+            Some(prev) => {
+                let predicted = prev + rate.unwrap_or(0.0) * dt.clamp(0.0, 10.0);
+                // without a rate, a turn is followed by the readings alone
+                let gain = if rate.is_some() {
+                    self.gain
+                } else {
+                    self.gain.max(0.3)
+                };
+                predicted + gain * wrap180(heading - predicted)
+            }
+        };
+        let e = wrap360(e);
+        self.estimate = Some(e);
+        e
+    }
+}
+
+/// A compass deviation table: deviation (degrees, east positive: true = compass + deviation) by
+/// compass heading, interpolated around the circle; learnt from GPS course over ground while the
+/// vehicle goes straight and fast enough that course is heading.
+#[derive(Debug, Clone)]
+pub struct Deviation {
+    /// Sums of learnt samples' headings and deviations, and their count, per 10° of heading.
+    bins: [(f64, f64, u32); 36],
+    /// Points given in the configuration, (heading, deviation), sorted.
+    table: Vec<(f64, f64)>,
+}
+
+impl Deviation {
+    /// A table of `(heading, deviation)` points (none: no deviation until some is learnt).
+    pub fn new(mut table: Vec<(f64, f64)>) -> Deviation {
+        table.sort_by(|a, b| a.0.total_cmp(&b.0));
+        Deviation {
+            bins: [(0.0, 0.0, 0); 36],
+            table,
+        }
+    }
+
+    /// Learns from one sample: the compass said `heading` while the course over ground was `course`.
+    pub fn learn(&mut self, heading: f64, course: f64) {
+        let h = crate::geo::wrap360(heading);
+        let bin = (h / 10.0) as usize % 36;
+        let d = crate::geo::wrap180(course - heading);
+        self.bins[bin].0 += h;
+        self.bins[bin].1 += d;
+        self.bins[bin].2 += 1;
+    }
+
+    /// The points in force: the learnt bins (each at its samples' mean heading) where there are
+    /// any, else the table's.
+    pub fn points(&self) -> Vec<(f64, f64)> {
+        let learnt: Vec<(f64, f64)> = self
+            .bins
+            .iter()
+            .filter(|(_, _, n)| *n >= 5)
+            .map(|(h, d, n)| (h / f64::from(*n), d / f64::from(*n)))
+            .collect();
+        if learnt.is_empty() {
+            self.table.clone()
+        } else {
+            learnt
+        }
+    }
+
+    /// The deviation at compass heading `heading`.
+    pub fn at(&self, heading: f64) -> f64 {
+        let pts = self.points();
+        match pts.len() {
+            0 => 0.0,
+            1 => pts[0].1,
+            _ => {
+                let h = crate::geo::wrap360(heading);
+                // the points around h, wrapping at 360
+                let after = pts.iter().position(|p| p.0 >= h).unwrap_or(0);
+                let before = (after + pts.len() - 1) % pts.len();
+                let (h0, d0) = pts[before];
+                let (h1, d1) = pts[after];
+                let span = crate::geo::wrap360(h1 - h0);
+                if span == 0.0 {
+                    return d0;
+                }
+                let f = crate::geo::wrap360(h - h0) / span;
+                d0 + f * (d1 - d0)
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -254,5 +379,90 @@ mod tests {
             "EKF error {ekf_err} m"
         );
         assert!(ekf_err < naive_err, "EKF {ekf_err} m vs raw {naive_err} m");
+    }
+
+    #[test]
+    fn tilt_is_taken_out_of_the_magnetometer() {
+        // a field 60° below the horizon towards magnetic north, seen by a vehicle on heading h,
+        // rolled and pitched
+        for (h, roll, pitch) in [
+            (0.0, 0.0, 0.0),
+            (30.0, 10.0, -5.0),
+            (200.0, -20.0, 15.0),
+            (300.0, 5.0, 25.0),
+        ] {
+            let (dip, f) = (60f64.to_radians(), 50.0);
+            let ned = nalgebra::Vector3::new(f * dip.cos(), 0.0, f * dip.sin());
+            let rot = nalgebra::Rotation3::from_euler_angles(
+                f64::to_radians(roll),
+                f64::to_radians(pitch),
+                f64::to_radians(h),
+            );
+            // body = R^T * ned
+            let body = rot.inverse() * ned;
+            let got = tilt_compensated([body[0], body[1], body[2]], roll, pitch);
+            assert!(
+                crate::geo::wrap180(got - h).abs() < 0.01,
+                "{h} {roll} {pitch}: {got}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_smoother_follows_turns_and_calms_noise() {
+        let mut noise = Noise(fastrand::Rng::with_seed(5));
+        let mut s = HeadingSmoother::new(0.05);
+        let (mut err_raw, mut err_s) = (Vec::new(), Vec::new());
+        let dt = 0.1;
+        for i in 0..2000 {
+            let t = f64::from(i) * dt;
+            // straight, then a 10°/s turn, then straight
+            let (truth, rate) = if t < 60.0 {
+                (90.0, 0.0)
+            } else if t < 78.0 {
+                (90.0 + 10.0 * (t - 60.0), 10.0)
+            } else {
+                (270.0, 0.0)
+            };
+            let reading = truth + noise.next(2.0);
+            let e = s.update(dt, reading, Some(rate));
+            if i > 50 {
+                err_raw.push(crate::geo::wrap180(reading - truth));
+                err_s.push(crate::geo::wrap180(e - truth));
+            }
+        }
+        let (raw, smooth) = (rms(&err_raw), rms(&err_s));
+        println!("heading smoother: raw {raw:.2}°, smoothed {smooth:.2}° through a 180° turn");
+        assert!(smooth < 0.4 * raw, "{smooth} vs {raw}");
+    }
+
+    #[test]
+    fn deviation_is_learnt_from_course_over_ground() {
+        let mut noise = Noise(fastrand::Rng::with_seed(9));
+        // the compass errs by 3 sin(h) + 1 degrees
+        let deviation = |h: f64| 3.0 * h.to_radians().sin() + 1.0;
+        let mut d = Deviation::new(vec![]);
+        for leg in 0..12 {
+            let truth = f64::from(leg) * 30.0 + 5.0;
+            for _ in 0..40 {
+                // compass = truth - deviation, so true = compass + deviation
+                let compass = truth - deviation(truth) + noise.next(1.0);
+                let course = truth + noise.next(1.0);
+                d.learn(compass, course);
+            }
+        }
+        let mut worst = 0.0f64;
+        for leg in 0..12 {
+            let truth = f64::from(leg) * 30.0 + 5.0;
+            let compass = truth - deviation(truth);
+            worst = worst.max((d.at(compass) - deviation(truth)).abs());
+        }
+        println!("deviation learnt: worst error {worst:.2}° on the legs sailed");
+        assert!(worst < 0.6, "{worst}");
+        // a configured table is interpolated around the circle
+        let t = Deviation::new(vec![(0.0, 2.0), (90.0, -2.0), (180.0, 0.0), (270.0, 4.0)]);
+        assert!((t.at(45.0) - 0.0).abs() < 1e-9);
+        assert!((t.at(315.0) - 3.0).abs() < 1e-9);
+        assert!((t.at(270.0) - 4.0).abs() < 1e-9);
     }
 }

@@ -45,6 +45,7 @@ async fn start() -> (Runtime, Feed, Interface) {
   <medium name="bus" url="inproc://"/>
   <module name="depth" type="depth-kalman" medium="bus" sigma="0.2" accel="0.3"/>
   <module name="ekf" type="position-ekf" medium="bus" gps_sigma="2" vel_sigma="0.02"/>
+  <module name="compass" type="heading-correction" medium="bus" learn="true" variation="4"/>
 </seabus>"#,
     )
     .unwrap();
@@ -55,6 +56,7 @@ async fn start() -> (Runtime, Feed, Interface) {
     let mut rx = bus.attach_with("rx", 1 << 16, 16);
     rx.subscribe("nav.depth.filtered").unwrap();
     rx.subscribe("nav.position.estimated").unwrap();
+    rx.subscribe("nav.heading.corrected").unwrap();
     // the modules subscribe as they start
     tokio::time::sleep(Duration::from_millis(200)).await;
     let feed = Feed {
@@ -193,5 +195,82 @@ async fn position_ekf_learns_the_compass_bias_and_dead_reckons() {
     );
     assert!((learnt - bias).abs() < 0.5, "learnt {learnt}°");
     assert!(err < 10.0, "{err} m after 900 m");
+    rt.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn heading_correction_learns_the_deviation_on_straight_legs() {
+    let (rt, mut feed, mut rx) = start().await;
+    let mut rng = fastrand::Rng::with_seed(8);
+    // the compass errs by 3 sin(h) + 1 degrees; the variation is 4° east
+    let deviation = |h: f64| 3.0 * h.to_radians().sin() + 1.0;
+    let mut t = 0.0;
+    let mut sent = 0;
+    for leg in 0..12 {
+        let truth = f64::from(leg) * 30.0 + 5.0;
+        for i in 0..60 {
+            if i % 10 == 0 {
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
+            t += 0.2;
+            let compass = truth - 4.0 - deviation(truth) + gauss(&mut rng, 1.0);
+            feed.send(
+                t,
+                "nav.attitude",
+                DataMap::new()
+                    .with("yaw", compass)
+                    .with("yaw_rate", 0.0)
+                    .with("pitch", 0.0)
+                    .with("roll", 0.0),
+            )
+            .await;
+            feed.send(
+                t,
+                "nav.velocity",
+                DataMap::new()
+                    .with("course", truth + gauss(&mut rng, 1.0))
+                    .with("speed", 1.5),
+            )
+            .await;
+            sent += 1;
+        }
+        tokio::time::sleep(Duration::from_millis(2)).await;
+    }
+    // a last pass over every leg's heading (long enough for the smoother to settle after each
+    // jump, which the rate of turn does not announce): the corrected heading is the truth
+    let mut errors = Vec::new();
+    for leg in 0..12 {
+        let truth = f64::from(leg) * 30.0 + 5.0;
+        for i in 0..100 {
+            if i % 10 == 0 {
+                tokio::time::sleep(Duration::from_millis(1)).await;
+            }
+            t += 0.2;
+            let compass = truth - 4.0 - deviation(truth);
+            feed.send(
+                t,
+                "nav.attitude",
+                DataMap::new()
+                    .with("yaw", compass)
+                    .with("yaw_rate", 0.0)
+                    .with("pitch", 0.0)
+                    .with("roll", 0.0),
+            )
+            .await;
+        }
+        let out = drain(
+            &mut rx,
+            "nav.heading.corrected",
+            if leg == 0 { sent + 100 } else { 100 },
+        )
+        .await;
+        let last = out.last().expect("corrected headings");
+        errors.push(seabus_modules::geo::wrap180(
+            last.get_f64("heading").unwrap() - truth,
+        ));
+    }
+    let worst = errors.iter().fold(0.0f64, |a, e| a.max(e.abs()));
+    println!("heading-correction: worst error {worst:.2}° after learning ({errors:.2?})");
+    assert!(worst < 0.6, "{errors:?}");
     rt.shutdown().await;
 }

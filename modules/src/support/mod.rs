@@ -8,8 +8,9 @@
 //!   vehicle's severity;
 //! - `external` runs another program as a module, speaking JSON lines on its stdin and stdout;
 //! - `logger` keeps one binary log of everything and a CSV per topic, stamped by seabus;
-//! - `depth-kalman` and `position-ekf` estimate depth and vertical speed, and position with the
-//!   compass bias, keeping the raw topics.
+//! - `depth-kalman`, `position-ekf` and `heading-correction` estimate depth and vertical speed,
+//!   position with the compass bias, and heading corrected for tilt and deviation, keeping the raw
+//!   topics.
 
 pub mod convert;
 pub mod external;
@@ -30,5 +31,6 @@ pub fn register(reg: &mut Registry) {
         .add_module(external::TYPE)
         .add_module(logger::TYPE)
         .add_module(navigation::DEPTH)
-        .add_module(navigation::POSITION);
+        .add_module(navigation::POSITION)
+        .add_module(navigation::HEADING);
 }

@@ -11,6 +11,13 @@
 //!   `sigma` and the compass bias it has learnt; between fixes (submerged) it dead-reckons, and the
 //!   output says `source = "dead-reckoning"`. The first fix is the origin of its local frame.
 //!   Parameters: `gps_sigma` (m, default 3), `vel_sigma` (m/s, default 0.03).
+//! - `heading-correction`: reads the compass (`attitude`, default `nav.attitude`: `yaw`, or the
+//!   magnetometer `mag_x`, `mag_y`, `mag_z` with `roll` and `pitch`, whose tilt it takes out) and
+//!   publishes the heading (`output`, default `nav.heading.corrected`) corrected by the deviation
+//!   table (`deviation="0:2, 90:-1.5, 180:0, 270:1"`, compass heading : degrees east) and the
+//!   magnetic `variation`, smoothed through turns with the rate of turn (`gain`, default 0.1). With
+//!   `learn="true"` it learns the deviation from GPS course over ground (`course`, default
+//!   `nav.velocity`) while the vehicle goes straight faster than `min_speed` (m/s, default 0.5).
 
 use crate::datasets::Catalogue;
 use crate::estimate::{DepthKalman, PositionEkf};
@@ -205,6 +212,121 @@ impl Module for PositionModule {
             self.fixed = false;
             return self.publish(ctx).await;
         }
+        Ok(())
+    }
+}
+
+/// The `heading-correction` module type.
+pub const HEADING: ModuleType = ModuleType {
+    name: "heading-correction",
+    kind: ModuleKind::Supporting,
+    summary: "compass heading with tilt compensation, deviation (configured or learnt from GPS) and smoothing",
+    build: build_heading,
+};
+
+struct HeadingModule {
+    attitude: Topic,
+    course: Topic,
+    output: Topic,
+    variation: f64,
+    learn: bool,
+    min_speed: f64,
+    deviation: crate::estimate::Deviation,
+    smoother: crate::estimate::HeadingSmoother,
+    last: Option<(Stamp, f64, Option<f64>)>,
+}
+
+fn build_heading(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
+    let p = &cfg.params;
+    let attitude = p.topic_or("attitude", "nav.attitude")?;
+    let course = p.topic_or("course", "nav.velocity")?;
+    let output = p.topic_or("output", "nav.heading.corrected")?;
+    let mut table = Vec::new();
+    if let Some(t) = p.get("deviation") {
+        for item in t.value.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let point = item
+                .split_once(':')
+                .and_then(|(h, d)| Some((h.trim().parse().ok()?, d.trim().parse().ok()?)));
+            let Some(point) = point else {
+                return Err(t.error(format!("`{item}` is not HEADING:DEVIATION in degrees")));
+            };
+            table.push(point);
+        }
+    }
+    let decl = Declaration::new(ModuleKind::Supporting)
+        .consumes(TopicDecl::topic(attitude.as_str()).field("yaw", "deg"))
+        .consumes(TopicDecl::topic(course.as_str()).field("course", "deg"))
+        .produces(TopicDecl::dataset(output.as_str(), "heading"));
+    Ok(Built {
+        decl,
+        module: Box::new(HeadingModule {
+            attitude,
+            course,
+            output,
+            variation: p.float_or("variation", 0.0)?,
+            learn: p.flag_or("learn", false)?,
+            min_speed: p.non_negative_or("min_speed", 0.5)?,
+            deviation: crate::estimate::Deviation::new(table),
+            smoother: crate::estimate::HeadingSmoother::new(p.positive_or("gain", 0.1)?),
+            last: None,
+        }),
+    })
+}
+
+#[async_trait]
+impl Module for HeadingModule {
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        _: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
+        let Some(m) = msg.payload.as_map() else {
+            return Ok(());
+        };
+        if msg.topic == self.course {
+            // course over ground is heading only when going straight and fast enough
+            let straight = self
+                .last
+                .is_some_and(|(_, _, rate)| rate.is_none_or(|r| r.abs() < 1.0));
+            if let (true, true, Some(course), Some((_, compass, _))) =
+                (self.learn, straight, m.get_f64("course"), self.last)
+                && m.get_f64("speed").is_some_and(|s| s >= self.min_speed)
+            {
+                self.deviation.learn(compass, course - self.variation);
+            }
+            return Ok(());
+        }
+        if msg.topic != self.attitude {
+            return Ok(());
+        }
+        let mag = (m.get_f64("mag_x"), m.get_f64("mag_y"), m.get_f64("mag_z"));
+        let compass = match (mag, m.get_f64("roll"), m.get_f64("pitch")) {
+            ((Some(x), Some(y), Some(z)), Some(roll), Some(pitch)) => {
+                crate::estimate::tilt_compensated([x, y, z], roll, pitch)
+            }
+            _ => match m.get_f64("yaw").or_else(|| m.get_f64("heading")) {
+                Some(h) => h,
+                None => return Ok(()),
+            },
+        };
+        let rate = m.get_f64("yaw_rate").or_else(|| m.get_f64("rate"));
+        let dt = self
+            .last
+            .map_or(0.0, |(t, _, _)| msg.stamp.since(t).as_secs_f64());
+        self.last = Some((msg.stamp, compass, rate));
+        let deviation = self.deviation.at(compass);
+        let heading = self
+            .smoother
+            .update(dt, compass + deviation + self.variation, rate);
+        let mut out = DataMap::new()
+            .with("heading", heading)
+            .with("deviation", deviation)
+            .with("variation", self.variation);
+        if let Some(r) = rate {
+            out.insert("rate", r);
+        }
+        ctx.publish(&self.output, out).await?;
         Ok(())
     }
 }
