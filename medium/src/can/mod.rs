@@ -528,6 +528,14 @@ impl CannelloniConfig {
     }
 }
 
+/// The frame a message sent on CAN medium `medium` stands for, or why it stands for none.
+pub(crate) fn frame_to_send(medium: &str, msg: &Message) -> Result<CanFrame, SendError> {
+    CanFrame::from_message(msg.topic.as_str(), &msg.payload).map_err(|reason| SendError::Io {
+        medium: medium.to_string(),
+        reason,
+    })
+}
+
 /// The transport of `cannelloni://`.
 pub struct CannelloniTransport {
     name: Arc<str>,
@@ -538,12 +546,7 @@ pub struct CannelloniTransport {
 
 impl Transport for CannelloniTransport {
     fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
-        let frame = CanFrame::from_message(msg.topic.as_str(), &msg.payload).map_err(|reason| {
-            SendError::Io {
-                medium: self.name.to_string(),
-                reason,
-            }
-        })?;
+        let frame = frame_to_send(&self.name, msg)?;
         let seq = self.seq.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         Ok(Bytes::from(cannelloni::encode(seq, &[frame])))
     }

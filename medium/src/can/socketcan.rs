@@ -94,12 +94,7 @@ pub struct SocketCanTransport {
 
 impl Transport for SocketCanTransport {
     fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
-        let frame = CanFrame::from_message(msg.topic.as_str(), &msg.payload).map_err(|reason| {
-            SendError::Io {
-                medium: self.name.to_string(),
-                reason,
-            }
-        })?;
+        let frame = super::frame_to_send(&self.name, msg)?;
         // the frame travels to the writer in cannelloni's form: the Linux id word, length, data
         Ok(Bytes::from(super::cannelloni::encode(0, &[frame])))
     }

@@ -247,27 +247,6 @@ async fn keep_connected(
     }
 }
 
-/// Reads packets until one is whole.
-async fn read_packet(sock: &mut TcpStream, buf: &mut Vec<u8>) -> Result<Packet, String> {
-    loop {
-        match wire::read_packet(buf) {
-            Ok(Read::Packet(p, n)) => {
-                buf.drain(..n);
-                return Ok(p);
-            }
-            Ok(Read::Incomplete(_)) => {}
-            Err(e) => return Err(format!("malformed packet: {e}")),
-        }
-        let mut chunk = [0u8; 65_536];
-        match tokio::time::timeout(Duration::from_secs(5), sock.read(&mut chunk)).await {
-            Err(_) => return Err("no answer for 5 s".into()),
-            Ok(Ok(0)) => return Err("the connection closed".into()),
-            Ok(Ok(n)) => buf.extend_from_slice(&chunk[..n]),
-            Ok(Err(e)) => return Err(e.to_string()),
-        }
-    }
-}
-
 /// Connects, shakes hands and registers; returns the connection and what it read beyond.
 async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), String> {
     let mut sock = tokio::time::timeout(
@@ -298,7 +277,7 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
         .await
         .map_err(|e| format!("handshake: {e}"))?;
     let mut buf = Vec::new();
-    let answer = read_packet(&mut sock, &mut buf).await?;
+    let answer = wire::next_packet(&mut sock, &mut buf, Duration::from_secs(5)).await?;
     let Some(first) = answer.messages.first() else {
         return Err("an empty answer to the handshake".into());
     };

@@ -180,27 +180,6 @@ impl Drop for MoosDb {
     }
 }
 
-/// Reads one packet (at most `SILENCE` away).
-async fn next_packet(sock: &mut TcpStream, buf: &mut Vec<u8>) -> Result<Packet, String> {
-    loop {
-        match wire::read_packet(buf) {
-            Ok(Read::Packet(p, n)) => {
-                buf.drain(..n);
-                return Ok(p);
-            }
-            Ok(Read::Incomplete(_)) => {}
-            Err(e) => return Err(format!("malformed packet: {e}")),
-        }
-        let mut chunk = [0u8; 65_536];
-        match tokio::time::timeout(SILENCE, sock.read(&mut chunk)).await {
-            Err(_) => return Err("silent for 5 s".into()),
-            Ok(Ok(0)) => return Err("closed".into()),
-            Ok(Ok(n)) => buf.extend_from_slice(&chunk[..n]),
-            Ok(Err(e)) => return Err(e.to_string()),
-        }
-    }
-}
-
 async fn send(sock: &mut TcpStream, messages: Vec<MoosMsg>) -> std::io::Result<()> {
     sock.write_all(&Packet { messages }.encode()).await
 }
@@ -214,7 +193,7 @@ async fn serve(mut sock: TcpStream, state: Arc<Mutex<State>>) {
         return;
     }
     let mut buf = Vec::new();
-    let Ok(intro) = next_packet(&mut sock, &mut buf).await else {
+    let Ok(intro) = wire::next_packet(&mut sock, &mut buf, SILENCE).await else {
         return;
     };
     let Some(first) = intro.messages.first().filter(|m| m.kind == kind::DATA) else {

@@ -351,6 +351,33 @@ pub fn handshake() -> [u8; HANDSHAKE_LEN] {
     h
 }
 
+/// Reads from `sock` until `buf` holds a whole packet (waiting at most `silence` for each read);
+/// takes the packet out of `buf`. The error says why: closed, silent, or malformed.
+pub async fn next_packet(
+    sock: &mut (impl tokio::io::AsyncRead + Unpin),
+    buf: &mut Vec<u8>,
+    silence: std::time::Duration,
+) -> Result<Packet, String> {
+    use tokio::io::AsyncReadExt;
+    loop {
+        match read_packet(buf) {
+            Ok(Read::Packet(p, n)) => {
+                buf.drain(..n);
+                return Ok(p);
+            }
+            Ok(Read::Incomplete(_)) => {}
+            Err(e) => return Err(format!("malformed packet: {e}")),
+        }
+        let mut chunk = [0u8; 65_536];
+        match tokio::time::timeout(silence, sock.read(&mut chunk)).await {
+            Err(_) => return Err(format!("silent for {silence:?}")),
+            Ok(Ok(0)) => return Err("the connection closed".into()),
+            Ok(Ok(n)) => buf.extend_from_slice(&chunk[..n]),
+            Ok(Err(e)) => return Err(e.to_string()),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
