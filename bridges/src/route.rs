@@ -127,6 +127,7 @@ struct Leg {
     format: Option<Format>,
     kind: Option<Kind>,
     fields: Vec<(String, String)>,
+    keep: bool,
     lcm: Option<crate::lcm::Mapping>,
 }
 
@@ -214,6 +215,7 @@ impl RouteBridge {
                     format: r.format,
                     kind: r.kind,
                     fields: r.fields.clone(),
+                    keep: r.keep,
                     lcm: match &types {
                         Some(t) => crate::lcm::Mapping::new(spec, r, t, from, to)?,
                         None => None,
@@ -331,7 +333,7 @@ impl RouteBridge {
             (Some(lcm), Some(types)) => {
                 convert_lcm(taken, leg, lcm, types, &msg.topic, &topic, msg.stamp)
             }
-            _ => convert(taken, &leg.fields, leg.format)
+            _ => convert(taken, &leg.fields, leg.keep, leg.format)
                 .map_err(|e| Problem::new("conversion", format!("topic `{}`: {e}", msg.topic))),
         };
         let payload = match converted {
@@ -433,23 +435,25 @@ fn convert_lcm(
     let conversion =
         |e: seabus_medium::ConvertError| Problem::new("conversion", format!("topic `{from}`: {e}"));
     if !lcm.encode {
-        return convert(p, &leg.fields, leg.format).map_err(conversion);
+        return convert(p, &leg.fields, leg.keep, leg.format).map_err(conversion);
     }
-    let map = convert(p, &leg.fields, None)
+    let map = convert(p, &leg.fields, leg.keep, None)
         .and_then(|p| p.to_map())
         .map_err(conversion)?;
     lcm.encode(types, to.as_str(), &map, stamp)
 }
 
-/// Applies field renames (which need a datamap) and the far side's format.
+/// Applies field renames (which need a datamap), keeping only the listed fields unless `keep`,
+/// and the far side's format.
 fn convert(
     p: Payload,
     fields: &[(String, String)],
+    keep: bool,
     format: Option<Format>,
 ) -> Result<Payload, seabus_medium::ConvertError> {
-    let p = if fields.is_empty() {
+    let p = if fields.is_empty() && keep {
         p
-    } else {
+    } else if keep {
         let map = p.to_map()?;
         drop(p);
         let mut map = Arc::unwrap_or_clone(map);
@@ -457,6 +461,16 @@ fn convert(
             map.rename(from, to);
         }
         Payload::from(map)
+    } else {
+        // only the listed fields, in the order listed
+        let map = p.to_map()?;
+        let mut out = DataMap::with_capacity(fields.len());
+        for (from, to) in fields {
+            if let Some(v) = map.get(from) {
+                out.push(to.clone(), v.clone());
+            }
+        }
+        Payload::from(out)
     };
     match format {
         Some(f) => p.convert(f),

@@ -58,6 +58,8 @@ pub struct RouteSpec {
     pub kind: Option<Kind>,
     /// Field renames (datamap payloads), `from → to`.
     pub fields: Vec<(String, String)>,
+    /// Whether fields not listed in `fields` cross too (`keep="false"`: only the listed ones).
+    pub keep: bool,
     /// The LCM type (`package.name_t`) messages have on the route's LCM side.
     pub lcm: Option<String>,
     /// Where it is written.
@@ -407,7 +409,7 @@ fn bridge_spec(
     for r in el.children_named("route") {
         r.only_children(&["field"])?;
         r.only_attrs(&[
-            "from", "to", "topics", "rename", "rate", "format", "kind", "lcm",
+            "from", "to", "topics", "rename", "rate", "format", "kind", "lcm", "keep",
         ])?;
         let medium_attr = |key: &str| -> Result<Option<String>, FileError> {
             match r.attr(key) {
@@ -467,10 +469,9 @@ fn bridge_spec(
         let mut fields = Vec::new();
         for f in r.children_named("field") {
             f.only_attrs(&["name", "rename"])?;
-            fields.push((
-                f.required("name")?.value.clone(),
-                f.required("rename")?.value.clone(),
-            ));
+            let name = f.required("name")?.value.clone();
+            let rename = f.get("rename").map_or_else(|| name.clone(), str::to_string);
+            fields.push((name, rename));
         }
         routes.push(RouteSpec {
             from,
@@ -481,6 +482,7 @@ fn bridge_spec(
             format,
             kind,
             fields,
+            keep: r.flag("keep")?.unwrap_or(true),
             lcm: r.get("lcm").map(|t| t.trim().to_string()),
             pos: r.pos.clone(),
         });
