@@ -357,6 +357,16 @@ impl DataMap {
         self.entries.iter().map(|(k, v)| (k.as_ref(), v))
     }
 
+    /// The entries in order, keys as held: cloning a key written in code copies nothing.
+    pub fn entries(&self) -> &[(Key, Value)] {
+        &self.entries
+    }
+
+    /// The entries in order, taken out of the map.
+    pub fn into_entries(self) -> Vec<(Key, Value)> {
+        self.entries
+    }
+
     /// The number of entries.
     pub fn len(&self) -> usize {
         self.entries.len()

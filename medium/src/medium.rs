@@ -652,7 +652,14 @@ impl Inner {
         let (msg, frame) = match self.transport.get() {
             Some(t) => {
                 let frame = t.encode(&msg)?;
-                (t.local_copy(msg, &frame), Some(frame))
+                // the local copy is handed out at once (a fault stage may hand it out later, to
+                // whoever subscribes meanwhile): with nobody else here subscribed, there is none
+                let local = if self.faults.is_none() && !self.others_subscribe(from) {
+                    None
+                } else {
+                    t.local_copy(msg, &frame)
+                };
+                (local, Some(frame))
             }
             None => (Some(msg), None),
         };
@@ -661,6 +668,15 @@ impl Inner {
             Some(f) => f.apply(self, msg, frame, from, wait).await,
             None => self.dispatch(msg, frame, Some(from), wait).await,
         }
+    }
+
+    /// Whether any local interface but `from` subscribes to anything.
+    fn others_subscribe(&self, from: u64) -> bool {
+        self.subs
+            .read()
+            .unwrap_or_else(|p| p.into_inner())
+            .iter()
+            .any(|s| s.id != from && !s.patterns.is_empty())
     }
 
     /// Puts a message into the queue of every matching local interface but `from`, without

@@ -3,7 +3,9 @@
 //! file in the same form.
 
 use crate::xml::{self, FileError};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::hash::{BuildHasherDefault, Hasher};
+use std::sync::{Mutex, OnceLock};
 
 /// The built-in dictionary's text.
 pub const BUILT_IN: &str = include_str!("../../../configs/dsaav-dictionary.xml");
@@ -35,13 +37,62 @@ impl ValueType {
     }
 }
 
+/// A quick hash for the dictionary's numbers and names (FNV-1a, then mixed so that every bit of
+/// the result depends on the input): the dictionary is looked up for every key of every message.
+#[derive(Default)]
+pub(crate) struct QuickHasher(u64);
+
+impl Hasher for QuickHasher {
+    fn finish(&self) -> u64 {
+        (self.0 ^ (self.0 >> 29)).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        let mut h = if self.0 == 0 {
+            0xcbf2_9ce4_8422_2325
+        } else {
+            self.0
+        };
+        for b in bytes {
+            h = (h ^ u64::from(*b)).wrapping_mul(0x0100_0000_01b3);
+        }
+        self.0 = h;
+    }
+
+    fn write_u16(&mut self, n: u16) {
+        self.0 = (self.0 ^ u64::from(n)).wrapping_mul(0x0100_0000_01b3);
+    }
+}
+
+/// A map with [`QuickHasher`].
+pub(crate) type QuickMap<K, V> = HashMap<K, V, BuildHasherDefault<QuickHasher>>;
+
+/// The one copy of `name` kept for the program's life, so that datamaps built from received
+/// frames name their keys without copying them. Each distinct name is kept once, however many
+/// dictionaries name it.
+fn intern(name: &str) -> &'static str {
+    static NAMES: OnceLock<Mutex<HashSet<&'static str>>> = OnceLock::new();
+    let mut names = NAMES
+        .get_or_init(Default::default)
+        .lock()
+        .unwrap_or_else(|p| p.into_inner());
+    match names.get(name) {
+        Some(n) => n,
+        None => {
+            let n: &'static str = Box::leak(name.into());
+            names.insert(n);
+            n
+        }
+    }
+}
+
 /// Message types and keys by number and by name.
 #[derive(Debug, Clone, Default)]
 pub struct Dictionary {
-    types: HashMap<u16, String>,
-    type_ids: HashMap<String, u16>,
-    keys: HashMap<u16, (String, ValueType)>,
-    key_ids: HashMap<String, (u16, ValueType)>,
+    types: QuickMap<u16, &'static str>,
+    type_ids: QuickMap<&'static str, u16>,
+    keys: QuickMap<u16, (&'static str, ValueType)>,
+    key_ids: QuickMap<&'static str, (u16, ValueType)>,
 }
 
 impl Dictionary {
@@ -70,7 +121,7 @@ impl Dictionary {
             let id_attr = el.required("id")?;
             let id: u16 = id_attr.parse("a number 0–65535")?;
             let name_attr = el.required("name")?;
-            let name = name_attr.value.trim().to_string();
+            let name = name_attr.value.trim();
             if name.is_empty()
                 || !name
                     .chars()
@@ -82,10 +133,11 @@ impl Dictionary {
             }
             if el.name == "type" {
                 el.only_attrs(&["id", "name", "summary"])?;
-                if next.types.contains_key(&id) || next.type_ids.contains_key(&name) {
+                if next.types.contains_key(&id) || next.type_ids.contains_key(name) {
                     return Err(el.error(format!("message type {id} or `{name}` is defined twice")));
                 }
-                next.types.insert(id, name.clone());
+                let name = intern(name);
+                next.types.insert(id, name);
                 next.type_ids.insert(name, id);
             } else {
                 el.only_attrs(&["id", "name", "type", "unit", "summary"])?;
@@ -97,10 +149,11 @@ impl Dictionary {
                     "string" => ValueType::Str,
                     _ => return Err(ty_attr.error("expected int, float, double or string")),
                 };
-                if next.keys.contains_key(&id) || next.key_ids.contains_key(&name) {
+                if next.keys.contains_key(&id) || next.key_ids.contains_key(name) {
                     return Err(el.error(format!("key {id} or `{name}` is defined twice")));
                 }
-                next.keys.insert(id, (name.clone(), ty));
+                let name = intern(name);
+                next.keys.insert(id, (name, ty));
                 next.key_ids.insert(name, (id, ty));
             }
         }
@@ -114,8 +167,8 @@ impl Dictionary {
     }
 
     /// The name and value type of key `id`.
-    pub fn key_name(&self, id: u16) -> Option<(&str, ValueType)> {
-        self.keys.get(&id).map(|(n, t)| (n.as_str(), *t))
+    pub fn key_name(&self, id: u16) -> Option<(&'static str, ValueType)> {
+        self.keys.get(&id).copied()
     }
 
     /// The number of the message type called `name` (or written as a number).
@@ -128,10 +181,15 @@ impl Dictionary {
 
     /// The name of message type `id`, or its number as text when it has none.
     pub fn type_name(&self, id: u16) -> String {
-        self.types
-            .get(&id)
-            .cloned()
-            .unwrap_or_else(|| id.to_string())
+        match self.types.get(&id) {
+            Some(name) => name.to_string(),
+            None => id.to_string(),
+        }
+    }
+
+    /// The name of message type `id`, when it has one.
+    pub fn named_type(&self, id: u16) -> Option<&'static str> {
+        self.types.get(&id).copied()
     }
 }
 

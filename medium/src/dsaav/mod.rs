@@ -24,6 +24,7 @@
 //! seen here at all.
 
 pub mod dict;
+mod sockets;
 pub mod wire;
 
 use crate::datamap::{DataMap, Value};
@@ -33,15 +34,20 @@ use crate::payload::Payload;
 use crate::topic::Topic;
 use crate::url::{MediumUrl, UrlError};
 use bytes::Bytes;
-use dict::{Dictionary, ValueType};
+use dict::{Dictionary, QuickMap, ValueType};
 use std::collections::HashMap;
 use std::net::SocketAddr;
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
+use tokio::io::Interest;
+use tokio::io::unix::AsyncFd;
 use wire::{Address, Destination, Frame, Param};
 
 /// The EtherType of DSAAV frames on raw Ethernet (IEEE local experimental).
 pub const ETHERTYPE: u16 = 0x88B5;
+
+/// Bytes before the payload in what a UDP socket's filter reads.
+const UDP_HEADER: u32 = 8;
 
 /// What the medium puts its frames on.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -230,10 +236,25 @@ fn is_for(f: &Frame, node: u16) -> bool {
 /// Turns a frame into the datamap a seabus receiver gets, with the keys the dictionary did not
 /// know.
 pub fn from_frame(dict: &Dictionary, f: &Frame) -> (DataMap, Vec<u16>) {
-    let mut map = DataMap::with_capacity(f.params.len() + 4);
-    map.push("@src", f.src.to_string());
+    frame_map(dict, f, f.params.iter().cloned())
+}
+
+/// [`from_frame`] for a frame no longer needed: its strings move into the datamap.
+fn into_map(dict: &Dictionary, mut f: Frame) -> (DataMap, Vec<u16>) {
+    let params = std::mem::take(&mut f.params);
+    frame_map(dict, &f, params.into_iter())
+}
+
+/// The datamap of frame `f`'s header and `params`.
+fn frame_map(
+    dict: &Dictionary,
+    f: &Frame,
+    params: impl ExactSizeIterator<Item = (u16, Param)>,
+) -> (DataMap, Vec<u16>) {
+    let mut map = DataMap::with_capacity(params.len() + 4);
+    map.push("@src", f.src.text());
     match f.dst {
-        Destination::To(a) => map.push("@dst", a.to_string()),
+        Destination::To(a) => map.push("@dst", a.text()),
         Destination::Channel(c) => map.push("@channel", i64::from(c)),
     }
     map.push("@id", i64::from(f.id));
@@ -241,23 +262,31 @@ pub fn from_frame(dict: &Dictionary, f: &Frame) -> (DataMap, Vec<u16>) {
         map.push("@ref", i64::from(f.reference));
     }
     let mut unknown = Vec::new();
-    for (key, p) in &f.params {
-        let name = match dict.key_name(*key) {
-            Some((name, _)) => name.to_string(),
-            None => {
-                unknown.push(*key);
-                format!("k{key}")
-            }
-        };
+    for (key, p) in params {
         let value = match p {
-            Param::Int(v) => Value::Int(i64::from(*v)),
-            Param::Float(v) => Value::Float(f64::from(*v)),
-            Param::Double(v) => Value::Float(*v),
-            Param::Str(s) => Value::from(s.as_str()),
+            Param::Int(v) => Value::Int(i64::from(v)),
+            Param::Float(v) => Value::Float(f64::from(v)),
+            Param::Double(v) => Value::Float(v),
+            Param::Str(s) => Value::from(s),
         };
-        map.push(name, value);
+        match dict.key_name(key) {
+            // the dictionary's own copy of the name: nothing is copied
+            Some((name, _)) => map.push(name, value),
+            None => {
+                unknown.push(key);
+                map.push(format!("k{key}"), value);
+            }
+        }
     }
     (map, unknown)
+}
+
+/// The node a frame this medium encoded is addressed to; `None` for a channel broadcast.
+fn addressed_node(frame: &[u8]) -> Option<u16> {
+    match (frame.get(4), frame.get(10..12)) {
+        (Some(flags), Some(&[hi, lo])) if flags & 1 == 0 => Some(u16::from_be_bytes([hi, lo])),
+        _ => None,
+    }
 }
 
 /// The DSAAV transport.
@@ -269,7 +298,7 @@ pub struct DsaavTransport {
 }
 
 enum Link {
-    Udp(Arc<tokio::net::UdpSocket>, Vec<SocketAddr>),
+    Udp(Arc<AsyncFd<std::net::UdpSocket>>, Vec<SocketAddr>),
     Ethernet(Arc<eth::RawSocket>),
     InProcess(Hub, u64),
 }
@@ -282,17 +311,25 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<DsaavTransport>, OpenError> {
         Backbone::Udp(ucfg) => {
             let (socket, dests) =
                 crate::udp::bind(ucfg).map_err(o.io_error(format!("binding {}", ucfg.bind)))?;
-            let socket = Arc::new(
-                tokio::net::UdpSocket::from_std(socket)
-                    .map_err(o.io_error("registering the socket"))?,
-            );
+            // what this medium sends comes back to it (multicast loopback): the kernel drops it
+            sockets::set_filter(
+                std::os::fd::AsRawFd::as_raw_fd(&socket),
+                &sockets::skip_own(UDP_HEADER, cfg.node, u32::MAX),
+            )
+            .map_err(o.io_error("filtering the socket"))?;
+            // watched for reading only: see `sockets`
+            // SAFETY: the socket is owned by the AsyncFd from here on and closed only by it
+            let socket = unsafe { AsyncFd::register_with_interest(socket, Interest::READABLE) }
+                .map_err(std::io::Error::from)
+                .map_err(o.io_error("registering the socket"))?;
+            let socket = Arc::new(socket);
             let task = tokio::spawn(rx.udp(socket.clone()));
             o.ingress.own_task(task.abort_handle());
             Link::Udp(socket, dests)
         }
         Backbone::Ethernet(iface) => {
             let socket = Arc::new(
-                eth::RawSocket::open(iface, ETHERTYPE)
+                eth::RawSocket::open_node(iface, ETHERTYPE, cfg.node)
                     .map_err(o.io_error(format!("opening a raw socket on {iface}")))?,
             );
             let task = tokio::spawn(rx.ethernet(socket.clone()));
@@ -359,6 +396,10 @@ impl Transport for DsaavTransport {
     /// What a receiver on this node reads of the frame: the header keys the wire gives (`@src`,
     /// `@id`, …), the values as the wire carries them; nothing for a frame to another node.
     fn local_copy(&self, msg: Message, frame: &Bytes) -> Option<Message> {
+        // a frame to another node: its header says so, nothing to read
+        if addressed_node(frame).is_some_and(|node| node != self.cfg.node) {
+            return None;
+        }
         let f = match Frame::decode(frame) {
             Ok(f) => f,
             Err(e) => {
@@ -372,13 +413,13 @@ impl Transport for DsaavTransport {
         if !is_for(&f, self.cfg.node) {
             return None;
         }
-        let topic = topic_of(&self.cfg.dict, f.kind);
-        let topic = if msg.topic.as_str() == topic {
+        let named = self.cfg.dict.named_type(f.kind);
+        let topic = if named.is_some() && msg.topic.as_str().strip_prefix("dsaav.") == named {
             msg.topic
         } else {
-            Topic::new(&topic).ok()?
+            Topic::new(&topic_of(&self.cfg.dict, f.kind)).ok()?
         };
-        let (map, _) = from_frame(&self.cfg.dict, &f);
+        let (map, _) = into_map(&self.cfg.dict, f);
         Some(Message {
             topic,
             // the wire carries no kind: what it delivers is data
@@ -393,8 +434,7 @@ impl Transport for DsaavTransport {
             match &self.link {
                 Link::Udp(socket, dests) => {
                     for dest in dests {
-                        socket
-                            .send_to(&frame, dest)
+                        sockets::send_to(socket, &frame, *dest)
                             .await
                             .map_err(|e| io_send(&self.name, format!("sending to {dest}: {e}")))?;
                     }
@@ -425,8 +465,8 @@ struct Receiver {
     medium: Arc<str>,
     node: u16,
     dict: Arc<Dictionary>,
-    origins: HashMap<u16, (Arc<Origin>, u64)>,
-    topics: HashMap<u16, Option<Topic>>,
+    origins: QuickMap<u16, (Arc<Origin>, u64)>,
+    topics: QuickMap<u16, Option<Topic>>,
 }
 
 impl Receiver {
@@ -436,8 +476,8 @@ impl Receiver {
             medium: o.name.clone(),
             node: cfg.node,
             dict: cfg.dict.clone(),
-            origins: HashMap::new(),
-            topics: HashMap::new(),
+            origins: QuickMap::default(),
+            topics: QuickMap::default(),
         }
     }
 
@@ -455,7 +495,8 @@ impl Receiver {
         if src == self.node || !is_for(&f, self.node) {
             return (true, Some(src));
         }
-        let (map, unknown) = from_frame(&self.dict, &f);
+        let kind = f.kind;
+        let (map, unknown) = into_map(&self.dict, f);
         for key in unknown {
             self.ingress.reject(
                 "dsaav-unknown-key",
@@ -464,12 +505,12 @@ impl Receiver {
                 ),
             );
         }
-        let topic = match self.topics.get(&f.kind) {
+        let topic = match self.topics.get(&kind) {
             Some(t) => t.clone(),
             None => {
                 // made once per message type
-                let t = Topic::new(&topic_of(&self.dict, f.kind)).ok();
-                self.topics.insert(f.kind, t.clone());
+                let t = Topic::new(&topic_of(&self.dict, kind)).ok();
+                self.topics.insert(kind, t.clone());
                 t
             }
         };
@@ -503,41 +544,62 @@ impl Receiver {
         (self.ingress.deliver(msg), Some(src))
     }
 
-    async fn udp(mut self, socket: Arc<tokio::net::UdpSocket>) {
-        let mut buf = vec![0u8; 65_536];
+    async fn udp(mut self, socket: Arc<AsyncFd<std::net::UdpSocket>>) {
+        use std::os::fd::AsRawFd;
+        let mut batch = sockets::Batch::new(65_536);
         loop {
-            match socket.recv_from(&mut buf).await {
-                Ok((n, from)) => {
-                    if !self.frame(&from, &buf[..n]).0 {
-                        return;
-                    }
-                }
+            let mut ready = match socket.readable().await {
+                Ok(r) => r,
                 Err(e) => {
                     tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
                     tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                    continue;
+                }
+            };
+            let read = batch.receive(socket.as_raw_fd());
+            // a batch that is not full emptied the socket, as a read that would block says: the
+            // next read waits for a new datagram instead of trying
+            if !matches!(read, Ok(sockets::BATCH)) {
+                ready.clear_ready();
+            }
+            if let Err(e) = read
+                && e.kind() != std::io::ErrorKind::WouldBlock
+            {
+                tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
+                tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                continue;
+            }
+            for i in 0..batch.taken() {
+                let (from, d) = batch.get(i);
+                if !self.frame(&sockets::inet(from), d).0 {
+                    return;
                 }
             }
         }
     }
 
     async fn ethernet(mut self, socket: Arc<eth::RawSocket>) {
-        let mut buf = vec![0u8; 2048];
+        let mut batch = sockets::Batch::new(2048);
         loop {
-            match socket.recv(&mut buf).await {
-                Ok(Some((mac, n))) => {
-                    let from = eth::Mac(mac);
-                    let (open, src) = self.frame(&from, &buf[..n]);
-                    if let Some(node) = src {
-                        socket.learn(node, mac);
-                    }
-                    if !open {
-                        return;
-                    }
+            if let Err(e) = socket.recv_batch(&mut batch).await {
+                tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
+                tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                continue;
+            }
+            for i in 0..batch.taken() {
+                // the Ethernet header, then the frame
+                let (_, d) = batch.get(i);
+                if d.len() < 14 {
+                    continue;
                 }
-                Ok(None) => {}
-                Err(e) => {
-                    tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
-                    tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                let mut mac = [0u8; 6];
+                mac.copy_from_slice(&d[6..12]);
+                let (open, src) = self.frame(&eth::Mac(mac), &d[14..]);
+                if let Some(node) = src {
+                    socket.learn(node, mac);
+                }
+                if !open {
+                    return;
                 }
             }
         }
@@ -568,7 +630,7 @@ pub mod eth {
     use std::collections::HashMap;
     use std::fmt;
     use std::io;
-    use std::os::fd::{AsRawFd, FromRawFd, OwnedFd};
+    use std::os::fd::{AsFd, AsRawFd, FromRawFd, OwnedFd};
     use std::sync::Mutex;
     use tokio::io::Interest;
     use tokio::io::unix::AsyncFd;
@@ -595,11 +657,29 @@ pub mod eth {
         mac: [u8; 6],
         ethertype: u16,
         peers: Mutex<HashMap<u16, [u8; 6]>>,
+        /// whether the runtime watches the socket for writing (else a full socket is waited on
+        /// through a copy of its descriptor)
+        writes_watched: bool,
     }
 
     impl RawSocket {
         /// Opens the socket on interface `iface` for frames of `ethertype`.
         pub fn open(iface: &str, ethertype: u16) -> io::Result<RawSocket> {
+            RawSocket::open_with(iface, ethertype, None)
+        }
+
+        /// Opens the socket on interface `iface` for the DSAAV frames of `ethertype` of a medium
+        /// that is node `node`: the kernel drops the frames from `node` (what the medium sends
+        /// itself, seen as it leaves) before they are read, and the socket is watched for reading
+        /// only (a send that finds it full waits for room by itself).
+        pub fn open_node(iface: &str, ethertype: u16, node: u16) -> io::Result<RawSocket> {
+            let socket = RawSocket::open_with(iface, ethertype, Some(node))?;
+            // a frame to this node goes to this interface, as when its own frames were read
+            socket.learn(node, socket.mac);
+            Ok(socket)
+        }
+
+        fn open_with(iface: &str, ethertype: u16, skip: Option<u16>) -> io::Result<RawSocket> {
             let name = std::ffi::CString::new(iface)
                 .map_err(|_| io::Error::new(io::ErrorKind::InvalidInput, "bad interface name"))?;
             // SAFETY: if_nametoindex reads a NUL-terminated string
@@ -625,7 +705,7 @@ pub mod eth {
             }
             // SAFETY: fd is a new descriptor we own
             let fd = unsafe { OwnedFd::from_raw_fd(fd) };
-            attach_filter(&fd, ethertype)?;
+            attach_filter(&fd, ethertype, skip)?;
             // every frame of the interface, the ones this host sends included (other media of
             // this host are other nodes), and the filter keeps those of `ethertype`
             let addr = sockaddr(ifindex, libc::ETH_P_ALL as u16, [0; 6]);
@@ -640,14 +720,20 @@ pub mod eth {
             if r < 0 {
                 return Err(io::Error::last_os_error());
             }
+            let interest = match skip {
+                Some(_) => Interest::READABLE,
+                None => Interest::READABLE | Interest::WRITABLE,
+            };
             // SAFETY: the descriptor is owned by the AsyncFd from here on and closed only by it
-            let fd = unsafe { AsyncFd::register(fd) }.map_err(io::Error::from)?;
+            let fd = unsafe { AsyncFd::register_with_interest(fd, interest) }
+                .map_err(io::Error::from)?;
             Ok(RawSocket {
                 fd,
                 ifindex,
                 mac,
                 ethertype,
                 peers: Mutex::new(HashMap::new()),
+                writes_watched: skip.is_none(),
             })
         }
 
@@ -682,26 +768,35 @@ pub mod eth {
             frame.extend_from_slice(&self.ethertype.to_be_bytes());
             frame.extend_from_slice(payload);
             let addr = sockaddr(self.ifindex, self.ethertype, dst);
-            self.fd
-                .async_io(Interest::WRITABLE, |fd| {
-                    // SAFETY: sendto(2) reads the frame and a sockaddr_ll of the sizes given
-                    let n = unsafe {
-                        libc::sendto(
-                            fd.as_raw_fd(),
-                            frame.as_ptr().cast(),
-                            frame.len(),
-                            0,
-                            (&addr as *const libc::sockaddr_ll).cast(),
-                            std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t,
-                        )
-                    };
-                    if n < 0 {
-                        Err(io::Error::last_os_error())
-                    } else {
-                        Ok(())
+            let send = || {
+                // SAFETY: sendto(2) reads the frame and a sockaddr_ll of the sizes given
+                let n = unsafe {
+                    libc::sendto(
+                        self.fd.as_raw_fd(),
+                        frame.as_ptr().cast(),
+                        frame.len(),
+                        0,
+                        (&addr as *const libc::sockaddr_ll).cast(),
+                        std::mem::size_of::<libc::sockaddr_ll>() as libc::socklen_t,
+                    )
+                };
+                if n < 0 {
+                    Err(io::Error::last_os_error())
+                } else {
+                    Ok(())
+                }
+            };
+            if self.writes_watched {
+                return self.fd.async_io(Interest::WRITABLE, |_| send()).await;
+            }
+            loop {
+                match send() {
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                        super::sockets::writable(self.fd.as_fd()).await?
                     }
-                })
-                .await
+                    sent => return sent,
+                }
+            }
         }
 
         /// Receives one frame: the sender's hardware address and the payload's length in `buf`
@@ -741,40 +836,45 @@ pub mod eth {
             buf.copy_within(14..n, 0);
             Ok(Some((mac, n - 14)))
         }
+
+        /// Waits for frames and takes those waiting, up to a batch, with their Ethernet headers.
+        pub(super) async fn recv_batch(&self, batch: &mut super::sockets::Batch) -> io::Result<()> {
+            loop {
+                let mut ready = self.fd.readable().await?;
+                match batch.receive(self.fd.as_raw_fd()) {
+                    Ok(n) => {
+                        // a batch that is not full emptied the socket: the next call waits for
+                        // a new frame instead of trying a read that would block
+                        if n < super::sockets::BATCH {
+                            ready.clear_ready();
+                        }
+                        return Ok(());
+                    }
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => ready.clear_ready(),
+                    Err(e) => return Err(e),
+                }
+            }
+        }
     }
 
     /// Keeps only frames of `ethertype` (a classic BPF program: load the EtherType, compare,
-    /// accept or drop), so the socket sees none of the interface's other traffic.
-    fn attach_filter(fd: &OwnedFd, ethertype: u16) -> io::Result<()> {
+    /// accept or drop), so the socket sees none of the interface's other traffic; with `skip`, also
+    /// drops the DSAAV frames whose source is that node.
+    fn attach_filter(fd: &OwnedFd, ethertype: u16, skip: Option<u16>) -> io::Result<()> {
         let op = |code: u16, jt: u8, jf: u8, k: u32| libc::sock_filter { code, jt, jf, k };
-        let program = [
+        let tail = match skip {
+            Some(node) => super::sockets::skip_own(14, node, 0xffff),
+            // ret #65535; ret #0
+            None => vec![op(0x06, 0, 0, 0xffff), op(0x06, 0, 0, 0)],
+        };
+        let mut program = vec![
             // ldh [12]
             op(0x28, 0, 0, 12),
-            // jeq #ethertype, next, drop
-            op(0x15, 0, 1, u32::from(ethertype)),
-            // ret #65535
-            op(0x06, 0, 0, 0xffff),
-            // ret #0
-            op(0x06, 0, 0, 0),
+            // jeq #ethertype, next, drop (the last instruction)
+            op(0x15, 0, (tail.len() - 1) as u8, u32::from(ethertype)),
         ];
-        let prog = libc::sock_fprog {
-            len: program.len() as u16,
-            filter: program.as_ptr() as *mut libc::sock_filter,
-        };
-        // SAFETY: setsockopt(2) reads the program through the sock_fprog, both alive for the call
-        let r = unsafe {
-            libc::setsockopt(
-                fd.as_raw_fd(),
-                libc::SOL_SOCKET,
-                libc::SO_ATTACH_FILTER,
-                (&prog as *const libc::sock_fprog).cast(),
-                std::mem::size_of::<libc::sock_fprog>() as libc::socklen_t,
-            )
-        };
-        if r < 0 {
-            return Err(io::Error::last_os_error());
-        }
-        Ok(())
+        program.extend(tail);
+        super::sockets::set_filter(fd.as_raw_fd(), &program)
     }
 
     fn sockaddr(ifindex: i32, ethertype: u16, dst: [u8; 6]) -> libc::sockaddr_ll {

@@ -45,9 +45,42 @@ pub struct Address {
     pub port: u16,
 }
 
+impl Address {
+    /// The address as text, `NODE:PORT`, written by hand (every message's header has addresses):
+    /// a buffer, and where the text starts in it.
+    fn digits(&self) -> ([u8; 11], usize) {
+        let mut text = [0u8; 11];
+        let mut at = text.len();
+        for (i, mut n) in [self.port, self.node].into_iter().enumerate() {
+            if i == 1 {
+                at -= 1;
+                text[at] = b':';
+            }
+            loop {
+                at -= 1;
+                text[at] = b'0' + (n % 10) as u8;
+                n /= 10;
+                if n == 0 {
+                    break;
+                }
+            }
+        }
+        (text, at)
+    }
+
+    /// The address as text, as [`fmt::Display`] writes it, made in one allocation.
+    pub(crate) fn text(&self) -> String {
+        let (text, at) = self.digits();
+        // only ASCII digits and a colon were written
+        text[at..].iter().map(|b| char::from(*b)).collect()
+    }
+}
+
 impl fmt::Display for Address {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}:{}", self.node, self.port)
+        let (text, at) = self.digits();
+        // only ASCII digits and a colon were written
+        f.write_str(std::str::from_utf8(&text[at..]).map_err(|_| fmt::Error)?)
     }
 }
 
@@ -518,5 +551,13 @@ mod tests {
             "`65535:0` is not an address: node `65535` is not a number from 0 to 65534"
         );
         assert_eq!(Address { node: 2, port: 3 }.to_string(), "2:3");
+        assert_eq!(Address { node: 0, port: 0 }.to_string(), "0:0");
+        let far = Address {
+            node: 65534,
+            port: 65535,
+        };
+        assert_eq!(far.to_string(), "65534:65535");
+        assert_eq!(far.to_string().parse(), Ok(far));
+        assert_eq!(far.text(), far.to_string());
     }
 }

@@ -17,10 +17,10 @@
 //! ([`RpcError::Failed`]).
 
 use seabus_medium::dsaav::wire::Address;
-use seabus_medium::{DataMap, Interface, Medium, SendError, Value};
+use seabus_medium::{DataMap, Interface, Medium, Payload, SendError, Topic, Value};
 use std::collections::{HashMap, VecDeque};
 use std::sync::atomic::{AtomicU32, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Duration;
 use thiserror::Error;
 use tokio::sync::oneshot;
@@ -32,6 +32,30 @@ pub const UNSENDABLE: i64 = 7;
 
 /// Replies a server remembers to answer repeated requests.
 pub const REMEMBERED_REPLIES: usize = 65_536;
+
+/// The topics of the three RPC messages, made once.
+struct Topics {
+    request: Topic,
+    oneway: Topic,
+    reply: Topic,
+}
+
+fn topics() -> &'static Topics {
+    static TOPICS: OnceLock<Topics> = OnceLock::new();
+    TOPICS.get_or_init(|| {
+        let topic = |name| Topic::new(name).expect("the RPC topics are valid");
+        Topics {
+            request: topic("dsaav.rpc-request"),
+            oneway: topic("dsaav.rpc-oneway"),
+            reply: topic("dsaav.rpc-reply"),
+        }
+    })
+}
+
+/// The datamap of a payload, owned: taken as it is when nobody else holds it, else copied.
+fn owned(map: Arc<DataMap>) -> DataMap {
+    Arc::try_unwrap(map).unwrap_or_else(|shared| (*shared).clone())
+}
 
 /// How a reliable call waits and retries.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -112,7 +136,7 @@ impl RpcClient {
         let w = waiters.clone();
         let reader = tokio::spawn(async move {
             while let Some(m) = replies.recv().await {
-                let Some(map) = m.payload.as_map() else {
+                let Payload::Map(map) = m.payload else {
                     continue;
                 };
                 // replies to other ports of this node are theirs
@@ -124,7 +148,7 @@ impl RpcClient {
                 if let (true, Some(r)) = (to_me, reference) {
                     let waiter = w.lock().unwrap_or_else(|p| p.into_inner()).remove(&r);
                     if let Some(tx) = waiter {
-                        let _ = tx.send(map.clone());
+                        let _ = tx.send(owned(map));
                     }
                 }
             }
@@ -147,8 +171,8 @@ impl RpcClient {
         map.push("@port", i64::from(self.port));
         map.push("@id", i64::from(id));
         map.push("op", i64::from(op));
-        for (k, v) in params.iter() {
-            map.push(k.to_string(), v.clone());
+        for (k, v) in params.entries() {
+            map.push(k.clone(), v.clone());
         }
         map
     }
@@ -193,12 +217,13 @@ impl RpcClient {
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .insert(id, tx);
-        let request = self.request(id, to, op, params);
+        // made once, shared by every attempt
+        let request = Payload::from(self.request(id, to, op, params));
         let deadline = tokio::time::Instant::now() + opts.timeout;
         let mut wait = opts.first_retry;
         let mut attempts = 0;
         let result = loop {
-            if let Err(e) = self.iface.send("dsaav.rpc-request", request.clone()).await {
+            if let Err(e) = self.iface.send(&topics().request, request.clone()).await {
                 break Err(RpcError::Send(e));
             }
             attempts += 1;
@@ -241,7 +266,7 @@ impl RpcClient {
     ) -> Result<(), SendError> {
         let id = self.next_id.fetch_add(1, Ordering::Relaxed);
         self.iface
-            .send("dsaav.rpc-oneway", self.request(id, Some(to), op, params))
+            .send(&topics().oneway, self.request(id, Some(to), op, params))
             .await
     }
 }
@@ -273,11 +298,11 @@ pub async fn serve(
     let mut iface = medium.attach(&format!("rpc-server-{port}"));
     let _ = iface.subscribe("dsaav.rpc-request");
     let _ = iface.subscribe("dsaav.rpc-oneway");
-    let mut replies: HashMap<(Address, u32), DataMap> = HashMap::new();
+    let mut replies: HashMap<(Address, u32), Payload> = HashMap::new();
     let mut order: VecDeque<(Address, u32)> = VecDeque::new();
     while let Some(m) = iface.recv().await {
-        let reliable = m.topic.as_str() == "dsaav.rpc-request";
-        let Some(map) = m.payload.as_map() else {
+        let reliable = m.topic == topics().request;
+        let Payload::Map(map) = m.payload else {
             continue;
         };
         let header = |k: &str| map.get_str(k).and_then(|s| s.parse::<Address>().ok());
@@ -300,16 +325,13 @@ pub async fn serve(
         if let Some(reply) = replies.get(&key) {
             // a repeated request: answered again, not run again
             if reliable {
-                let _ = iface.send("dsaav.rpc-reply", reply.clone()).await;
+                let _ = iface.send(&topics().reply, reply.clone()).await;
             }
             continue;
         }
-        let params = DataMap::from_entries(
-            map.iter()
-                .filter(|(k, _)| !k.starts_with('@') && *k != "op")
-                .map(|(k, v)| (k.to_string().into(), v.clone()))
-                .collect(),
-        );
+        let mut params = owned(map).into_entries();
+        params.retain(|(k, _)| !k.starts_with('@') && k != "op");
+        let params = DataMap::from_entries(params);
         let outcome = handler(Call {
             from,
             op,
@@ -323,8 +345,8 @@ pub async fn serve(
         match outcome {
             Ok(results) => {
                 reply.push("status", 0i64);
-                for (k, v) in results.iter() {
-                    reply.push(k.to_string(), v.clone());
+                for (k, v) in results.into_entries() {
+                    reply.push(k, v);
                 }
             }
             Err((status, message)) => {
@@ -338,16 +360,20 @@ pub async fn serve(
             replies.remove(&old);
         }
         order.push_back(key);
-        if reliable && let Err(e) = iface.send("dsaav.rpc-reply", reply.clone()).await {
+        // kept for repeated requests and sent, shared
+        let mut reply = Payload::from(reply);
+        if reliable && let Err(e) = iface.send(&topics().reply, reply.clone()).await {
             // results the wire cannot carry (a key not in the dictionary, too large): the caller
             // hears why instead of waiting for its timeout
-            reply = DataMap::new()
-                .with("@dst", from.to_string())
-                .with("@port", i64::from(port))
-                .with("@ref", i64::from(id))
-                .with("status", UNSENDABLE)
-                .with("error", format!("the results cannot be sent: {e}"));
-            let _ = iface.send("dsaav.rpc-reply", reply.clone()).await;
+            reply = Payload::from(
+                DataMap::new()
+                    .with("@dst", from.to_string())
+                    .with("@port", i64::from(port))
+                    .with("@ref", i64::from(id))
+                    .with("status", UNSENDABLE)
+                    .with("error", format!("the results cannot be sent: {e}")),
+            );
+            let _ = iface.send(&topics().reply, reply.clone()).await;
         }
         replies.insert(key, reply);
     }
