@@ -91,15 +91,7 @@ impl CsvFiles {
         for c in columns.iter() {
             row.push(',');
             if let Some(v) = map.get(c) {
-                let text = match v {
-                    Value::Str(s) => s.to_string(),
-                    other => other.to_string(),
-                };
-                if text.contains([',', '"', '\n']) {
-                    row.push_str(&format!("\"{}\"", text.replace('"', "\"\"")));
-                } else {
-                    row.push_str(&text);
-                }
+                row.push_str(&seabus_modules::support::logger::cell(v));
             }
         }
         writeln!(out, "{row}")

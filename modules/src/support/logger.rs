@@ -98,8 +98,9 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
     })
 }
 
-/// A CSV cell: plain when it can be, quoted when it holds a comma, quote or line break.
-fn cell(v: &Value) -> String {
+/// A CSV cell: plain when it can be, quoted when it holds a comma, quote or line break; bytes in
+/// hex, lists and maps as JSON.
+pub fn cell(v: &Value) -> String {
     let text = match v {
         Value::Str(s) => s.to_string(),
         Value::Int(n) => n.to_string(),
