@@ -17,11 +17,15 @@
 //! - [`datasets`] — the standard datasets of `configs/datasets.xml` and validation against them.
 //! - [`params`] — module parameters with their places in the file.
 //! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.
-//! - [`support`] — supporting modules (`generator`, `convert`, `square`).
+//! - [`estimate`] — the navigation estimators (Kalman depth, position EKF, heading corrections).
+//! - [`frames`] — units, WGS-84 local frames and rotations for `convert`'s declared conversions.
+//! - [`support`] — supporting modules (`generator`, `convert`, `square`, `external`, `logger`,
+//!   the navigation modules, the health monitor).
 
 pub mod datasets;
 pub mod dsaav;
 pub mod estimate;
+pub mod frames;
 pub mod geo;
 pub mod module;
 pub mod params;

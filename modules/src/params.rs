@@ -119,6 +119,11 @@ impl Params {
         self.get(name).map(|p| p.value.as_str())
     }
 
+    /// An error at the element the parameters belong to.
+    pub fn error(&self, message: impl std::fmt::Display) -> FileError {
+        self.pos.error(message.to_string())
+    }
+
     /// The text of parameter `name`, or an error saying the module needs it.
     pub fn required(&self, name: &str) -> Result<&Param, FileError> {
         self.get(name)

@@ -1,5 +1,6 @@
 //! Replays the seeds of the fuzz corpus for the readers of this crate (`fuzz/corpus/system_file/`,
-//! `fuzz/corpus/dsaav_config/`, `fuzz/corpus/health_rules/`) through the same properties as the
+//! `fuzz/corpus/dsaav_config/`, `fuzz/corpus/health_rules/`,
+//! `fuzz/corpus/conversions/`) through the same properties as the
 //! fuzz targets, so that every seed runs with the ordinary tests, without libFuzzer.
 
 #[path = "../../fuzz/properties/modules.rs"]
@@ -18,4 +19,7 @@ seed_tests! {
     /// Every health-rules seed is read or refused with a place inside it, and a monitor following
     /// the rules that read keeps the severity rules.
     health_rules_seeds => health_rules,
+    /// Every conversion seed is read or refused with a reason, and the transforms that read keep
+    /// their properties.
+    conversions_seeds => conversions,
 }

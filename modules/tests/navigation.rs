@@ -2,35 +2,12 @@
 //! truth (stamped as sensors would stamp it): `depth-kalman` beats the raw depth; `position-ekf`
 //! learns a compass bias at the surface and dead-reckons a submerged leg with it.
 
-use seabus_medium::{DataMap, Interface, Kind, Message, Origin, Payload, Provenance, Stamp, Topic};
+mod common;
+
+use common::{Feed, drain};
+use seabus_medium::{DataMap, Interface};
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
-use std::sync::Arc;
 use std::time::Duration;
-
-struct Feed {
-    tx: Interface,
-    origin: Arc<Origin>,
-    seq: u64,
-    t0: f64,
-}
-
-impl Feed {
-    async fn send(&mut self, t: f64, topic: &str, map: DataMap) {
-        self.seq += 1;
-        let msg = Message {
-            topic: Topic::new(topic).unwrap(),
-            kind: Kind::Data,
-            provenance: Provenance {
-                origin: self.origin.clone(),
-                seq: self.seq,
-                hops: 0,
-            },
-            stamp: Stamp(((self.t0 + t) * 1e9) as i64),
-            payload: Payload::from(map),
-        };
-        self.tx.forward(msg).await.unwrap();
-    }
-}
 
 /// Gaussian noise from a seeded generator (Box–Muller).
 fn gauss(rng: &mut fastrand::Rng, sigma: f64) -> f64 {
@@ -59,27 +36,8 @@ async fn start() -> (Runtime, Feed, Interface) {
     rx.subscribe("nav.heading.corrected").unwrap();
     // the modules subscribe as they start
     tokio::time::sleep(Duration::from_millis(200)).await;
-    let feed = Feed {
-        tx: bus.attach("sensors"),
-        origin: Origin::new("sensors", "bus", 1),
-        seq: 0,
-        t0: 1_795_000_000.0,
-    };
+    let feed = Feed::new(&bus);
     (rt, feed, rx)
-}
-
-async fn drain(rx: &mut Interface, topic: &str, n: usize) -> Vec<DataMap> {
-    let mut out = Vec::new();
-    while out.len() < n {
-        match tokio::time::timeout(Duration::from_secs(5), rx.recv()).await {
-            Ok(Some(m)) if m.topic.as_str() == topic => {
-                out.push(m.payload.as_map().unwrap().clone())
-            }
-            Ok(Some(_)) => {}
-            _ => break,
-        }
-    }
-    out
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
