@@ -396,6 +396,21 @@ async fn publish(args: PubArgs) -> ExitCode {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };
+    // a medium with a connection (a MOOSDB, a serial port) takes a moment to come up
+    let mut link = medium.watch_link();
+    let up = tokio::time::timeout(
+        LINK_WAIT,
+        link.wait_for(|s| *s == seabus_medium::LinkState::Up),
+    )
+    .await;
+    if !matches!(up, Ok(Ok(_))) {
+        let reason = match medium.link_state() {
+            seabus_medium::LinkState::Down(r) => r,
+            seabus_medium::LinkState::Up => "closed".into(),
+        };
+        eprintln!("seabus pub: medium `pub` link is down after {LINK_WAIT:?}: {reason}");
+        return ExitCode::from(1);
+    }
     let port = medium.attach("pub");
     let kind = if command { Kind::Command } else { Kind::Data };
     let mut ticker = tokio::time::interval(period);
@@ -409,8 +424,19 @@ async fn publish(args: PubArgs) -> ExitCode {
             return usage(e.to_string());
         }
     }
+    // what a connection's task still holds goes out before the process ends
+    if tokio::time::timeout(LINK_WAIT, medium.flush())
+        .await
+        .is_err()
+    {
+        eprintln!("seabus pub: medium `pub`: not all sent within {LINK_WAIT:?}");
+        return ExitCode::from(1);
+    }
     ExitCode::SUCCESS
 }
+
+/// How long `seabus pub` waits for the medium's link to come up, and for what it sent to go out.
+const LINK_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
 
 /// What `seabus pub` sends: the same payload every time, or an LCM message made anew for each,
 /// with the time it is sent in its `utime`.

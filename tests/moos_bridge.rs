@@ -116,3 +116,33 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
     });
     assert_eq!(v["payload"], serde_json::json!({"depth": 5.0}), "{v}");
 }
+
+/// `seabus pub` on a `moos://` medium waits for the connection to the DB, and what it sent is
+/// written before it exits: one run, one value in the DB.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn pub_waits_for_the_moosdb_and_sends_before_exiting() {
+    let db = MoosDb::start("127.0.0.1:0".parse().unwrap()).await.unwrap();
+    let url = format!("moos://127.0.0.1:{}?name=cli", db.addr().port());
+    let out = tokio::task::spawn_blocking(move || {
+        seabus()
+            .args(["pub", &url, "NAV_X", "value=4.5"])
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while db.value("NAV_X").is_none() && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let x = db.value("NAV_X").expect("NAV_X reached the DB");
+    assert_eq!(
+        (x.data_type, x.value, x.source.as_slice()),
+        (data::DOUBLE, 4.5, &b"cli"[..])
+    );
+}

@@ -156,6 +156,11 @@ pub trait Transport: Send + Sync + 'static {
     }
     /// Releases the wire (sockets, devices) when the medium is closed.
     fn close(&self) {}
+    /// Returns once what was transmitted so far has been written out, for a transport that queues
+    /// frames for a task to write (or at once when the link goes down). By default at once.
+    fn flush(&self) -> BoxFuture<'_, ()> {
+        Box::pin(std::future::ready(()))
+    }
     /// A local interface subscribed to something: a transport that listens to its wire only
     /// while someone here wants what it hears (joining a multicast group) starts listening now.
     fn subscribed(&self) {}
@@ -452,6 +457,14 @@ impl Medium {
     /// A receiver that sees every change of the link state.
     pub fn watch_link(&self) -> watch::Receiver<LinkState> {
         self.inner.link.subscribe()
+    }
+
+    /// Returns once what was sent on the medium so far has been written to the wire, as far as
+    /// the transport can tell (see [`Transport::flush`]).
+    pub async fn flush(&self) {
+        if let Some(t) = self.inner.transport.get() {
+            t.flush().await;
+        }
     }
 
     /// Closes the medium: its I/O tasks stop, sends fail, interfaces drain then see the end.

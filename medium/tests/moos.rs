@@ -309,3 +309,275 @@ async fn the_skew_is_taken_and_garbage_from_the_db_is_refused() {
     );
     assert_eq!(m.stats().rejected.get("moos-bad-length"), Some(&1));
 }
+
+/// A DB that answers as a MOOSDB does: its clock 100 s ahead, a timing message sent back with
+/// the request's time still in it and the DB's time as the value. The medium's registrations name
+/// it as their source (a MOOSDB subscribes the client the source names), and the skew stays near
+/// 100 s through the timing replies.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn registrations_name_the_client_and_timing_replies_keep_the_skew() {
+    let listener = tokio::net::TcpListener::bind(any_port()).await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (answered_tx, answered) = tokio::sync::oneshot::channel();
+    let server = tokio::spawn(async move {
+        let db_now = || {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_secs_f64()
+                + 100.0
+        };
+        let (mut sock, _) = listener.accept().await.unwrap();
+        let mut hello = [0u8; 32];
+        sock.read_exact(&mut hello).await.unwrap();
+        let mut buf = Vec::new();
+        let mut chunk = [0u8; 4096];
+        let (mut registrations, mut timings) = (Vec::new(), 0);
+        let mut answered_tx = Some(answered_tx);
+        // bounded: the test gives up after 10 s
+        loop {
+            let n = sock.read(&mut chunk).await.unwrap();
+            assert!(n > 0, "the client went away");
+            buf.extend_from_slice(&chunk[..n]);
+            while let Ok(Read::Packet(p, used)) = wire::read_packet(&buf) {
+                buf.drain(..used);
+                let Some(first) = p.messages.first() else {
+                    continue;
+                };
+                let reply = match first.kind {
+                    kind::DATA => MoosMsg {
+                        id: -1,
+                        kind: kind::WELCOME,
+                        data_type: data::DOUBLE,
+                        community: b"#1".to_vec(),
+                        value: db_now() - first.time,
+                        string: b"asynchronous".to_vec(),
+                        ..MoosMsg::default()
+                    },
+                    kind::TIMING => {
+                        timings += 1;
+                        MoosMsg {
+                            value: db_now(),
+                            value2: 0.0,
+                            ..first.clone()
+                        }
+                    }
+                    _ => {
+                        for m in &p.messages {
+                            match m.kind {
+                                kind::REGISTER | kind::WILDCARD_REGISTER => {
+                                    registrations.push(m.clone())
+                                }
+                                kind::NOTIFY => return (registrations, m.clone()),
+                                _ => {}
+                            }
+                        }
+                        continue;
+                    }
+                };
+                sock.write_all(
+                    &Packet {
+                        messages: vec![reply],
+                    }
+                    .encode(),
+                )
+                .await
+                .unwrap();
+                if timings == 3
+                    && let Some(tx) = answered_tx.take()
+                {
+                    let _ = tx.send(());
+                }
+            }
+        }
+    });
+    let m = client(addr, "pTimed", "NAV_X,NAV_*:0.5");
+    up(&m).await;
+    tokio::time::timeout(Duration::from_secs(10), answered)
+        .await
+        .expect("three timing replies within 10 s")
+        .unwrap();
+    m.attach("w")
+        .send("NAV_Y", DataMap::new().with("value", 1.0))
+        .await
+        .unwrap();
+    let (registrations, notify) = tokio::time::timeout(Duration::from_secs(5), server)
+        .await
+        .expect("the server finishes")
+        .unwrap();
+    assert_eq!(
+        registrations
+            .iter()
+            .map(|r| (r.kind, r.source.as_slice(), r.key.as_slice()))
+            .collect::<Vec<_>>(),
+        [
+            (kind::REGISTER, &b"pTimed"[..], &b"NAV_X"[..]),
+            (kind::WILDCARD_REGISTER, &b"pTimed"[..], &b"pTimed"[..]),
+        ]
+    );
+    assert_eq!(
+        registrations[1].string,
+        b"AppPattern=*,VarPattern=NAV_*,Interval=0.5"
+    );
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert!(
+        (notify.time - (now + 100.0)).abs() < 2.0,
+        "MOOS time after three timing replies = local + 100 s: {} vs {}",
+        notify.time,
+        now + 100.0
+    );
+}
+
+/// A raw client of the test MoosDb, for what the medium does not send.
+struct Raw {
+    sock: tokio::net::TcpStream,
+    buf: Vec<u8>,
+}
+
+impl Raw {
+    async fn connect(db: SocketAddr, name: &str) -> Raw {
+        let mut sock = tokio::net::TcpStream::connect(db).await.unwrap();
+        let intro = MoosMsg {
+            id: -1,
+            kind: kind::DATA,
+            data_type: data::STRING,
+            key: b"asynchronous".to_vec(),
+            string: name.as_bytes().to_vec(),
+            ..MoosMsg::default()
+        };
+        let mut hello = wire::handshake().to_vec();
+        hello.extend(
+            Packet {
+                messages: vec![intro],
+            }
+            .encode(),
+        );
+        sock.write_all(&hello).await.unwrap();
+        let mut raw = Raw {
+            sock,
+            buf: Vec::new(),
+        };
+        let welcome = raw.packet(Duration::from_secs(5)).await.unwrap();
+        assert_eq!(welcome.messages[0].kind, kind::WELCOME);
+        raw
+    }
+
+    async fn send(&mut self, messages: Vec<MoosMsg>) {
+        self.sock
+            .write_all(&Packet { messages }.encode())
+            .await
+            .unwrap();
+    }
+
+    async fn packet(&mut self, within: Duration) -> Option<Packet> {
+        wire::next_packet(&mut self.sock, &mut self.buf, within)
+            .await
+            .ok()
+    }
+
+    /// The keys and values of the notifications that come within 300 ms.
+    async fn notified(&mut self) -> Vec<(String, f64)> {
+        let mut got = Vec::new();
+        while let Some(p) = self.packet(Duration::from_millis(300)).await {
+            got.extend(
+                p.messages
+                    .iter()
+                    .filter(|m| m.kind == kind::NOTIFY)
+                    .map(|m| (m.key_str(), m.value)),
+            );
+        }
+        got
+    }
+}
+
+fn raw_msg(kind: u8, source: &str, key: &str, value: f64, string: &str) -> MoosMsg {
+    MoosMsg {
+        kind,
+        data_type: if string.is_empty() {
+            data::DOUBLE
+        } else {
+            data::STRING
+        },
+        source: source.as_bytes().to_vec(),
+        key: key.as_bytes().to_vec(),
+        value,
+        string: string.as_bytes().to_vec(),
+        ..MoosMsg::default()
+    }
+}
+
+/// The test MoosDb does what core-moos's MOOSDB was seen to do: registrations count for the client
+/// their source names, a timing message comes back with the request's time and the DB's time as
+/// the value, and unregistering by pattern stops the variables written so far while the pattern
+/// still takes new ones.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_test_db_registers_times_and_unregisters_as_a_moosdb() {
+    let db = MoosDb::start(any_port()).await.unwrap();
+    let mut sub = Raw::connect(db.addr(), "rSub").await;
+    let mut publisher = Raw::connect(db.addr(), "rPub").await;
+
+    // a registration without a source subscribes no one
+    sub.send(vec![raw_msg(kind::REGISTER, "", "U0", 0.0, "")])
+        .await;
+    sub.send(vec![
+        raw_msg(kind::REGISTER, "rSub", "U1", 0.0, ""),
+        raw_msg(
+            kind::WILDCARD_REGISTER,
+            "rSub",
+            "rSub",
+            0.0,
+            "AppPattern=*,VarPattern=W*,Interval=0",
+        ),
+    ])
+    .await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let write = |v: f64, keys: &[&str]| -> Vec<MoosMsg> {
+        keys.iter()
+            .map(|k| raw_msg(kind::NOTIFY, "rPub", k, v, ""))
+            .collect()
+    };
+    publisher.send(write(1.0, &["U0", "U1", "W1"])).await;
+    assert_eq!(
+        sub.notified().await,
+        [("U1".to_string(), 1.0), ("W1".to_string(), 1.0)]
+    );
+
+    sub.send(vec![
+        raw_msg(kind::UNREGISTER, "rSub", "U1", 0.0, ""),
+        raw_msg(
+            kind::WILDCARD_UNREGISTER,
+            "rSub",
+            "rSub",
+            0.0,
+            "AppPattern=*,VarPattern=W*",
+        ),
+    ])
+    .await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    publisher.send(write(2.0, &["U1", "W1", "W2"])).await;
+    assert_eq!(sub.notified().await, [("W2".to_string(), 2.0)]);
+
+    let asked = MoosMsg {
+        id: 7,
+        kind: kind::TIMING,
+        data_type: data::DOUBLE,
+        key: b"_async_timing".to_vec(),
+        time: 1234.5,
+        ..MoosMsg::default()
+    };
+    sub.send(vec![asked.clone()]).await;
+    let reply = sub.packet(Duration::from_secs(5)).await.unwrap();
+    let t = &reply.messages[0];
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert_eq!(
+        (t.kind, t.id, t.time, t.key.as_slice()),
+        (kind::TIMING, 7, 1234.5, &b"_async_timing"[..])
+    );
+    assert!((t.value - now).abs() < 2.0, "the DB's time: {}", t.value);
+}

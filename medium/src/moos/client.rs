@@ -126,6 +126,13 @@ fn local_now() -> f64 {
         .map_or(0.0, |d| d.as_secs_f64())
 }
 
+/// Notifications handed to the connection task, and those it has written or dropped since.
+#[derive(Default)]
+struct Written {
+    queued: AtomicU64,
+    done: AtomicU64,
+}
+
 /// The transport of `moos://`.
 pub struct MoosTransport {
     name: Arc<str>,
@@ -134,6 +141,7 @@ pub struct MoosTransport {
     up: Arc<AtomicBool>,
     skew: Arc<Skew>,
     writer: mpsc::Sender<Bytes>,
+    written: Arc<Written>,
 }
 
 impl MoosTransport {
@@ -182,7 +190,20 @@ impl Transport for MoosTransport {
             self.writer
                 .send(message)
                 .await
-                .map_err(|_| SendError::Closed(self.name.to_string()))
+                .map_err(|_| SendError::Closed(self.name.to_string()))?;
+            self.written.queued.fetch_add(1, Ordering::AcqRel);
+            Ok(())
+        })
+    }
+
+    fn flush(&self) -> BoxFuture<'_, ()> {
+        Box::pin(async move {
+            let queued = self.written.queued.load(Ordering::Acquire);
+            while self.up.load(Ordering::Acquire)
+                && self.written.done.load(Ordering::Acquire) < queued
+            {
+                tokio::time::sleep(Duration::from_millis(2)).await;
+            }
         })
     }
 
@@ -197,6 +218,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<MoosTransport>, OpenError> {
     let (writer, rx) = mpsc::channel(WRITE_QUEUE);
     let up = Arc::new(AtomicBool::new(false));
     let skew = Arc::new(Skew::default());
+    let written = Arc::new(Written::default());
     let db = format!("{}:{}", cfg.host, cfg.port);
     o.ingress.init_link(LinkState::Down(format!(
         "not connected to the MOOSDB at {db} yet"
@@ -205,6 +227,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<MoosTransport>, OpenError> {
         cfg.clone(),
         up.clone(),
         skew.clone(),
+        written.clone(),
         rx,
         o.ingress.clone(),
     ));
@@ -216,6 +239,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<MoosTransport>, OpenError> {
         up,
         skew,
         writer,
+        written,
     }))
 }
 
@@ -223,6 +247,7 @@ async fn keep_connected(
     cfg: MoosConfig,
     up: Arc<AtomicBool>,
     skew: Arc<Skew>,
+    written: Arc<Written>,
     mut rx: mpsc::Receiver<Bytes>,
     ingress: Ingress,
 ) {
@@ -232,7 +257,7 @@ async fn keep_connected(
             Ok((sock, buf)) => {
                 up.store(true, Ordering::Release);
                 ingress.set_link(LinkState::Up);
-                let reason = session(sock, buf, &cfg, &skew, &mut rx, &ingress).await;
+                let reason = session(sock, buf, &cfg, &skew, &written, &mut rx, &ingress).await;
                 up.store(false, Ordering::Release);
                 reason
             }
@@ -242,7 +267,9 @@ async fn keep_connected(
             return;
         }
         ingress.set_link(LinkState::Down(format!("MOOSDB at {db}: {reason}")));
-        while rx.try_recv().is_ok() {}
+        while rx.try_recv().is_ok() {
+            written.done.fetch_add(1, Ordering::AcqRel);
+        }
         tokio::time::sleep(cfg.reopen).await;
     }
 }
@@ -302,6 +329,8 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
             MoosMsg {
                 kind: kind::WILDCARD_REGISTER,
                 data_type: data::STRING,
+                // a MOOSDB subscribes the client the source names
+                source: cfg.name.as_bytes().to_vec(),
                 key: cfg.name.as_bytes().to_vec(),
                 string: format!(
                     "AppPattern=*,VarPattern={},Interval={}",
@@ -315,6 +344,7 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
             MoosMsg {
                 kind: kind::REGISTER,
                 data_type: data::DOUBLE,
+                source: cfg.name.as_bytes().to_vec(),
                 key: r.pattern.as_bytes().to_vec(),
                 value: r.interval,
                 time: local_now() + skew.get(),
@@ -339,6 +369,7 @@ async fn session(
     mut buf: Vec<u8>,
     cfg: &MoosConfig,
     skew: &Skew,
+    written: &Written,
     rx: &mut mpsc::Receiver<Bytes>,
     ingress: &Ingress,
 ) -> String {
@@ -346,8 +377,8 @@ async fn session(
     let mut timing = tokio::time::interval(TIMING_EVERY);
     let mut topics: HashMap<Vec<u8>, Option<Topic>> = HashMap::new();
     let mut chunk = vec![0u8; 65_536];
-    // when the last timing request went, local time
-    let mut asked = None;
+    // a timing request is waiting for its answer
+    let mut asked = false;
     loop {
         loop {
             match wire::read_packet(&buf) {
@@ -356,12 +387,10 @@ async fn session(
                     for m in p.messages {
                         match m.kind {
                             kind::NOTIFY => deliver(&m, cfg, &mut topics, ingress),
-                            kind::TIMING => {
-                                if let Some(rq) = asked.take() {
-                                    let rx_t = local_now();
-                                    let measured = 0.5 * ((m.time - rx_t) + (m.time - rq));
-                                    skew.set(0.9 * skew.get() + 0.1 * measured);
-                                }
+                            // the DB sends back the timing message with its own
+                            // time as the value; the time is still the request's
+                            kind::TIMING if std::mem::take(&mut asked) => {
+                                skew.set(refined_skew(skew.get(), m.time, m.value, local_now()));
                             }
                             _ => {}
                         }
@@ -394,13 +423,17 @@ async fn session(
                 packet.extend_from_slice(&count.to_le_bytes());
                 packet.push(0);
                 packet.extend_from_slice(&body);
-                if let Err(e) = writer.write_all(&packet).await {
+                let sent = writer.write_all(&packet).await;
+                written
+                    .done
+                    .fetch_add(u64::try_from(count).unwrap_or(0), Ordering::AcqRel);
+                if let Err(e) = sent {
                     return e.to_string();
                 }
             }
             _ = timing.tick() => {
                 let now = local_now();
-                asked = Some(now);
+                asked = true;
                 let t = MoosMsg {
                     kind: kind::TIMING,
                     data_type: data::DOUBLE,
@@ -413,6 +446,19 @@ async fn session(
                 }
             }
         }
+    }
+}
+
+/// The skew after a timing reply: `rq` when the request left (local time), `tx` when the DB
+/// answered (its time), `rx` when the answer came (local time). As a MOOS client does: the measured
+/// skew is 0.5·((tx − rx) + (tx − rq)), and the new skew 0.9·old + 0.1·measured. A reply whose
+/// times are not finite leaves the skew as it was.
+pub(crate) fn refined_skew(old: f64, rq: f64, tx: f64, rx: f64) -> f64 {
+    let measured = 0.5 * ((tx - rx) + (tx - rq));
+    if measured.is_finite() {
+        0.9 * old + 0.1 * measured
+    } else {
+        old
     }
 }
 

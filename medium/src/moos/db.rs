@@ -6,7 +6,7 @@
 //! user try MOOS clients without installing MOOS.
 
 use super::wire::{self, MoosMsg, Packet, Read, data, kind};
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -53,6 +53,8 @@ enum Sub {
         app: String,
         var: String,
         interval: f64,
+        /// Variables unregistered since: the pattern still takes variables written later.
+        except: HashSet<String>,
     },
 }
 
@@ -60,8 +62,13 @@ impl Sub {
     fn interval_for(&self, key: &str, source: &str) -> Option<f64> {
         match self {
             Sub::Exact { key: k, interval } => (k == key).then_some(*interval),
-            Sub::Pattern { app, var, interval } => {
-                (glob(var, key) && glob(app, source)).then_some(*interval)
+            Sub::Pattern {
+                app,
+                var,
+                interval,
+                except,
+            } => {
+                (glob(var, key) && glob(app, source) && !except.contains(key)).then_some(*interval)
             }
         }
     }
@@ -302,11 +309,17 @@ async fn run(
 }
 
 /// Acts on a client's packet; returns what is sent back to it at once.
+///
+/// As in a MOOSDB, registrations are for the client the message's source names (a MOOS client
+/// puts its own name there; an empty source subscribes no one), and a timing message is answered
+/// only when it opens the packet: the same message back, its time still the request's, with the
+/// DB's time as the value.
 fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
     let mut st = state.lock().unwrap_or_else(|p| p.into_inner());
     let mut replies = Vec::new();
-    for mut m in p.messages {
+    for (i, mut m) in p.messages.into_iter().enumerate() {
         let key = m.key_str();
+        let source = String::from_utf8_lossy(&m.source).into_owned();
         match m.kind {
             kind::NOTIFY => {
                 if let Some(old) = st.vars.get(&key)
@@ -322,26 +335,21 @@ fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
                 st.deliver(&m);
             }
             kind::REGISTER | kind::WILDCARD_REGISTER => {
+                let text = String::from_utf8_lossy(&m.string).into_owned();
                 let sub = if m.kind == kind::REGISTER {
                     Sub::Exact {
                         key: key.clone(),
                         interval: m.value.max(0.0),
                     }
                 } else {
-                    let text = String::from_utf8_lossy(&m.string).into_owned();
-                    let field = |f: &str| {
-                        text.split(',')
-                            .filter_map(|kv| kv.split_once('='))
-                            .find(|(k, _)| k.trim() == f)
-                            .map(|(_, v)| v.trim().to_string())
-                    };
                     Sub::Pattern {
-                        app: field("AppPattern").unwrap_or_else(|| "*".into()),
-                        var: field("VarPattern").unwrap_or_else(|| "*".into()),
-                        interval: field("Interval")
+                        app: field(&text, "AppPattern").unwrap_or_else(|| "*".into()),
+                        var: field(&text, "VarPattern").unwrap_or_else(|| "*".into()),
+                        interval: field(&text, "Interval")
                             .and_then(|i| i.parse().ok())
                             .unwrap_or(0.0f64)
                             .max(0.0),
+                        except: HashSet::new(),
                     }
                 };
                 // the current values it now wants go at once
@@ -354,39 +362,68 @@ fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
                     })
                     .cloned()
                     .collect();
-                if let Some(c) = st.clients.get_mut(name) {
-                    c.subs.push(sub);
-                    let now = Instant::now();
-                    for v in &current {
-                        c.last.insert(v.key_str(), now);
+                let Some(c) = st.clients.get_mut(&source) else {
+                    tracing::debug!(client = %name, "moosdb: a registration for `{source}`, not connected");
+                    continue;
+                };
+                c.subs.push(sub);
+                let now = Instant::now();
+                for v in &current {
+                    c.last.insert(v.key_str(), now);
+                }
+                if source == name {
+                    replies.extend(current);
+                } else {
+                    for v in current {
+                        let _ = c.tx.try_send(v);
                     }
                 }
-                replies.extend(current);
             }
+            // as in a MOOSDB: unregistering stops the variables written so far (for a
+            // pattern, those it matches now); a pattern registered stays for new variables
             kind::UNREGISTER | kind::WILDCARD_UNREGISTER => {
-                let pattern = String::from_utf8_lossy(&m.string).into_owned();
-                if let Some(c) = st.clients.get_mut(name) {
-                    c.subs.retain(|s| match s {
-                        Sub::Exact { key: k, .. } => !(m.kind == kind::UNREGISTER && *k == key),
-                        Sub::Pattern { var, .. } => {
-                            !(m.kind == kind::WILDCARD_UNREGISTER && pattern.contains(var.as_str()))
+                let text = String::from_utf8_lossy(&m.string).into_owned();
+                let stopped: Vec<String> = if m.kind == kind::UNREGISTER {
+                    vec![key]
+                } else {
+                    let app = field(&text, "AppPattern").unwrap_or_default();
+                    let var = field(&text, "VarPattern").unwrap_or_default();
+                    st.vars
+                        .values()
+                        .filter(|v| {
+                            glob(&var, &v.key_str())
+                                && glob(&app, &String::from_utf8_lossy(&v.source))
+                        })
+                        .map(MoosMsg::key_str)
+                        .collect()
+                };
+                if let Some(c) = st.clients.get_mut(&source) {
+                    c.subs
+                        .retain(|s| !matches!(s, Sub::Exact { key, .. } if stopped.contains(key)));
+                    for s in &mut c.subs {
+                        if let Sub::Pattern { except, .. } = s {
+                            except.extend(stopped.iter().cloned());
                         }
-                    });
+                    }
                 }
             }
-            kind::TIMING => replies.push(MoosMsg {
-                kind: kind::TIMING,
-                data_type: data::DOUBLE,
-                key: m.key.clone(),
-                time: now_s(),
-                value: m.time,
-                value2: 0.0,
-                ..MoosMsg::default()
-            }),
+            kind::TIMING if i == 0 => {
+                m.value = now_s();
+                m.value2 = 0.0;
+                replies.insert(0, m);
+            }
             _ => {}
         }
     }
     replies
+}
+
+/// The value of `name` in a `name=value,name=value` string.
+fn field(text: &str, name: &str) -> Option<String> {
+    text.split(',')
+        .filter_map(|kv| kv.split_once('='))
+        .find(|(k, _)| k.trim() == name)
+        .map(|(_, v)| v.trim().to_string())
 }
 
 #[cfg(test)]
