@@ -49,6 +49,7 @@ async fn raw(db: std::net::SocketAddr, name: &str, register: Option<&str>) -> (T
         let r = MoosMsg {
             kind: kind::REGISTER,
             data_type: data::DOUBLE,
+            source: name.as_bytes().to_vec(),
             key: key.as_bytes().to_vec(),
             ..MoosMsg::default()
         };

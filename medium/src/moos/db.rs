@@ -16,7 +16,7 @@ use tokio::sync::mpsc;
 
 /// How long a client may stay silent before the server drops it.
 pub const SILENCE: Duration = Duration::from_secs(5);
-/// Messages waiting for a slow client, at most; the newest are dropped past that.
+/// Messages waiting for a slow client, at most; past that a publisher waits up to 1 s for room.
 const CLIENT_QUEUE: usize = 65_536;
 
 /// `*` any run of characters, `?` any one.
@@ -74,6 +74,9 @@ impl Sub {
     }
 }
 
+/// Notifications for other clients' queues.
+type Deliveries = Vec<(mpsc::Sender<MoosMsg>, MoosMsg)>;
+
 struct Client {
     tx: mpsc::Sender<MoosMsg>,
     subs: Vec<Sub>,
@@ -89,12 +92,13 @@ struct State {
 }
 
 impl State {
-    /// Sends `m` to every client whose registrations want it now.
-    fn deliver(&mut self, m: &MoosMsg) {
+    /// Adds `m` for every client whose registrations want it now: to `own` for the client
+    /// called `name` (written back at once), to `out` for the others.
+    fn deliver(&mut self, m: &MoosMsg, name: &str, own: &mut Vec<MoosMsg>, out: &mut Deliveries) {
         let key = m.key_str();
         let source = String::from_utf8_lossy(&m.source).into_owned();
         let now = Instant::now();
-        for c in self.clients.values_mut() {
+        for (cname, c) in self.clients.iter_mut() {
             let Some(interval) = c
                 .subs
                 .iter()
@@ -109,7 +113,11 @@ impl State {
                 .is_none_or(|t| now.duration_since(*t).as_secs_f64() >= interval);
             if due {
                 c.last.insert(key.clone(), now);
-                let _ = c.tx.try_send(m.clone());
+                if cname == name {
+                    own.push(m.clone());
+                } else {
+                    out.push((c.tx.clone(), m.clone()));
+                }
             }
         }
     }
@@ -274,7 +282,12 @@ async fn run(
             match wire::read_packet(buf) {
                 Ok(Read::Packet(p, n)) => {
                     buf.drain(..n);
-                    let replies = handle(p, name, state);
+                    let (replies, deliveries) = handle(p, name, state);
+                    // a subscriber slower than its publisher holds the publisher back (as TCP
+                    // would); one that takes nothing for a second misses the message
+                    for (tx, m) in deliveries {
+                        let _ = tx.send_timeout(m, Duration::from_secs(1)).await;
+                    }
                     if !replies.is_empty()
                         && writer
                             .write_all(&Packet { messages: replies }.encode())
@@ -314,9 +327,11 @@ async fn run(
 /// puts its own name there; an empty source subscribes no one), and a timing message is answered
 /// only when it opens the packet: the same message back, its time still the request's, with the
 /// DB's time as the value.
-fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
+/// Also returns the notifications for other clients, to be queued once the state is unlocked.
+fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> (Vec<MoosMsg>, Deliveries) {
     let mut st = state.lock().unwrap_or_else(|p| p.into_inner());
     let mut replies = Vec::new();
+    let mut deliveries = Vec::new();
     for (i, mut m) in p.messages.into_iter().enumerate() {
         let key = m.key_str();
         let source = String::from_utf8_lossy(&m.source).into_owned();
@@ -332,7 +347,7 @@ fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
                     m.community = b"#1".to_vec();
                 }
                 st.vars.insert(key, m.clone());
-                st.deliver(&m);
+                st.deliver(&m, name, &mut replies, &mut deliveries);
             }
             kind::REGISTER | kind::WILDCARD_REGISTER => {
                 let text = String::from_utf8_lossy(&m.string).into_owned();
@@ -374,9 +389,7 @@ fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
                 if source == name {
                     replies.extend(current);
                 } else {
-                    for v in current {
-                        let _ = c.tx.try_send(v);
-                    }
+                    deliveries.extend(current.into_iter().map(|v| (c.tx.clone(), v)));
                 }
             }
             // as in a MOOSDB: unregistering stops the variables written so far (for a
@@ -415,7 +428,7 @@ fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> Vec<MoosMsg> {
             _ => {}
         }
     }
-    replies
+    (replies, deliveries)
 }
 
 /// The value of `name` in a `name=value,name=value` string.
