@@ -96,8 +96,26 @@ enum Command {
         #[command(subcommand)]
         command: LogCommand,
     },
+    /// The console's layouts.
+    Layout {
+        #[command(subcommand)]
+        command: LayoutCommand,
+    },
     /// List the module types, bridge types, medium schemes and standard datasets.
     Types,
+}
+
+/// What `seabus layout` does.
+#[derive(Subcommand)]
+enum LayoutCommand {
+    /// Check a layout against a system file: exit 1 when either does not read or contradicts
+    /// itself; warnings for bindings no module produces and commands no module accepts (exit 0).
+    Check {
+        /// The layout file.
+        layout: PathBuf,
+        /// The system file the layout is used with.
+        system: PathBuf,
+    },
 }
 
 /// What `seabus log` does.
@@ -241,6 +259,9 @@ fn main() -> ExitCode {
                 Ok(d) => logtail::tail(&file, lines, d),
                 Err(code) => code,
             },
+            Command::Layout {
+                command: LayoutCommand::Check { layout, system },
+            } => layout_check(&layout, &system),
             Command::Types => {
                 types();
                 ExitCode::SUCCESS
@@ -351,6 +372,38 @@ fn check(file: &std::path::Path) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// `seabus layout check LAYOUT SYSTEM`.
+fn layout_check(layout: &std::path::Path, system: &std::path::Path) -> ExitCode {
+    let fail = |e: &FileError| {
+        eprintln!("{e}");
+        ExitCode::from(1)
+    };
+    let layout = match seabus_ui::Layout::load(layout, &Default::default()) {
+        Ok(l) => l,
+        Err(e) => return fail(&e),
+    };
+    let spec = match SystemSpec::load(system) {
+        Ok(s) => s,
+        Err(e) => return fail(&e),
+    };
+    let registry = registry();
+    let catalogue = Catalogue::built_in();
+    if let Err(e) = system::check(&spec, &registry, &catalogue) {
+        return fail(&e);
+    }
+    for w in layout.check(&spec, &registry, &catalogue) {
+        eprintln!("{w}");
+    }
+    println!(
+        "{}: valid ({} widgets, {} commands, {} bindings)",
+        layout.file,
+        layout.widget_count(),
+        layout.commands.len(),
+        layout.bindings().len()
+    );
+    ExitCode::SUCCESS
 }
 
 async fn publish(args: PubArgs) -> ExitCode {
