@@ -293,10 +293,16 @@ function consolePage() {
       const e = typeof m.error === 'object' ? m.error : { message: String(m.error) };
       S.layoutError = e;
       showLayoutError(e);
-      designer.saveResult(e);
-      if (!S.layout) {
-        ui.root.replaceChildren(el('p', { class: 'placeholder', text: 'The layout did not load.' }));
+      if (designer.saving()) {
+        designer.saveResult(e);
+        return;
       }
+      designer.stop();
+      S.layout = null;
+      widgets = [];
+      inputs.attach(null);
+      ui.title.textContent = `${S.layoutName || ''} — not loaded`;
+      ui.root.replaceChildren(el('p', { class: 'placeholder', text: 'The layout did not load.' }));
       return;
     }
     const L = m.layout;

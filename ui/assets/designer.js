@@ -239,11 +239,12 @@ export function createDesigner(ctx, panel, toggle) {
     return out;
   }
 
+  // ids of the `kind-N` form are left out of the XML (the server numbers widgets by place)
   function newId(kind) {
     const ids = allIds();
-    let n = ids.size + 1 + seq++;
-    while (ids.has(`${kind}-new${n}`)) n++;
-    return `${kind}-new${n}`;
+    let n = 1000 + seq++;
+    while (ids.has(`${kind}-${n}`)) n++;
+    return `${kind}-${n}`;
   }
 
   function defaults(kind) {

@@ -77,8 +77,9 @@ export function createInputs(ctx) {
 
   function drive(name) {
     const a = ctx.access(name);
-    if (!a.ok) { stop(name, false); return; }
-    ctx.sendMsg({ type: 'drive', layout: ctx.layoutName(), command: name, fields: ctx.fields(name) });
+    const e = active.get(name);
+    if (!a.ok || !e) { stop(name, false); return; }
+    ctx.sendMsg({ type: 'drive', layout: e.layout, command: name, fields: ctx.fields(name) });
   }
 
   function activate(name, src, set) {
@@ -90,7 +91,7 @@ export function createInputs(ctx) {
     let e = active.get(name);
     ctx.setFields(name, clampAll(name, set));
     if (!e) {
-      e = { sources: new Map() };
+      e = { sources: new Map(), layout: ctx.layoutName() };
       active.set(name, e);
       e.sources.set(src, set);
       drive(name);
@@ -113,7 +114,7 @@ export function createInputs(ctx) {
     if (!e) return;
     clearInterval(e.timer);
     active.delete(name);
-    if (release) ctx.sendMsg({ type: 'release', layout: ctx.layoutName(), command: name });
+    if (release) ctx.sendMsg({ type: 'release', layout: e.layout, command: name });
     ctx.setFields(name, neutralOf(name));
   }
 
