@@ -1,0 +1,662 @@
+// The operator console: connection, header, layout, commands and control.
+
+import { el, renderNode, fmtFields, parseBind } from './widgets.js';
+import { createInputs } from './inputs.js';
+import { createDesigner } from './designer.js';
+
+const HOLD_MARGIN_MS = 100; // a held command is sent a little after its hold time, never before
+const ARM_TIMEOUT_MS = 5000;
+
+if (document.body.classList.contains('login-page')) loginPage();
+else consolePage();
+
+function loginPage() {
+  const params = new URLSearchParams(location.search);
+  const error = params.get('error');
+  const box = document.getElementById('login-error');
+  if (error && box) {
+    box.textContent = error;
+    box.hidden = false;
+  }
+  const name = params.get('name');
+  if (name) {
+    document.getElementById('name').value = name;
+    document.getElementById('password').focus();
+  }
+}
+
+function consolePage() {
+  const $ = (id) => document.getElementById(id);
+  const ui = {
+    root: $('layout-root'), banner: $('banner'), notice: $('notice'),
+    select: $('layout-select'), title: $('layout-title'),
+    holder: $('lease-holder'), take: $('take-control'), release: $('release-control'),
+    conn: $('connection'), userName: $('user-name'), userRoles: $('user-roles'),
+    edit: $('edit-toggle'), designer: $('designer'), toasts: $('toasts'),
+    dialog: $('confirm-dialog'), dialogTitle: $('confirm-title'), dialogText: $('confirm-text'), dialogFields: $('confirm-fields'),
+    holdBox: $('hold-indicator'),
+  };
+
+  const S = {
+    conn: 'connecting',
+    user: null, roles: [], layouts: [],
+    leaseRole: 'pilot', designerRole: 'designer',
+    lease: { holder: null, since: null },
+    layoutName: null, layout: null, layoutError: null,
+    producers: {}, topics: {}, now: undefined, nowAt: 0,
+    fields: {}, history: [],
+    sentCount: 0, driveCount: 0, releaseCount: 0, lastSent: null, sent: [],
+    helloSeen: false,
+  };
+  let ws = null;
+  let attempt = 0;
+  let reconnectTimer = null;
+  let widgets = [];
+  const pendingArms = [];
+  const uiState = new Map();
+
+  // ------------------------------------------------------------ context for the widgets
+
+  const ctx = {
+    S,
+    uiState,
+    hasRole: (r) => String(r).split(/\s+/).filter(Boolean).some((x) => S.roles.includes(x)),
+    register(w) { widgets.push(w); },
+    nodeElement(e, node) { designer.nodeElement(e, node); },
+    redrawSoon() { setTimeout(() => widgets.forEach((w) => w.redraw && w.redraw()), 0); },
+    topic: (n) => S.topics[n],
+    allTopics: () => S.topics,
+    producer(n) {
+      const p = S.producers[n];
+      return p === undefined ? undefined : !!p;
+    },
+    serverNow() {
+      if (S.now === undefined) return Date.now() / 1000;
+      return S.now + (performance.now() - S.nowAt) / 1000;
+    },
+    history: () => S.history,
+    command: (n) => (S.layout && S.layout.commands && Object.prototype.hasOwnProperty.call(S.layout.commands, n) ? S.layout.commands[n] : null),
+    commandRole(n) {
+      const c = ctx.command(n);
+      return (c && c.role) || S.leaseRole;
+    },
+    canCommandAny() {
+      const cmds = (S.layout && S.layout.commands) || {};
+      return Object.keys(cmds).some((n) => ctx.hasRole(ctx.commandRole(n)));
+    },
+    access(n) {
+      const c = ctx.command(n);
+      if (!c) return { ok: false, why: `unknown command ${n}`, hidden: false };
+      if (!ctx.canCommandAny()) return { ok: false, why: 'observer', hidden: true };
+      const role = ctx.commandRole(n);
+      if (!ctx.hasRole(role)) return { ok: false, why: `needs role ${role}`, hidden: false };
+      if (c.lease !== false && S.lease.holder !== S.user) {
+        return { ok: false, why: 'take control first', hidden: false };
+      }
+      if (S.conn !== 'connected') return { ok: false, why: 'disconnected', hidden: false };
+      return { ok: true, why: '', hidden: false };
+    },
+    limits(n, f) {
+      const c = ctx.command(n);
+      const lim = { min: undefined, max: undefined };
+      if (!c || !f) return lim;
+      if (c.min && typeof c.min[f] === 'number') lim.min = c.min[f];
+      if (c.max && typeof c.max[f] === 'number') lim.max = c.max[f];
+      return lim;
+    },
+    holdMs(n) {
+      const c = ctx.command(n);
+      const h = c && Number(c.hold_ms);
+      return Number.isFinite(h) && h > 0 ? h : 1000;
+    },
+    fieldValue(n, f) {
+      const fs = S.fields[n];
+      return fs ? fs[f] : undefined;
+    },
+    fields(n) { return { ...(S.fields[n] || {}) }; },
+    setFields(n, set) {
+      S.fields[n] = { ...(S.fields[n] || {}), ...set };
+      syncInputs();
+    },
+    clamp(n, f, v) {
+      if (typeof v !== 'number') return v;
+      const { min, max } = ctx.limits(n, f);
+      if (min !== undefined && v < min) v = min;
+      if (max !== undefined && v > max) v = max;
+      return v;
+    },
+    send: sendCommand,
+    setAndSend(n, f, v) { return sendCommand(n, f ? { [f]: v } : {}); },
+    hold: holdCommand,
+    sendMsg,
+    toast,
+    layoutName: () => (S.layout ? S.layout.name : S.layoutName),
+    rerender: renderLayout,
+  };
+
+  const inputs = createInputs(ctx);
+  const designer = createDesigner(ctx, ui.designer, ui.edit);
+  ctx.inputs = inputs;
+  ctx.designer = designer;
+
+  // ------------------------------------------------------------ socket
+
+  function wsUrl() {
+    return `${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws`;
+  }
+
+  function connect() {
+    clearTimeout(reconnectTimer);
+    setConn('connecting');
+    let gotHello = false;
+    try {
+      ws = new WebSocket(wsUrl());
+    } catch (e) {
+      scheduleReconnect(false);
+      return;
+    }
+    const sock = ws;
+    sock.onopen = () => { if (sock === ws) setConn('connected'); };
+    sock.onmessage = (ev) => {
+      if (sock !== ws) return;
+      let m;
+      try { m = JSON.parse(ev.data); } catch (e) { return; }
+      if (m && m.type === 'hello') gotHello = true;
+      try { handle(m); } catch (e) { console.error('message', m && m.type, e); }
+    };
+    sock.onclose = () => {
+      if (sock !== ws) return;
+      ws = null;
+      lostConnection();
+      scheduleReconnect(gotHello);
+    };
+    sock.onerror = () => {};
+  }
+
+  function scheduleReconnect(hadHello) {
+    if (hadHello) attempt = 0;
+    const delay = Math.min(10000, 500 * Math.pow(2, attempt)) * (0.8 + Math.random() * 0.4);
+    attempt = Math.min(attempt + 1, 10);
+    const until = Date.now() + delay;
+    setConn('disconnected', until);
+    reconnectTimer = setTimeout(connect, delay);
+    if (!hadHello && attempt >= 2) checkSession();
+  }
+
+  async function checkSession() {
+    try {
+      const r = await fetch('/', { redirect: 'manual', cache: 'no-store', credentials: 'same-origin' });
+      if (r.type === 'opaqueredirect' || (r.redirected && /\/login/.test(r.url))) location.href = '/login';
+    } catch (e) { /* the server is away: keep retrying */ }
+  }
+
+  function lostConnection() {
+    inputs.stopAll(false);
+    while (pendingArms.length) {
+      const p = pendingArms.shift();
+      clearTimeout(p.timer);
+      p.reject(new Error('disconnected'));
+    }
+    updatePermissions();
+  }
+
+  function setConn(state, until) {
+    S.conn = state;
+    ui.conn.dataset.state = state;
+    if (state === 'connected') ui.conn.textContent = 'connected';
+    else if (state === 'connecting') ui.conn.textContent = 'connecting…';
+    else {
+      const left = until ? Math.max(0, Math.round((until - Date.now()) / 1000)) : 0;
+      ui.conn.textContent = left ? `disconnected · retry in ${left}s` : 'disconnected';
+      ui.conn.dataset.until = until || '';
+    }
+  }
+  setInterval(() => {
+    if (S.conn === 'disconnected' && ui.conn.dataset.until) setConn('disconnected', Number(ui.conn.dataset.until));
+  }, 1000);
+
+  function sendMsg(m) {
+    if (!ws || ws.readyState !== WebSocket.OPEN) return false;
+    ws.send(JSON.stringify(m));
+    S.sentCount++;
+    if (m.type === 'drive') S.driveCount++;
+    if (m.type === 'release') S.releaseCount++;
+    S.lastSent = m;
+    S.sent.push(m);
+    if (S.sent.length > 200) S.sent.shift();
+    return true;
+  }
+
+  // ------------------------------------------------------------ messages
+
+  function handle(m) {
+    switch (m && m.type) {
+      case 'hello': return onHello(m);
+      case 'layout': return onLayout(m);
+      case 'data': return onData(m);
+      case 'lease': return onLease(m);
+      case 'command': return onCommand(m);
+      case 'history': return onHistory(m);
+      case 'armed': return onArmed(m);
+      case 'error': return onError(m);
+      default: return undefined;
+    }
+  }
+
+  function onHello(m) {
+    attempt = 0;
+    S.helloSeen = true;
+    S.user = m.user || null;
+    S.roles = Array.isArray(m.roles) ? m.roles.map(String) : String(m.roles || '').split(/\s+/).filter(Boolean);
+    if (m.lease_role) S.leaseRole = String(m.lease_role);
+    if (m.designer_role) S.designerRole = String(m.designer_role);
+    S.layouts = (Array.isArray(m.layouts) ? m.layouts : []).map((l) => (typeof l === 'string' ? { name: l, title: l } : { name: l.name, title: l.title || l.name }));
+    setLease(m.lease);
+    ui.userName.textContent = S.user || '';
+    ui.userRoles.textContent = S.roles.length ? S.roles.join(' · ') : 'observer';
+    ui.select.replaceChildren(...S.layouts.map((l) => el('option', { value: l.name, text: l.title && l.title !== l.name ? `${l.title}` : l.name })));
+    ui.select.disabled = S.layouts.length < 2;
+    designer.enable(S.roles.includes(S.designerRole));
+    const params = new URLSearchParams(location.search);
+    const want = params.get('layout');
+    const names = S.layouts.map((l) => l.name);
+    let pick = names.includes(want) ? want : names.includes(S.layoutName) ? S.layoutName : names[0];
+    if (!pick) {
+      S.layout = null;
+      S.layoutName = null;
+      ui.root.replaceChildren(el('p', { class: 'placeholder', text: 'No layout for your roles.' }));
+      return;
+    }
+    openLayout(pick, false);
+  }
+
+  function queryVars() {
+    const vars = {};
+    for (const [k, v] of new URLSearchParams(location.search)) if (k !== 'layout') vars[k] = v;
+    return vars;
+  }
+
+  function openLayout(name, userChoice) {
+    S.layoutName = name;
+    ui.select.value = name;
+    if (userChoice) {
+      const params = new URLSearchParams(location.search);
+      params.set('layout', name);
+      history.replaceState(null, '', `${location.pathname}?${params}`);
+      designer.stop();
+    }
+    sendMsg({ type: 'open', layout: name, vars: queryVars() });
+  }
+
+  function onLayout(m) {
+    if (m.error) {
+      const e = typeof m.error === 'object' ? m.error : { message: String(m.error) };
+      S.layoutError = e;
+      showLayoutError(e);
+      if (designer.saving()) {
+        designer.saveResult(e);
+        return;
+      }
+      designer.stop();
+      S.layout = null;
+      widgets = [];
+      inputs.attach(null);
+      ui.title.textContent = `${S.layoutName || ''} — not loaded`;
+      ui.root.replaceChildren(el('p', { class: 'placeholder', text: 'The layout did not load.' }));
+      return;
+    }
+    const L = m.layout;
+    if (!L || typeof L !== 'object') return;
+    const same = S.layout && S.layout.name === L.name;
+    S.layoutError = null;
+    hideBanner();
+    S.layout = L;
+    S.layoutName = L.name || S.layoutName;
+    S.producers = normaliseProducers(m.producers);
+    const prev = same ? S.fields : {};
+    S.fields = {};
+    for (const [n, c] of Object.entries(L.commands || {})) {
+      const defaults = c && c.fields && typeof c.fields === 'object' ? c.fields : {};
+      const kept = prev[n] || {};
+      S.fields[n] = { ...defaults };
+      for (const k of Object.keys(defaults)) if (k in kept) S.fields[n][k] = kept[k];
+    }
+    if (!S.layouts.some((l) => l.name === L.name)) {
+      S.layouts.push({ name: L.name, title: L.title || L.name });
+      ui.select.append(el('option', { value: L.name, text: L.title || L.name }));
+    }
+    ui.select.value = S.layoutName;
+    ui.title.textContent = L.title || L.name || '';
+    document.title = `${L.title || L.name} · seabus`;
+    designer.loaded(L);
+    renderLayout();
+  }
+
+  function normaliseProducers(p) {
+    const out = {};
+    if (!p) return out;
+    if (Array.isArray(p)) {
+      for (const x of p) {
+        if (Array.isArray(x)) out[x[0]] = !!x[1];
+        else if (x && x.topic) out[x.topic] = !!(x.produced ?? x.producer ?? x.has_producer ?? x.produces ?? true);
+        else if (typeof x === 'string') out[x] = true;
+      }
+    } else if (typeof p === 'object') {
+      for (const [k, v] of Object.entries(p)) {
+        out[k] = v && typeof v === 'object' ? !!(v.produced ?? v.producer ?? v.has_producer ?? true) : !!v;
+      }
+    }
+    return out;
+  }
+
+  function onData(m) {
+    if (typeof m.now === 'number') {
+      S.now = m.now;
+      S.nowAt = performance.now();
+    }
+    const topics = m.topics || {};
+    for (const [name, t] of Object.entries(topics)) {
+      if (!t || typeof t !== 'object') continue;
+      S.topics[name] = { stamp: Number(t.stamp), fields: t.fields && typeof t.fields === 'object' ? t.fields : {} };
+    }
+    for (const w of widgets) {
+      try { w.update(); } catch (e) { console.error('widget', w.node && w.node.id, e); }
+    }
+    for (const w of widgets) w.tick();
+  }
+
+  function setLease(l) {
+    if (l && typeof l === 'object') S.lease = { holder: l.holder ?? null, since: l.since ?? null };
+    else S.lease = { holder: l || null, since: null };
+    const h = S.lease.holder;
+    ui.holder.textContent = h ? (h === S.user ? `you (${h})` : h) : 'free';
+    ui.holder.className = `lease-holder ${h ? (h === S.user ? 'mine' : 'other') : 'none'}`;
+    ui.holder.title = h && S.lease.since ? `since ${new Date(Number(S.lease.since) * 1000).toLocaleTimeString()}` : '';
+    ui.holder.dataset.holder = h || '';
+    const mayTake = S.roles.includes(S.leaseRole);
+    ui.take.hidden = !mayTake || h === S.user;
+    ui.take.disabled = !!h || S.conn !== 'connected';
+    ui.take.title = h ? `${h} holds control` : 'take control of the vehicle';
+    ui.release.hidden = h !== S.user || !S.user;
+    if (h !== S.user) inputs.stopAll(false);
+    updatePermissions();
+  }
+
+  function onLease(m) { setLease({ holder: m.holder, since: m.since }); }
+
+  function upsertCommand(c) {
+    if (!c) return;
+    const i = c.id !== undefined ? S.history.findIndex((x) => x.id === c.id) : -1;
+    if (i >= 0) S.history[i] = { ...S.history[i], ...c };
+    else S.history.push(c);
+    if (S.history.length > 500) S.history.splice(0, S.history.length - 500);
+  }
+
+  function onCommand(m) {
+    const { type, ...c } = m;
+    upsertCommand(c);
+    if (c.user === S.user) {
+      if (c.state === 'refused') toast(`${c.command || c.topic} refused${c.reason ? `: ${c.reason}` : ''}`, 'error');
+      else if (c.state === 'timed-out') toast(`${c.command || c.topic} timed out`, 'warn');
+    }
+    widgets.forEach((w) => w.onHistory && w.onHistory());
+  }
+
+  function onHistory(m) {
+    S.history = [];
+    for (const c of Array.isArray(m.commands) ? m.commands : []) upsertCommand(c);
+    widgets.forEach((w) => w.onHistory && w.onHistory());
+  }
+
+  function onArmed(m) {
+    let i = pendingArms.findIndex((p) => m.command === undefined || p.command === m.command);
+    if (i < 0) return;
+    const p = pendingArms.splice(i, 1)[0];
+    clearTimeout(p.timer);
+    p.resolve(m.arm);
+  }
+
+  function onError(m) {
+    const msg = m.message || 'request refused';
+    if (designer.saving()) designer.saveResult({ message: msg, file: m.file, line: m.line, col: m.col });
+    if (pendingArms.length) {
+      const p = pendingArms.shift();
+      clearTimeout(p.timer);
+      p.reject(new Error(msg));
+      return;
+    }
+    toast(msg, 'error');
+  }
+
+  // ------------------------------------------------------------ header
+
+  ui.select.addEventListener('change', () => openLayout(ui.select.value, true));
+  ui.take.addEventListener('click', () => sendMsg({ type: 'lease', action: 'take' }));
+  ui.release.addEventListener('click', () => {
+    inputs.stopAll(true);
+    sendMsg({ type: 'lease', action: 'release' });
+  });
+
+  // ------------------------------------------------------------ rendering
+
+  function showLayoutError(e) {
+    const where = [e.file, e.line, e.col].filter((x) => x !== undefined && x !== null && x !== '').join(':');
+    ui.banner.replaceChildren(
+      el('strong', { text: 'The layout has an error' }),
+      where ? el('span', { class: 'where', 'data-testid': 'error-where', text: where }) : null,
+      el('span', { 'data-testid': 'error-message', text: e.message || 'unknown error' }),
+      e.line !== undefined ? el('div', { text: `line ${e.line}, column ${e.col ?? '?'}` }) : null,
+    );
+    ui.banner.hidden = false;
+  }
+
+  function hideBanner() { ui.banner.hidden = true; }
+
+  function renderLayout() {
+    widgets = [];
+    const tree = designer.editing() ? designer.tree() : (S.layout && S.layout.root);
+    const e = tree ? renderNode(ctx, tree) : null;
+    ui.root.replaceChildren(e || el('p', { class: 'placeholder', text: S.layout ? 'This layout shows nothing for your roles.' : 'Waiting for the layout…' }));
+    inputs.attach(S.layout);
+    for (const w of widgets) w.tick();
+    ctx.redrawSoon();
+  }
+
+  function updatePermissions() {
+    for (const w of widgets) if (w.permissions) w.permissions();
+    if (ui.take) ui.take.disabled = !!S.lease.holder || S.conn !== 'connected';
+  }
+
+  function syncInputs() {
+    for (const w of widgets) if (w.sync) w.sync();
+  }
+
+  setInterval(() => { for (const w of widgets) w.tick(); }, 250);
+  window.addEventListener('resize', () => ctx.redrawSoon());
+
+  // ------------------------------------------------------------ commands
+
+  function arm(name) {
+    return new Promise((resolve, reject) => {
+      if (!sendMsg({ type: 'arm', layout: ctx.layoutName(), command: name })) {
+        reject(new Error('disconnected'));
+        return;
+      }
+      const p = { command: name, resolve, reject };
+      p.timer = setTimeout(() => {
+        const i = pendingArms.indexOf(p);
+        if (i >= 0) pendingArms.splice(i, 1);
+        reject(new Error('no answer to arming'));
+      }, ARM_TIMEOUT_MS);
+      pendingArms.push(p);
+    });
+  }
+
+  function prepare(name, set) {
+    const c = ctx.command(name);
+    if (!c) { toast(`unknown command ${name}`, 'error'); return null; }
+    const a = ctx.access(name);
+    if (!a.ok) { toast(`${name}: ${a.why}`, 'warn'); return null; }
+    const fields = { ...(S.fields[name] || {}), ...set };
+    for (const [k, v] of Object.entries(fields)) fields[k] = ctx.clamp(name, k, v);
+    S.fields[name] = fields;
+    syncInputs();
+    return { c, fields };
+  }
+
+  /** Sends a command with some fields set, asking first when it needs confirmation. */
+  function sendCommand(name, set) {
+    const p = prepare(name, set || {});
+    if (!p) return false;
+    const { c, fields } = p;
+    if (c.confirm === 'dialog' || c.confirm === 'hold') {
+      confirmDialog(name, c, fields);
+      return true;
+    }
+    return sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields });
+  }
+
+  async function armAndSend(name, fields) {
+    try {
+      const id = await arm(name);
+      sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: id });
+    } catch (e) {
+      toast(`${name} not sent: ${e.message}`, 'error');
+    }
+  }
+
+  /** Press and hold: arms at once, sends when held for the hold time, nothing when let go early. */
+  function holdCommand(name, set, cb) {
+    const p = prepare(name, set || {});
+    const end = () => { try { cb && cb.end && cb.end(); } catch (e) { /* */ } };
+    if (!p) { end(); return { cancel() {} }; }
+    const holdMs = ctx.holdMs(name) + HOLD_MARGIN_MS;
+    const t0 = performance.now();
+    let armId = null, armErr = null, done = false, cancelled = false, ticking;
+    arm(name).then((id) => { armId = id; finish(); }, (e) => { armErr = e; finish(); });
+    const progress = () => {
+      const f = Math.min(1, (performance.now() - t0) / holdMs);
+      if (cb && cb.progress) cb.progress(f);
+      if (f >= 1) { clearInterval(ticking); finish(); }
+    };
+    ticking = setInterval(progress, 25);
+    progress();
+    function finish() {
+      if (done || cancelled) return;
+      if (armErr) {
+        done = true; clearInterval(ticking); end();
+        toast(`${name} not sent: ${armErr.message}`, 'error');
+        return;
+      }
+      if (performance.now() - t0 < holdMs || armId === null) return;
+      done = true;
+      clearInterval(ticking);
+      sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields: S.fields[name] || p.fields, confirmed: armId });
+      end();
+    }
+    return {
+      cancel() {
+        if (done || cancelled) return;
+        cancelled = true;
+        clearInterval(ticking);
+        end();
+      },
+      get done() { return done; },
+    };
+  }
+  ctx.holdIndicator = (text) => {
+    ui.holdBox.querySelector('.hold-text').textContent = text;
+    ui.holdBox.hidden = false;
+    const fill = ui.holdBox.querySelector('.hold-fill');
+    return {
+      progress(f) { fill.style.width = `${(f * 100).toFixed(1)}%`; },
+      end() { ui.holdBox.hidden = true; fill.style.width = '0'; },
+    };
+  };
+
+  let dialogBusy = false;
+  function confirmDialog(name, c, fields) {
+    if (dialogBusy) return;
+    dialogBusy = true;
+    const d = ui.dialog;
+    const okBtn = d.querySelector('[value="ok"]');
+    const hold = c.confirm === 'hold';
+    ui.dialogTitle.textContent = `Send ${name}?`;
+    ui.dialogText.textContent = hold
+      ? `Press and hold Send for ${(ctx.holdMs(name) / 1000).toFixed(1)} s to send ${c.topic || name}.`
+      : `This sends ${c.topic || name} to the vehicle.`;
+    ui.dialogFields.textContent = fmtFields(fields).split(', ').join('\n');
+    okBtn.textContent = hold ? 'Hold to send' : 'Send';
+    let h = null;
+    const fill = el('span', { class: 'fill' });
+    okBtn.classList.add('cmd-button');
+    okBtn.prepend(fill);
+    const down = (ev) => {
+      if (!hold || h) return;
+      ev.preventDefault();
+      h = holdCommand(name, {}, {
+        progress(f) { fill.style.width = `${(f * 100).toFixed(1)}%`; },
+        end() { fill.style.width = '0'; if (h && h.done) d.close('held'); h = null; },
+      });
+    };
+    const up = () => { if (h && !h.done) { h.cancel(); } };
+    const click = (ev) => { if (hold) ev.preventDefault(); };
+    okBtn.addEventListener('pointerdown', down);
+    okBtn.addEventListener('pointerup', up);
+    okBtn.addEventListener('pointerleave', up);
+    okBtn.addEventListener('click', click);
+    const onKey = (ev) => { if (hold && (ev.key === ' ' || ev.key === 'Enter') && !ev.repeat && ev.target === okBtn) down(ev); };
+    const onKeyUp = (ev) => { if (hold && (ev.key === ' ' || ev.key === 'Enter')) up(); };
+    okBtn.addEventListener('keydown', onKey);
+    okBtn.addEventListener('keyup', onKeyUp);
+    d.addEventListener('close', function closed() {
+      d.removeEventListener('close', closed);
+      okBtn.removeEventListener('pointerdown', down);
+      okBtn.removeEventListener('pointerup', up);
+      okBtn.removeEventListener('pointerleave', up);
+      okBtn.removeEventListener('click', click);
+      okBtn.removeEventListener('keydown', onKey);
+      okBtn.removeEventListener('keyup', onKeyUp);
+      fill.remove();
+      if (h) h.cancel();
+      dialogBusy = false;
+      if (d.returnValue === 'ok' && !hold) armAndSend(name, S.fields[name] || fields);
+    });
+    d.returnValue = '';
+    d.showModal();
+    d.querySelector('[value="cancel"]').focus();
+  }
+
+  // ------------------------------------------------------------ toasts
+
+  function toast(text, kind) {
+    const t = el('div', { class: `toast ${kind || ''}`, role: kind === 'error' ? 'alert' : 'status', text });
+    ui.toasts.append(t);
+    while (ui.toasts.childElementCount > 5) ui.toasts.firstElementChild.remove();
+    setTimeout(() => t.remove(), kind === 'error' ? 8000 : 5000);
+  }
+
+  // ------------------------------------------------------------ test hook
+
+  window.seabusConsole = {
+    state() {
+      return {
+        layout: S.layout ? S.layout.name : S.layoutName,
+        lease: S.lease.holder,
+        connection: S.conn,
+        drives: S.driveCount,
+        releases: S.releaseCount,
+        sentCount: S.sentCount,
+        lastSent: S.lastSent,
+        user: S.user,
+        roles: S.roles.slice(),
+        editing: designer.editing(),
+        error: S.layoutError,
+        inputs: inputs.status(),
+      };
+    },
+    sent: () => S.sent.slice(),
+  };
+
+  connect();
+}

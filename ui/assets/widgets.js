@@ -1,0 +1,1139 @@
+// Layout tree and widgets of the console: containers, outputs and command inputs.
+
+const SVG_NS = 'http://www.w3.org/2000/svg';
+const EARTH_RADIUS = 6371008.8;
+
+export const PALETTE = ['#3fc1e0', '#f2b33d', '#3ccf8e', '#ff7ab6', '#a98bff', '#f0524f', '#9be15d', '#ffffff'];
+const NAMED_COLOURS = {
+  green: '#3ccf8e', orange: '#f29a3d', red: '#f0524f', yellow: '#f2d43d', blue: '#4c8dff',
+  cyan: '#3fc1e0', grey: '#6b8399', gray: '#6b8399', white: '#e8f1f8', purple: '#a98bff', magenta: '#ff5fd2',
+};
+
+// ---------------------------------------------------------------- helpers
+
+export function el(tag, attrs, ...children) {
+  const e = document.createElement(tag);
+  if (attrs) {
+    for (const [k, v] of Object.entries(attrs)) {
+      if (v === undefined || v === null || v === false) continue;
+      if (k === 'class') e.className = v;
+      else if (k === 'text') e.textContent = v;
+      else if (k.startsWith('on') && typeof v === 'function') e.addEventListener(k.slice(2), v);
+      else e.setAttribute(k, v === true ? '' : String(v));
+    }
+  }
+  for (const c of children.flat()) {
+    if (c === null || c === undefined || c === false) continue;
+    e.append(c instanceof Node ? c : document.createTextNode(String(c)));
+  }
+  return e;
+}
+
+export function svg(tag, attrs, ...children) {
+  const e = document.createElementNS(SVG_NS, tag);
+  if (attrs) {
+    for (const [k, v] of Object.entries(attrs)) {
+      if (v === undefined || v === null) continue;
+      if (k === 'text') e.textContent = v;
+      else e.setAttribute(k, String(v));
+    }
+  }
+  for (const c of children.flat()) if (c) e.append(c);
+  return e;
+}
+
+export function colour(name, i) {
+  if (!name) return PALETTE[(i || 0) % PALETTE.length];
+  const key = String(name).trim().toLowerCase();
+  return NAMED_COLOURS[key] || String(name).trim();
+}
+
+/** `topic.field` (string) or `{topic, field}` → `{topic, field}`; the field is after the last dot. */
+export function parseBind(b) {
+  if (!b) return null;
+  if (typeof b === 'object') {
+    if (typeof b.topic === 'string') return { topic: b.topic, field: b.field == null ? null : String(b.field) };
+    return null;
+  }
+  const s = String(b).trim();
+  if (!s) return null;
+  const i = s.lastIndexOf('.');
+  if (i <= 0) return { topic: s, field: null };
+  return { topic: s.slice(0, i), field: s.slice(i + 1) };
+}
+
+export function bindText(b) {
+  const p = parseBind(b);
+  if (!p) return '';
+  return p.field ? `${p.topic}.${p.field}` : p.topic;
+}
+
+/** A widget attribute naming a whole topic (`position`, health's `bind`): the names it may go by. */
+export function topicNames(x) {
+  if (!x) return [];
+  if (typeof x === 'string') return [x.trim()];
+  const p = parseBind(x);
+  if (!p) return [];
+  return p.field ? [`${p.topic}.${p.field}`, p.topic] : [p.topic];
+}
+
+/** Durations: numbers are taken in `unit` ms per unit; strings may carry ms/s/m/h. */
+export function parseDuration(x, unitMs, dflt) {
+  if (x === undefined || x === null || x === '') return dflt;
+  if (typeof x === 'number') return x * unitMs;
+  const m = /^\s*(-?[\d.]+)\s*(ms|s|m|min|h)?\s*$/i.exec(String(x));
+  if (!m) return dflt;
+  const n = parseFloat(m[1]);
+  const u = (m[2] || '').toLowerCase();
+  if (u === 'ms') return n;
+  if (u === 's') return n * 1000;
+  if (u === 'm' || u === 'min') return n * 60000;
+  if (u === 'h') return n * 3600000;
+  return n * unitMs;
+}
+
+export function num(x, dflt) {
+  if (x === undefined || x === null || x === '') return dflt;
+  const n = typeof x === 'number' ? x : parseFloat(x);
+  return Number.isFinite(n) ? n : dflt;
+}
+
+/** A value typed by a user or written in an attribute: number, boolean or text. */
+export function parseValue(s) {
+  if (typeof s !== 'string') return s;
+  const t = s.trim();
+  if (t === 'true') return true;
+  if (t === 'false') return false;
+  if (t !== '' && /^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$/.test(t)) return parseFloat(t);
+  return s;
+}
+
+/** `F=V, F=V` or an object → an object of typed values. */
+export function parseFields(x) {
+  if (!x) return {};
+  if (typeof x === 'object') return { ...x };
+  const out = {};
+  for (const part of String(x).split(',')) {
+    const i = part.indexOf('=');
+    if (i < 0) continue;
+    const k = part.slice(0, i).trim();
+    if (k) out[k] = parseValue(part.slice(i + 1).trim());
+  }
+  return out;
+}
+
+export function fmtValue(v, precision) {
+  if (v === undefined) return '—';
+  if (v === null) return 'null';
+  if (typeof v === 'number') {
+    if (!Number.isFinite(v)) return String(v);
+    if (precision !== undefined && precision !== null && precision !== '') {
+      const p = Math.max(0, Math.min(12, Math.round(num(precision, 2))));
+      return v.toFixed(p);
+    }
+    if (Number.isInteger(v)) return String(v);
+    const a = Math.abs(v);
+    return String(+v.toFixed(a >= 1000 ? 1 : a >= 1 ? 3 : 4));
+  }
+  if (typeof v === 'boolean') return v ? 'true' : 'false';
+  if (typeof v === 'object') return fmtObject(v);
+  return String(v);
+}
+
+function fmtObject(v) {
+  try {
+    const s = JSON.stringify(v);
+    return s.length > 200 ? s.slice(0, 199) + '…' : s;
+  } catch (_) {
+    return String(v);
+  }
+}
+
+export function fmtFields(fields) {
+  if (!fields || typeof fields !== 'object') return fields === undefined ? '' : String(fields);
+  return Object.entries(fields).map(([k, v]) => `${k}=${fmtValue(v)}`).join(', ');
+}
+
+export function fmtAge(s) {
+  if (!Number.isFinite(s) || s < 0) s = 0;
+  if (s < 60) return `${Math.floor(s)}s`;
+  if (s < 3600) return `${Math.floor(s / 60)}m`;
+  if (s < 86400) return `${Math.floor(s / 3600)}h`;
+  return `${Math.floor(s / 86400)}d`;
+}
+
+/** Seconds since the epoch (or an ISO text) → local HH:MM:SS. */
+export function fmtTime(t, millis) {
+  let d;
+  if (typeof t === 'number') d = new Date(t > 1e11 ? t : t * 1000);
+  else if (typeof t === 'string' && t) d = new Date(/^[\d.]+$/.test(t) ? parseFloat(t) * 1000 : t);
+  else return '';
+  if (isNaN(d.getTime())) return String(t);
+  const p = (n, w = 2) => String(n).padStart(w, '0');
+  const base = `${p(d.getHours())}:${p(d.getMinutes())}:${p(d.getSeconds())}`;
+  return millis ? `${base}.${p(d.getMilliseconds(), 3)}` : base;
+}
+
+function niceStep(span, target) {
+  if (!(span > 0)) return 1;
+  const raw = span / Math.max(1, target);
+  const pow = Math.pow(10, Math.floor(Math.log10(raw)));
+  const f = raw / pow;
+  const m = f < 1.5 ? 1 : f < 3.5 ? 2 : f < 7.5 ? 5 : 10;
+  return m * pow;
+}
+
+function globToRegExp(p) {
+  const esc = p.replace(/[.+^${}()|[\]\\]/g, '\\$&').replace(/\*/g, '.*').replace(/\?/g, '.');
+  return new RegExp(`^${esc}$`);
+}
+
+function listAttr(x) {
+  if (Array.isArray(x)) return x.map(String);
+  if (x === undefined || x === null || x === '') return [];
+  return String(x).split(/[,\s]+/).filter(Boolean);
+}
+
+// ---------------------------------------------------------------- the tree
+
+const CONTAINERS = new Set(['row', 'column', 'grid', 'tabs', 'tab']);
+export const OUTPUT_KINDS = ['readout', 'gauge', 'plot', 'track', 'health', 'log', 'history'];
+export const INPUT_KINDS = ['button', 'slider', 'number', 'text', 'toggle'];
+export const CONTAINER_KINDS = ['row', 'column', 'grid', 'tabs', 'tab'];
+
+export function isContainer(node) {
+  return node && CONTAINERS.has(node.kind);
+}
+
+export function nodeChildren(node) {
+  return Array.isArray(node && node.children) ? node.children : [];
+}
+
+/**
+ * Renders a node and its children. Returns the element, or null for a node the user may not see.
+ * Widgets are registered with ctx.register so that data, time and lease changes reach them.
+ */
+export function renderNode(ctx, node) {
+  if (!node || typeof node !== 'object') return null;
+  if (node.role && !ctx.hasRole(node.role)) return null;
+  const kind = String(node.kind || 'unknown');
+  let e;
+  switch (kind) {
+    case 'row':
+    case 'column':
+    case 'tab':
+      e = renderFlex(ctx, node, kind === 'row' ? 'row' : 'column');
+      break;
+    case 'grid':
+      e = renderGrid(ctx, node);
+      break;
+    case 'tabs':
+      e = renderTabs(ctx, node);
+      break;
+    case 'readout': e = readout(ctx, node); break;
+    case 'gauge': e = gauge(ctx, node); break;
+    case 'plot': e = plot(ctx, node); break;
+    case 'track': e = track(ctx, node); break;
+    case 'health': e = health(ctx, node); break;
+    case 'log': e = logWidget(ctx, node); break;
+    case 'history': e = history(ctx, node); break;
+    case 'button': case 'slider': case 'number': case 'text': case 'toggle':
+      e = input(ctx, node, kind);
+      break;
+    case 'series':
+      return null;
+    default:
+      e = frame(ctx, node, kind, el('div', { class: 'unknown', text: `unknown widget <${kind}>` }));
+  }
+  if (!e) return null;
+  e.classList.add('node');
+  if (node.id !== undefined) e.dataset.widgetId = node.id;
+  e.dataset.kind = kind;
+  ctx.nodeElement(e, node);
+  return e;
+}
+
+function renderKids(ctx, node) {
+  const out = [];
+  nodeChildren(node).forEach((c, i) => {
+    const e = renderNode(ctx, c);
+    if (e) out.push([e, i]);
+  });
+  return out;
+}
+
+function renderFlex(ctx, node, dir) {
+  const e = el('div', { class: dir, 'data-testid': 'container' });
+  const sizes = Array.isArray(node.sizes) ? node.sizes : listAttr(node.sizes).map(Number);
+  for (const [c, i] of renderKids(ctx, node)) {
+    const s = num(sizes[i], sizes.length ? 1 : undefined);
+    if (dir === 'row') {
+      c.style.flex = `${s > 0 ? s : 1} 1 0`;
+    } else if (s !== undefined) {
+      c.style.flex = `${s > 0 ? s : 1} 0 auto`;
+    } else {
+      // a column without sizes: natural heights, the big widgets share what is left
+      c.style.flex = /^(track|plot|tabs|log|health|history|row|column)$/.test(String(c.dataset.kind || nodeChildren(node)[i].kind)) ? '1 0 auto' : '0 0 auto';
+    }
+    e.append(c);
+  }
+  return e;
+}
+
+function renderGrid(ctx, node) {
+  const cols = Math.max(1, Math.round(num(node.columns, 2)));
+  const e = el('div', { class: 'grid', 'data-testid': 'container' });
+  e.style.gridTemplateColumns = `repeat(${cols}, minmax(0, 1fr))`;
+  for (const [c] of renderKids(ctx, node)) e.append(c);
+  return e;
+}
+
+function renderTabs(ctx, node) {
+  const e = el('div', { class: 'tabs', 'data-testid': 'container' });
+  const bar = el('div', { class: 'tab-bar', role: 'tablist' });
+  const panels = [];
+  const titles = Array.isArray(node.titles) ? node.titles : [];
+  const key = `tab:${node.id}`;
+  let current = ctx.uiState.get(key) || 0;
+  const kids = renderKids(ctx, node);
+  kids.forEach(([c, i], n) => {
+    const child = nodeChildren(node)[i];
+    const title = titles[i] || child.title || child.label || `Tab ${n + 1}`;
+    const id = `${String(node.id || 'tabs').replace(/\W/g, '_')}-${n}`;
+    const b = el('button', { type: 'button', role: 'tab', id: `${id}-t`, 'aria-controls': `${id}-p`, text: title });
+    const p = el('div', { class: 'tab-panel', role: 'tabpanel', id: `${id}-p`, 'aria-labelledby': `${id}-t` }, c);
+    b.addEventListener('click', () => select(n));
+    bar.append(b);
+    panels.push([b, p]);
+    e.append(p);
+  });
+  e.prepend(bar);
+  function select(n) {
+    current = n;
+    ctx.uiState.set(key, n);
+    panels.forEach(([b, p], j) => {
+      b.setAttribute('aria-selected', j === n ? 'true' : 'false');
+      b.tabIndex = j === n ? 0 : -1;
+      p.hidden = j !== n;
+    });
+    ctx.redrawSoon();
+  }
+  if (current >= panels.length) current = 0;
+  if (panels.length) select(current);
+  return e;
+}
+
+// ---------------------------------------------------------------- frames and status
+
+function frame(ctx, node, kind, body, extraClass) {
+  const label = node.label || '';
+  const status = el('span', { class: 'w-status', 'data-testid': 'status', 'data-state': 'nodata' });
+  const head = el('div', { class: 'w-head' }, el('span', { class: 'w-label', text: label, title: label }), status);
+  const e = el('section', {
+    class: `widget widget-${kind}${extraClass ? ' ' + extraClass : ''}`,
+    'data-testid': 'widget',
+    'aria-label': label || kind,
+  }, head, el('div', { class: 'w-body' }, body));
+  e._status = status;
+  return e;
+}
+
+/** Fresh / stale / no data / no producer for a widget whose values come from `topicsList`. */
+export function applyStatus(ctx, e, topicsList, freshMs) {
+  const status = e._status;
+  if (!status) return;
+  let best = null;
+  let missing = [];
+  for (const names of topicsList) {
+    let found = null;
+    for (const n of names) {
+      const t = ctx.topic(n);
+      if (t) { found = t; break; }
+    }
+    if (found) {
+      const age = ctx.serverNow() - num(found.stamp, 0);
+      if (best === null || age < best) best = age;
+    } else if (names.length && names.every((n) => ctx.producer(n) === false)) {
+      missing.push(names[0]);
+    }
+  }
+  let state, text, title = '';
+  if (best !== null) {
+    if (best * 1000 > freshMs) {
+      state = 'stale';
+      text = `stale ${fmtAge(best)}`;
+      title = `last value ${best.toFixed(1)} s old (fresh: ${freshMs / 1000} s)`;
+    } else {
+      state = 'fresh';
+      text = '';
+    }
+  } else if (missing.length && missing.length === topicsList.length) {
+    state = 'noproducer';
+    text = 'no producer';
+    title = `no module produces ${missing.join(', ')}`;
+  } else {
+    state = 'nodata';
+    text = 'no data';
+  }
+  if (status.dataset.state !== state || status.textContent !== text) {
+    status.dataset.state = state;
+    status.textContent = text;
+    status.title = title;
+    e.classList.toggle('is-stale', state === 'stale');
+    e.classList.toggle('is-nodata', state === 'nodata');
+    e.classList.toggle('is-noproducer', state === 'noproducer');
+  }
+}
+
+function freshOf(node) {
+  if (node.fresh_ms !== undefined) return num(node.fresh_ms, 2000);
+  return parseDuration(node.fresh, 1000, 2000);
+}
+
+function outputWidget(ctx, node, kind, body, topicsList, handlers) {
+  const e = frame(ctx, node, kind, body);
+  const freshMs = freshOf(node);
+  const w = {
+    node, el: e,
+    update: handlers.update || (() => {}),
+    tick() {
+      applyStatus(ctx, e, topicsList, freshMs);
+      if (handlers.tick) handlers.tick();
+    },
+    redraw: handlers.redraw,
+    onHistory: handlers.onHistory,
+  };
+  ctx.register(w);
+  w.update();
+  w.tick();
+  return e;
+}
+
+function valueOf(ctx, b) {
+  if (!b) return undefined;
+  const t = ctx.topic(b.topic);
+  if (!t || !t.fields || b.field === null) return undefined;
+  return t.fields[b.field];
+}
+
+// ---------------------------------------------------------------- readout
+
+function readout(ctx, node) {
+  const b = parseBind(node.bind);
+  const value = el('span', { class: 'readout-num', 'data-testid': 'value', text: '—' });
+  const unit = node.unit ? el('span', { class: 'readout-unit', text: node.unit }) : null;
+  const body = el('div', { class: 'readout-value', 'aria-live': 'off' }, value, unit);
+  if (!node.label && b) node = { ...node, label: bindText(b) };
+  return outputWidget(ctx, node, 'readout', body, b ? [[b.topic]] : [], {
+    update() {
+      const v = valueOf(ctx, b);
+      const s = fmtValue(v, node.precision);
+      if (value.textContent !== s) value.textContent = s;
+    },
+  });
+}
+
+// ---------------------------------------------------------------- gauge
+
+export function parseRanges(x) {
+  if (!x) return [];
+  if (Array.isArray(x)) {
+    return x.map((r) => {
+      if (Array.isArray(r)) return { from: num(r[0], 0), to: num(r[1], 0), colour: r[2] };
+      return { from: num(r.from, 0), to: num(r.to, 0), colour: r.colour || r.color };
+    });
+  }
+  return String(x).split(',').map((s) => s.trim()).filter(Boolean).map((s) => {
+    const [a, b, c] = s.split(':');
+    return { from: num(a, 0), to: num(b, 0), colour: (c || '').trim() };
+  });
+}
+
+function gauge(ctx, node) {
+  const b = parseBind(node.bind);
+  const min = num(node.min, 0);
+  let max = num(node.max, 100);
+  if (!(max > min)) max = min + 1;
+  const cx = 100, cy = 100, r = 78;
+  const ang = (v) => -135 + 270 * Math.max(0, Math.min(1, (v - min) / (max - min)));
+  const pt = (a, rr) => [cx + rr * Math.sin(a * Math.PI / 180), cy - rr * Math.cos(a * Math.PI / 180)];
+  const arc = (a1, a2, rr) => {
+    const [x1, y1] = pt(a1, rr);
+    const [x2, y2] = pt(a2, rr);
+    return `M${x1.toFixed(2)},${y1.toFixed(2)} A${rr},${rr} 0 ${a2 - a1 > 180 ? 1 : 0} 1 ${x2.toFixed(2)},${y2.toFixed(2)}`;
+  };
+  const s = svg('svg', { viewBox: '0 0 200 168', role: 'img', 'aria-label': node.label || 'gauge' });
+  s.append(svg('path', { d: arc(-135, 135, r), fill: 'none', stroke: '#1c3750', 'stroke-width': 12, 'stroke-linecap': 'butt' }));
+  parseRanges(node.ranges).forEach((rg, i) => {
+    const a1 = ang(Math.min(rg.from, rg.to)), a2 = ang(Math.max(rg.from, rg.to));
+    if (a2 > a1) s.append(svg('path', { d: arc(a1, a2, r), fill: 'none', stroke: colour(rg.colour, i), 'stroke-width': 12 }));
+  });
+  const step = niceStep(max - min, 5);
+  for (let v = Math.ceil(min / step) * step; v <= max + step * 1e-6; v += step) {
+    const a = ang(v);
+    const [x1, y1] = pt(a, r - 8);
+    const [x2, y2] = pt(a, r + 6);
+    const [tx, ty] = pt(a, r - 20);
+    s.append(svg('line', { x1, y1, x2, y2, stroke: '#7f9bb3', 'stroke-width': 1.2 }));
+    s.append(svg('text', { x: tx, y: ty + 3, 'text-anchor': 'middle', class: 'gauge-tick', text: fmtValue(+v.toFixed(6)) }));
+  }
+  const needle = svg('line', { x1: cx, y1: cy, x2: cx, y2: cy - r + 14, stroke: '#ffffff', 'stroke-width': 3, 'stroke-linecap': 'round' });
+  const needleG = svg('g', { transform: `rotate(-135 ${cx} ${cy})` }, needle);
+  s.append(needleG, svg('circle', { cx, cy, r: 6, fill: '#d8e6f2' }));
+  const valText = svg('text', { x: cx, y: 142, 'text-anchor': 'middle', class: 'gauge-value', 'data-testid': 'value', text: '—' });
+  const unitText = svg('text', { x: cx, y: 160, 'text-anchor': 'middle', class: 'gauge-unit', text: node.unit || '' });
+  s.append(valText, unitText);
+  const body = el('div', { class: 'gauge' }, s);
+  if (!node.label && b) node = { ...node, label: bindText(b) };
+  return outputWidget(ctx, node, 'gauge', body, b ? [[b.topic]] : [], {
+    update() {
+      const v = valueOf(ctx, b);
+      const t = fmtValue(v, node.precision);
+      if (valText.textContent !== t) valText.textContent = t;
+      if (typeof v === 'number' && Number.isFinite(v)) {
+        needleG.setAttribute('transform', `rotate(${ang(v).toFixed(2)} ${cx} ${cy})`);
+        needle.setAttribute('stroke', v < min || v > max ? '#ff2d6f' : '#ffffff');
+      }
+    },
+  });
+}
+
+// ---------------------------------------------------------------- plot
+
+function plotSeries(node) {
+  const list = Array.isArray(node.series) ? node.series : nodeChildren(node).filter((c) => c && c.kind === 'series');
+  return list.map((s, i) => ({
+    bind: parseBind(s.bind),
+    label: s.label || bindText(s.bind) || `series ${i + 1}`,
+    colour: colour(s.colour || s.color, i),
+    samples: [],
+    lastStamp: undefined,
+  })).filter((s) => s.bind);
+}
+
+function plot(ctx, node) {
+  const series = plotSeries(node);
+  const windowMs = node.window_ms !== undefined ? num(node.window_ms, 60000) : parseDuration(node.window, 1000, 60000);
+  const fixedMin = num(node.min, undefined);
+  const fixedMax = num(node.max, undefined);
+  const canvas = el('canvas', { role: 'img', 'aria-label': `plot of ${series.map((s) => s.label).join(', ')}` });
+  const wrap = el('div', { class: 'plot-canvas-wrap' }, canvas);
+  const legend = el('div', { class: 'plot-legend' });
+  const legendVals = series.map((s) => {
+    const v = el('span', { class: 'val', text: '—' });
+    const item = el('span', {}, el('span', { class: 'sw', style: `background:${s.colour}` }), s.label, v);
+    legend.append(item);
+    return [item, v];
+  });
+  const body = el('div', { style: 'display:flex;flex-direction:column;gap:4px;flex:1;min-height:0' }, wrap, legend);
+  let dirty = true;
+  if (!node.label) node = { ...node, label: series.map((x) => x.label).join(' · ') || 'Plot' };
+
+  function draw() {
+    if (!canvas.isConnected || !canvas.offsetParent) return;
+    const dpr = window.devicePixelRatio || 1;
+    const W = Math.max(50, wrap.clientWidth), H = Math.max(50, wrap.clientHeight);
+    if (canvas.width !== Math.round(W * dpr) || canvas.height !== Math.round(H * dpr)) {
+      canvas.width = Math.round(W * dpr);
+      canvas.height = Math.round(H * dpr);
+    }
+    const g = canvas.getContext('2d');
+    g.setTransform(dpr, 0, 0, dpr, 0, 0);
+    g.clearRect(0, 0, W, H);
+    const now = ctx.serverNow();
+    const t0 = now - windowMs / 1000;
+    let lo = Infinity, hi = -Infinity;
+    for (const s of series) for (const [t, v] of s.samples) if (t >= t0) { if (v < lo) lo = v; if (v > hi) hi = v; }
+    if (fixedMin !== undefined) lo = fixedMin;
+    if (fixedMax !== undefined) hi = fixedMax;
+    if (!Number.isFinite(lo) || !Number.isFinite(hi)) { lo = 0; hi = 1; }
+    if (hi - lo < 1e-9) { lo -= 1; hi += 1; } else if (fixedMin === undefined || fixedMax === undefined) {
+      const pad = (hi - lo) * 0.06;
+      if (fixedMin === undefined) lo -= pad;
+      if (fixedMax === undefined) hi += pad;
+    }
+    const L = 48, R = 8, T = 6, B = 18;
+    const pw = W - L - R, ph = H - T - B;
+    const X = (t) => L + ((t - t0) / (windowMs / 1000)) * pw;
+    const Y = (v) => T + (1 - (v - lo) / (hi - lo)) * ph;
+    g.font = '11px ui-monospace, monospace';
+    g.lineWidth = 1;
+    const ystep = niceStep(hi - lo, 4);
+    g.textAlign = 'right';
+    g.textBaseline = 'middle';
+    for (let v = Math.ceil(lo / ystep) * ystep; v <= hi + 1e-9; v += ystep) {
+      const y = Math.round(Y(v)) + 0.5;
+      g.strokeStyle = Math.abs(v) < ystep * 1e-6 ? '#2f5d80' : '#173550';
+      g.beginPath(); g.moveTo(L, y); g.lineTo(W - R, y); g.stroke();
+      g.fillStyle = '#7f9bb3';
+      g.fillText(fmtValue(+v.toFixed(6)), L - 5, y);
+    }
+    const wS = windowMs / 1000;
+    const tstep = niceStep(wS, 4);
+    g.textAlign = 'center';
+    g.textBaseline = 'top';
+    for (let a = 0; a <= wS + 1e-9; a += tstep) {
+      const x = Math.round(X(now - a)) + 0.5;
+      g.strokeStyle = '#173550';
+      g.beginPath(); g.moveTo(x, T); g.lineTo(x, T + ph); g.stroke();
+      g.fillStyle = '#7f9bb3';
+      g.fillText(a === 0 ? 'now' : `-${fmtValue(+a.toFixed(3))}s`, Math.min(W - R - 12, Math.max(L + 12, x)), T + ph + 3);
+    }
+    g.save();
+    g.beginPath(); g.rect(L, T, pw, ph); g.clip();
+    for (const s of series) {
+      g.strokeStyle = s.colour;
+      g.lineWidth = 2;
+      g.beginPath();
+      let started = false;
+      for (const [t, v] of s.samples) {
+        if (t < t0 - wS * 0.05) continue;
+        const x = X(t), y = Y(v);
+        if (!started) { g.moveTo(x, y); started = true; } else g.lineTo(x, y);
+      }
+      g.stroke();
+      const last = s.samples[s.samples.length - 1];
+      if (last && last[0] >= t0) {
+        g.fillStyle = s.colour;
+        g.beginPath(); g.arc(X(last[0]), Y(last[1]), 3, 0, Math.PI * 2); g.fill();
+      }
+    }
+    g.restore();
+    g.strokeStyle = '#1f4563';
+    g.strokeRect(L + 0.5, T + 0.5, pw, ph);
+    dirty = false;
+  }
+
+  const topics = series.map((s) => [s.bind.topic]);
+  return outputWidget(ctx, node, 'plot', body, topics, {
+    update() {
+      series.forEach((s, i) => {
+        const t = ctx.topic(s.bind.topic);
+        if (!t || !t.fields) return;
+        const v = t.fields[s.bind.field];
+        const stamp = num(t.stamp, NaN);
+        if (typeof v === 'number' && Number.isFinite(v) && stamp !== s.lastStamp) {
+          s.lastStamp = stamp;
+          s.samples.push([stamp, v]);
+          dirty = true;
+        }
+        const txt = fmtValue(v, node.precision);
+        if (legendVals[i][1].textContent !== txt) legendVals[i][1].textContent = txt;
+      });
+      const cut = ctx.serverNow() - windowMs / 1000 * 1.2;
+      for (const s of series) {
+        let k = 0;
+        while (k < s.samples.length && s.samples[k][0] < cut) k++;
+        if (k) s.samples.splice(0, k);
+        if (s.samples.length > 20000) s.samples.splice(0, s.samples.length - 20000);
+      }
+    },
+    tick() {
+      const now = ctx.serverNow();
+      const fresh = freshOf(node) / 1000;
+      series.forEach((s, i) => {
+        const last = s.samples[s.samples.length - 1];
+        legendVals[i][0].classList.toggle('stale', !last || now - last[0] > fresh);
+      });
+      dirty = true;
+      draw();
+    },
+    redraw() { dirty = true; draw(); },
+  });
+}
+
+// ---------------------------------------------------------------- track
+
+export function parseWaypoints(x) {
+  if (!x) return [];
+  if (Array.isArray(x)) {
+    return x.map((p) => Array.isArray(p) ? { lat: num(p[0], NaN), lon: num(p[1], NaN) } : { lat: num(p.lat, NaN), lon: num(p.lon, NaN) })
+      .filter((p) => Number.isFinite(p.lat) && Number.isFinite(p.lon));
+  }
+  return String(x).split(';').map((s) => s.trim()).filter(Boolean).map((s) => {
+    const [a, b] = s.split(',');
+    return { lat: num(a, NaN), lon: num(b, NaN) };
+  }).filter((p) => Number.isFinite(p.lat) && Number.isFinite(p.lon));
+}
+
+function track(ctx, node) {
+  const posNames = topicNames(node.position);
+  const headB = parseBind(node.heading);
+  const trailN = Math.max(2, Math.round(num(node.trail, 600)));
+  const waypoints = parseWaypoints(node.waypoints);
+  const gridAttr = node.grid;
+  const trail = [];
+  let lastStamp;
+  let origin = waypoints.length ? { ...waypoints[0] } : null;
+  let heading;
+  const wrap = el('div', { class: 'track-wrap' });
+  const s = svg('svg', { role: 'img', 'aria-label': node.label || 'vehicle track' });
+  wrap.append(s);
+  const info = el('div', { class: 'track-info', 'data-testid': 'track-info' });
+  const body = el('div', { style: 'display:flex;flex-direction:column;gap:4px;flex:1;min-height:0' }, wrap, info);
+  let dirty = true;
+  if (!node.label) node = { ...node, label: 'Track' };
+
+  const project = (p) => {
+    const lat0 = origin.lat * Math.PI / 180;
+    return [
+      (p.lon - origin.lon) * Math.PI / 180 * EARTH_RADIUS * Math.cos(lat0),
+      (p.lat - origin.lat) * Math.PI / 180 * EARTH_RADIUS,
+    ];
+  };
+
+  function draw() {
+    if (!dirty || !wrap.isConnected || !wrap.offsetParent) return;
+    dirty = false;
+    const W = Math.max(100, wrap.clientWidth), H = Math.max(100, wrap.clientHeight);
+    s.setAttribute('viewBox', `0 0 ${W} ${H}`);
+    s.replaceChildren();
+    if (!origin) {
+      s.append(svg('text', { x: W / 2, y: H / 2, 'text-anchor': 'middle', fill: '#7f9bb3', 'font-size': 13, text: 'waiting for a position' }));
+      return;
+    }
+    const pts = trail.map(project);
+    const wps = waypoints.map(project);
+    const all = pts.concat(wps);
+    let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
+    for (const [x, y] of all) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
+    if (!all.length) { x0 = x1 = y0 = y1 = 0; }
+    const minSpan = 20;
+    const cxm = (x0 + x1) / 2, cym = (y0 + y1) / 2;
+    const spanX = Math.max(minSpan, x1 - x0), spanY = Math.max(minSpan, y1 - y0);
+    const scale = Math.min((W - 40) / (spanX * 1.15), (H - 40) / (spanY * 1.15));
+    const SX = (x) => W / 2 + (x - cxm) * scale;
+    const SY = (y) => H / 2 - (y - cym) * scale;
+    const left = cxm - W / 2 / scale, right = cxm + W / 2 / scale;
+    const bottom = cym - H / 2 / scale, top = cym + H / 2 / scale;
+    let step = num(gridAttr, NaN);
+    const autoStep = niceStep(Math.max(right - left, top - bottom), 6);
+    if (!(step > 0) || (right - left) / step > 60 || (top - bottom) / step > 60) step = autoStep;
+    const grid = svg('g', { stroke: '#143452', 'stroke-width': 1 });
+    const labels = svg('g', { fill: '#56778f', 'font-size': 10, 'font-family': 'ui-monospace, monospace' });
+    for (let x = Math.ceil(left / step) * step; x <= right; x += step) {
+      const X = Math.round(SX(x)) + 0.5;
+      grid.append(svg('line', { x1: X, y1: 0, x2: X, y2: H, stroke: Math.abs(x) < step / 1e6 ? '#24557c' : undefined }));
+      labels.append(svg('text', { x: X + 3, y: H - 4, text: `${fmtValue(+x.toFixed(3))}` }));
+    }
+    for (let y = Math.ceil(bottom / step) * step; y <= top; y += step) {
+      const Y = Math.round(SY(y)) + 0.5;
+      grid.append(svg('line', { x1: 0, y1: Y, x2: W, y2: Y, stroke: Math.abs(y) < step / 1e6 ? '#24557c' : undefined }));
+      labels.append(svg('text', { x: 3, y: Y - 3, text: `${fmtValue(+y.toFixed(3))}` }));
+    }
+    s.append(grid, labels);
+    if (wps.length) {
+      s.append(svg('polyline', {
+        points: wps.map(([x, y]) => `${SX(x).toFixed(1)},${SY(y).toFixed(1)}`).join(' '),
+        fill: 'none', stroke: '#f2b33d', 'stroke-width': 1.5, 'stroke-dasharray': '6 4', opacity: 0.8,
+      }));
+      wps.forEach(([x, y], i) => {
+        s.append(svg('circle', { cx: SX(x), cy: SY(y), r: 6, fill: '#061422', stroke: '#f2b33d', 'stroke-width': 2 }));
+        s.append(svg('text', { x: SX(x) + 9, y: SY(y) - 7, fill: '#f2b33d', 'font-size': 11, text: `WP${i + 1}` }));
+      });
+    }
+    if (pts.length > 1) {
+      s.append(svg('polyline', {
+        points: pts.map(([x, y]) => `${SX(x).toFixed(1)},${SY(y).toFixed(1)}`).join(' '),
+        fill: 'none', stroke: '#3fc1e0', 'stroke-width': 2, 'stroke-linejoin': 'round', opacity: 0.9,
+      }));
+    }
+    if (pts.length) {
+      const [x, y] = pts[pts.length - 1];
+      const X = SX(x), Y = SY(y);
+      if (typeof heading === 'number' && Number.isFinite(heading)) {
+        s.append(svg('path', {
+          d: 'M0,-16 L9,10 L0,4 L-9,10 Z',
+          transform: `translate(${X.toFixed(1)},${Y.toFixed(1)}) rotate(${heading.toFixed(1)})`,
+          fill: '#ffffff', stroke: '#3fc1e0', 'stroke-width': 1.5, 'data-testid': 'heading-arrow',
+        }));
+      } else {
+        s.append(svg('circle', { cx: X, cy: Y, r: 6, fill: '#ffffff', stroke: '#3fc1e0', 'stroke-width': 2 }));
+      }
+    }
+    // scale bar
+    const barM = niceStep((W / 4) / scale, 1);
+    const barPx = barM * scale;
+    const bx = W - barPx - 14, by = H - 16;
+    s.append(svg('g', { 'data-testid': 'scale-bar' },
+      svg('rect', { x: bx - 6, y: by - 18, width: barPx + 12, height: 26, rx: 4, fill: 'rgba(6,20,34,.75)' }),
+      svg('path', { d: `M${bx},${by - 5} v5 h${barPx} v-5`, fill: 'none', stroke: '#d8e6f2', 'stroke-width': 2 }),
+      svg('text', { x: bx + barPx / 2, y: by - 7, 'text-anchor': 'middle', fill: '#d8e6f2', 'font-size': 11, text: `${fmtValue(barM)} m` })));
+    // north
+    s.append(svg('g', { transform: `translate(${W - 20},22)` },
+      svg('path', { d: 'M0,-12 L6,6 L0,2 L-6,6 Z', fill: '#d8e6f2' }),
+      svg('text', { x: 0, y: 18, 'text-anchor': 'middle', fill: '#d8e6f2', 'font-size': 10, text: 'N' })));
+    s.append(svg('text', { x: 6, y: 14, fill: '#56778f', 'font-size': 10, text: `grid ${fmtValue(step)} m` }));
+  }
+
+  function positionTopic() {
+    for (const n of posNames) if (ctx.topic(n)) return ctx.topic(n);
+    return undefined;
+  }
+
+  const topicsList = [posNames];
+  return outputWidget(ctx, node, 'track', body, topicsList, {
+    update() {
+      const t = positionTopic();
+      if (t && t.fields) {
+        const lat = num(t.fields.lat, NaN), lon = num(t.fields.lon, NaN);
+        if (Number.isFinite(lat) && Number.isFinite(lon) && t.stamp !== lastStamp) {
+          lastStamp = t.stamp;
+          if (!origin) origin = { lat, lon };
+          const prev = trail[trail.length - 1];
+          if (!prev || prev.lat !== lat || prev.lon !== lon) {
+            trail.push({ lat, lon });
+            if (trail.length > trailN) trail.splice(0, trail.length - trailN);
+          } else {
+            trail[trail.length - 1] = { lat, lon };
+          }
+          dirty = true;
+        }
+      }
+      const h = valueOf(ctx, headB);
+      if (h !== heading) { heading = typeof h === 'number' ? h : undefined; dirty = true; }
+      const cur = trail[trail.length - 1];
+      const parts = [];
+      if (cur) parts.push(`${cur.lat.toFixed(6)}, ${cur.lon.toFixed(6)}`);
+      if (typeof heading === 'number') parts.push(`hdg ${heading.toFixed(0)}°`);
+      if (cur && origin) {
+        const [x, y] = project(cur);
+        parts.push(`${x >= 0 ? 'E' : 'W'} ${Math.abs(x).toFixed(0)} m  ${y >= 0 ? 'N' : 'S'} ${Math.abs(y).toFixed(0)} m from ${waypoints.length ? 'WP1' : 'start'}`);
+      }
+      const txt = parts.join('   ');
+      if (info.textContent !== txt) info.textContent = txt;
+    },
+    tick: () => draw(),
+    redraw() { dirty = true; draw(); },
+  });
+}
+
+// ---------------------------------------------------------------- health
+
+function healthMap(ctx, node) {
+  const names = node.bind ? topicNames(node.bind) : ['vehicle.health'];
+  const b = parseBind(node.bind || 'vehicle.health');
+  for (const n of names) {
+    const t = ctx.topic(n);
+    if (t && t.fields) return t.fields;
+  }
+  if (b && b.field) {
+    const t = ctx.topic(b.topic);
+    if (t && t.fields && t.fields[b.field] !== undefined) {
+      const v = t.fields[b.field];
+      return typeof v === 'object' && v !== null ? v : { value: v };
+    }
+  }
+  return undefined;
+}
+
+function yesNo(v) {
+  if (v === true) return el('span', { class: 'yes', text: 'yes' });
+  if (v === false) return el('span', { class: 'no', text: 'NO' });
+  if (v === undefined || v === null) return el('span', { class: 'muted', text: '—' });
+  return el('span', { text: fmtValue(v) });
+}
+
+function health(ctx, node) {
+  const names = node.bind ? topicNames(node.bind) : ['vehicle.health'];
+  const b = parseBind(node.bind || 'vehicle.health');
+  const topics = b && b.field ? names.concat([b.topic]) : names;
+  const sev = el('span', { class: 'health-severity', 'data-testid': 'severity', text: 'severity —' });
+  const tbody = el('tbody');
+  const table = el('table', { class: 'tbl' },
+    el('thead', {}, el('tr', {}, ['component', 'online', 'healthy', 'data', 'state'].map((h) => el('th', { scope: 'col', text: h })))),
+    tbody);
+  const extra = el('div', { class: 'fields' });
+  const body = el('div', { style: 'display:flex;flex-direction:column;gap:6px;flex:1;min-height:0' }, sev, el('div', { class: 'scroll' }, table, extra));
+  if (!node.label) node = { ...node, label: 'Health' };
+  let lastJson = '';
+  return outputWidget(ctx, node, 'health', body, [topics], {
+    update() {
+      const m = healthMap(ctx, node);
+      const j = JSON.stringify(m === undefined ? null : m);
+      if (j === lastJson) return;
+      lastJson = j;
+      tbody.replaceChildren();
+      extra.replaceChildren();
+      if (!m || typeof m !== 'object') return;
+      const severity = m.severity !== undefined ? m.severity : m.Severity;
+      const sevName = typeof severity === 'number' ? ['NONE', 'WARN', 'ABORT', 'EMERGENCY'][severity] || String(severity) : String(severity ?? '—');
+      sev.textContent = `severity ${sevName}`;
+      sev.className = `health-severity sev-${sevName.toUpperCase()}`;
+      let comps = m.components !== undefined ? m.components : m.Components;
+      if (comps && typeof comps === 'object' && !Array.isArray(comps)) {
+        for (const [name, c] of Object.entries(comps)) {
+          let online, healthy, data, state;
+          if (c && typeof c === 'object') {
+            ({ online, healthy, data } = c);
+            state = c.state !== undefined ? c.state : '';
+            if (online === undefined && state) online = String(state).toUpperCase() !== 'OFFLINE';
+            if (healthy === undefined && state) healthy = String(state).toUpperCase() === 'HEALTHY';
+          } else {
+            state = c;
+            const st = String(c).toUpperCase();
+            online = st !== 'OFFLINE';
+            healthy = st === 'HEALTHY';
+          }
+          const stText = typeof state === 'object' ? fmtValue(state) : String(state ?? '');
+          tbody.append(el('tr', { 'data-component': name },
+            el('td', { text: name }), el('td', {}, yesNo(online)), el('td', {}, yesNo(healthy)), el('td', {}, yesNo(data)),
+            el('td', { class: `st-${stText.toUpperCase()}`, text: stText })));
+        }
+      } else if (comps !== undefined) {
+        extra.append(el('div', { text: `components: ${fmtValue(comps)}` }));
+      }
+      for (const [k, v] of Object.entries(m)) {
+        if (['severity', 'Severity', 'components', 'Components'].includes(k)) continue;
+        extra.append(el('div', { class: 'fields', text: `${k}: ${fmtValue(v)}` }));
+      }
+    },
+  });
+}
+
+// ---------------------------------------------------------------- log
+
+function logWidget(ctx, node) {
+  const patterns = listAttr(node.topics !== undefined ? node.topics : 'cmd.status, vehicle.state');
+  const res = patterns.map(globToRegExp);
+  const maxLines = Math.max(1, Math.round(num(node.lines, 200)));
+  const pre = el('div', { class: 'log-lines', 'data-testid': 'log-lines', role: 'log', 'aria-label': node.label || 'messages' });
+  const seen = new Map();
+  if (!node.label) node = { ...node, label: `Log ${patterns.join(', ')}` };
+  const matching = () => Object.keys(ctx.allTopics()).filter((t) => res.some((r) => r.test(t)));
+  const topicsList = patterns.filter((p) => !/[*?]/.test(p)).map((p) => [p]);
+  return outputWidget(ctx, node, 'log', pre, topicsList.length ? topicsList : [], {
+    update() {
+      const atBottom = pre.scrollHeight - pre.scrollTop - pre.clientHeight < 30;
+      let added = false;
+      const names = matching().sort((a, b) => num(ctx.topic(a).stamp, 0) - num(ctx.topic(b).stamp, 0));
+      for (const name of names) {
+        const t = ctx.topic(name);
+        if (seen.get(name) === t.stamp) continue;
+        seen.set(name, t.stamp);
+        pre.append(el('div', { class: 'line' },
+          el('span', { class: 't', text: fmtTime(t.stamp, true) }), ' ',
+          el('span', { class: 'tp', text: name }), ' ', fmtFields(t.fields)));
+        added = true;
+      }
+      while (pre.childElementCount > maxLines) pre.firstElementChild.remove();
+      if (added && atBottom) pre.scrollTop = pre.scrollHeight;
+    },
+  });
+}
+
+// ---------------------------------------------------------------- history
+
+function history(ctx, node) {
+  const lines = Math.max(1, Math.round(num(node.lines, 50)));
+  const tbody = el('tbody');
+  const table = el('table', { class: 'tbl' },
+    el('thead', {}, el('tr', {}, ['time', 'user', 'command', 'fields', 'state'].map((h) => el('th', { scope: 'col', text: h })))),
+    tbody);
+  if (!node.label) node = { ...node, label: 'Commands' };
+  const e = frame(ctx, node, 'history', el('div', { class: 'scroll' }, table));
+  e._status.hidden = true;
+  function render() {
+    const list = ctx.history().slice(-lines).reverse();
+    tbody.replaceChildren(...list.map((c) => {
+      const state = String(c.state || 'pending');
+      return el('tr', { 'data-command-id': c.id, 'data-state': state },
+        el('td', { text: fmtTime(c.time) }),
+        el('td', { text: c.user || '' }),
+        el('td', { text: c.command || c.topic || '', title: c.topic || '' }),
+        el('td', { class: 'fields', text: fmtFields(c.fields) }),
+        el('td', {}, el('span', { class: `state state-${state}`, text: state }),
+          c.reason ? el('div', { class: 'reason', text: c.reason }) : null));
+    }));
+    if (!list.length) tbody.append(el('tr', {}, el('td', { colspan: 5, class: 'muted', text: 'no commands yet' })));
+  }
+  const w = { node, el: e, update() {}, tick() {}, onHistory: render };
+  ctx.register(w);
+  render();
+  return e;
+}
+
+// ---------------------------------------------------------------- inputs
+
+/** `NAME.FIELD` (or an object) → {name, field}; a whole name that is a command has no field. */
+export function parseCommandRef(ctx, x, fieldAttr) {
+  if (!x) return null;
+  if (typeof x === 'object') return { name: x.command || x.name, field: x.field ?? fieldAttr ?? null };
+  const s = String(x).trim();
+  if (fieldAttr) return { name: s, field: fieldAttr };
+  if (ctx.command(s)) return { name: s, field: null };
+  const i = s.lastIndexOf('.');
+  if (i > 0) return { name: s.slice(0, i), field: s.slice(i + 1) };
+  return { name: s, field: null };
+}
+
+function input(ctx, node, kind) {
+  const ref = parseCommandRef(ctx, node.command, node.field);
+  const cmd = ref && ctx.command(ref.name);
+  if (!ref || !cmd) {
+    if (!ctx.canCommandAny()) return null;
+    return frame(ctx, { ...node, label: node.label || kind }, 'input', el('div', { class: 'unknown', text: `unknown command ${bindText(node.command) || ''}` }), 'widget-input');
+  }
+  const access = ctx.access(ref.name);
+  if (access.hidden) return null;
+  const label = node.label || (ref.field ? `${ref.name}.${ref.field}` : ref.name);
+  const why = el('div', { class: 'why', 'data-testid': 'why' });
+  const lim = ctx.limits(ref.name, ref.field);
+  const min = num(node.min, lim.min);
+  const max = num(node.max, lim.max);
+  const step = num(node.step, undefined);
+  let control, sync;
+  const controls = [];
+
+  if (kind === 'button') {
+    const c = ctx.command(ref.name);
+    const hold = c.confirm === 'hold';
+    const fill = el('span', { class: 'fill' });
+    const b = el('button', { type: 'button', class: `btn cmd-button${hold ? ' hold' : ''}${c.confirm === 'dialog' ? ' btn-danger' : ''}`, 'data-testid': 'command-button' },
+      fill, el('span', { class: 'txt', text: node.label || ref.name }));
+    controls.push(b);
+    const setFields = () => {
+      const set = parseFields(node.set);
+      if (ref.field && node.value !== undefined) set[ref.field] = parseValue(node.value);
+      return set;
+    };
+    if (hold) {
+      b.title = `hold for ${(ctx.holdMs(ref.name) / 1000).toFixed(1)} s`;
+      let h = null;
+      const start = (ev) => {
+        if (b.disabled || h) return;
+        if (ev.type === 'pointerdown') { if (ev.button !== 0) return; b.setPointerCapture?.(ev.pointerId); }
+        ev.preventDefault();
+        b.classList.add('armed');
+        h = ctx.hold(ref.name, setFields(), {
+          progress(f) { fill.style.width = `${(f * 100).toFixed(1)}%`; },
+          end() { h = null; b.classList.remove('armed'); fill.style.width = '0'; },
+        });
+      };
+      const stop = () => { if (h) { h.cancel(); h = null; } };
+      b.addEventListener('pointerdown', start);
+      b.addEventListener('pointerup', stop);
+      b.addEventListener('pointercancel', stop);
+      b.addEventListener('lostpointercapture', stop);
+      b.addEventListener('keydown', (ev) => { if ((ev.key === ' ' || ev.key === 'Enter') && !ev.repeat) start(ev); });
+      b.addEventListener('keyup', (ev) => { if (ev.key === ' ' || ev.key === 'Enter') stop(); });
+      b.addEventListener('blur', stop);
+      b.addEventListener('contextmenu', (ev) => ev.preventDefault());
+      b.setAttribute('aria-description', 'press and hold to send');
+    } else {
+      b.addEventListener('click', () => ctx.send(ref.name, setFields()));
+    }
+    control = b;
+  } else if (kind === 'slider') {
+    const r = el('input', { type: 'range', 'aria-label': label, 'data-testid': 'slider' });
+    r.min = String(min ?? 0);
+    r.max = String(max ?? 100);
+    r.step = step !== undefined ? String(step) : 'any';
+    const out = el('output', { class: 'input-value', 'data-testid': 'input-value' });
+    let dragging = false;
+    const show = () => { out.textContent = fmtValue(parseFloat(r.value), node.precision); };
+    r.addEventListener('input', () => { dragging = true; show(); });
+    r.addEventListener('change', () => {
+      dragging = false;
+      ctx.setAndSend(ref.name, ref.field, parseFloat(r.value));
+    });
+    sync = () => {
+      if (dragging) return;
+      const v = ctx.fieldValue(ref.name, ref.field);
+      if (typeof v === 'number') { r.value = String(v); show(); }
+    };
+    controls.push(r);
+    control = [r, out];
+  } else if (kind === 'number') {
+    const n = el('input', { type: 'number', class: 'num-input', 'aria-label': label, 'data-testid': 'number', enterkeyhint: 'send' });
+    if (min !== undefined) n.min = String(min);
+    if (max !== undefined) n.max = String(max);
+    n.step = step !== undefined ? String(step) : 'any';
+    const go = el('button', { type: 'button', class: 'btn btn-small', text: 'Send' });
+    const send = () => {
+      const v = parseFloat(n.value);
+      if (!Number.isFinite(v)) { n.setCustomValidity('a number'); n.reportValidity(); return; }
+      if ((min !== undefined && v < min) || (max !== undefined && v > max)) {
+        n.setCustomValidity(`between ${min ?? '−∞'} and ${max ?? '∞'}`); n.reportValidity(); return;
+      }
+      n.setCustomValidity('');
+      ctx.setAndSend(ref.name, ref.field, v);
+    };
+    n.addEventListener('keydown', (ev) => { if (ev.key === 'Enter') { ev.preventDefault(); send(); } });
+    n.addEventListener('input', () => n.setCustomValidity(''));
+    go.addEventListener('click', send);
+    sync = () => {
+      if (document.activeElement === n) return;
+      const v = ctx.fieldValue(ref.name, ref.field);
+      if (v !== undefined) n.value = String(v);
+    };
+    controls.push(n, go);
+    control = [n, go];
+  } else if (kind === 'text') {
+    const t = el('input', { type: 'text', class: 'text-input', 'aria-label': label, 'data-testid': 'text', enterkeyhint: 'send' });
+    const go = el('button', { type: 'button', class: 'btn btn-small', text: 'Send' });
+    const send = () => ctx.setAndSend(ref.name, ref.field, t.value);
+    t.addEventListener('keydown', (ev) => { if (ev.key === 'Enter') { ev.preventDefault(); send(); } });
+    go.addEventListener('click', send);
+    sync = () => {
+      if (document.activeElement === t) return;
+      const v = ctx.fieldValue(ref.name, ref.field);
+      if (v !== undefined) t.value = String(v);
+    };
+    controls.push(t, go);
+    control = [t, go];
+  } else if (kind === 'toggle') {
+    const onV = node.on !== undefined ? parseValue(node.on) : true;
+    const offV = node.off !== undefined ? parseValue(node.off) : false;
+    const c = el('input', { type: 'checkbox', role: 'switch', 'aria-label': label, 'data-testid': 'toggle' });
+    const state = el('span', { class: 'input-value', 'data-testid': 'input-value' });
+    c.addEventListener('change', () => {
+      const v = c.checked ? onV : offV;
+      state.textContent = fmtValue(v);
+      ctx.setAndSend(ref.name, ref.field, v);
+    });
+    sync = () => {
+      const v = ctx.fieldValue(ref.name, ref.field);
+      c.checked = v === onV || String(v) === String(onV);
+      state.textContent = fmtValue(v);
+    };
+    controls.push(c);
+    control = [el('label', { class: 'switch' }, c), state];
+  }
+
+  const e = frame(ctx, { ...node, label: kind === 'button' ? (c2label(ctx, ref)) : label }, 'input', [control, why].flat(), 'widget-input');
+  e._status.hidden = true;
+  e.dataset.command = ref.name;
+  if (ref.field) e.dataset.field = ref.field;
+  const w = {
+    node, el: e,
+    update() {},
+    tick() {},
+    permissions() {
+      const a = ctx.access(ref.name);
+      const dis = !a.ok;
+      for (const c of controls) {
+        c.disabled = dis;
+        c.title = dis ? a.why : (c.title || '');
+      }
+      e.classList.toggle('disabled', dis);
+      e.title = dis ? a.why : '';
+      why.textContent = dis ? a.why : '';
+      why.hidden = !dis;
+    },
+    sync: sync || (() => {}),
+  };
+  ctx.register(w);
+  w.permissions();
+  w.sync();
+  return e;
+}
+
+function c2label(ctx, ref) {
+  const c = ctx.command(ref.name);
+  if (!c) return ref.name;
+  const bits = [ref.name];
+  if (c.confirm === 'hold') bits.push('hold to send');
+  else if (c.confirm === 'dialog') bits.push('confirm');
+  return bits.join(' · ');
+}
