@@ -1,6 +1,7 @@
 //! `seabus`: the command-line program. It parses arguments and wires a system file to the runtime;
 //! everything else lives in the library crates.
 
+mod console;
 mod export;
 mod logtail;
 mod record;
@@ -101,6 +102,11 @@ enum Command {
         #[command(subcommand)]
         command: LayoutCommand,
     },
+    /// The console's users file.
+    User {
+        #[command(subcommand)]
+        command: UserCommand,
+    },
     /// List the module types, bridge types, medium schemes and standard datasets.
     Types,
 }
@@ -115,6 +121,23 @@ enum LayoutCommand {
         layout: PathBuf,
         /// The system file the layout is used with.
         system: PathBuf,
+    },
+}
+
+/// What `seabus user` does.
+#[derive(Subcommand)]
+enum UserCommand {
+    /// Add a user (or replace one of that name) to a users file, created when missing; the
+    /// password is asked for (read from stdin when it is not a terminal) and stored as an argon2id
+    /// hash.
+    Add {
+        /// The users file.
+        file: PathBuf,
+        /// The user's log-in name.
+        name: String,
+        /// The user's roles, space-separated (for example "pilot designer").
+        #[arg(long, default_value = "")]
+        roles: String,
     },
 }
 
@@ -167,6 +190,7 @@ fn registry() -> Registry {
     let mut reg = seabus_modules::registry();
     seabus_drivers::register(&mut reg);
     seabus_bridges::register(&mut reg);
+    seabus_ui::register(&mut reg);
     reg
 }
 
@@ -218,7 +242,7 @@ fn main() -> ExitCode {
     let code = rt.block_on(async move {
         match cli.command {
             Command::Run { file, duration } => match SystemSpec::load(&file) {
-                Ok(spec) => run(spec, duration).await,
+                Ok(spec) => run(spec, duration, false).await,
                 Err(e) => file_error(&e),
             },
             Command::Demo { duration } => match SystemSpec::parse("configs/demo.xml (built in)", DEMO) {
@@ -229,7 +253,7 @@ fn main() -> ExitCode {
                          The traffic is on udp://239.255.42.1:47800 (loopback only): in another terminal run\n  \
                          seabus spy udp://239.255.42.1:47800\n  Ctrl-C stops."
                     );
-                    run(spec, duration).await
+                    run(spec, duration, true).await
                 }
                 Err(e) => file_error(&e),
             },
@@ -262,6 +286,9 @@ fn main() -> ExitCode {
             Command::Layout {
                 command: LayoutCommand::Check { layout, system },
             } => layout_check(&layout, &system),
+            Command::User {
+                command: UserCommand::Add { file, name, roles },
+            } => console::user_add(&file, &name, &roles),
             Command::Types => {
                 types();
                 ExitCode::SUCCESS
@@ -313,15 +340,39 @@ fn seconds(value: Option<f64>) -> Result<Option<Duration>, ExitCode> {
     }
 }
 
-async fn run(spec: SystemSpec, duration: Option<f64>) -> ExitCode {
+async fn run(spec: SystemSpec, duration: Option<f64>, demo: bool) -> ExitCode {
     let duration = match seconds(duration) {
         Ok(d) => d,
         Err(code) => return code,
     };
-    let runtime = match Runtime::start(&spec, &registry(), Catalogue::built_in()).await {
+    let registry = registry();
+    let runtime = match Runtime::start(&spec, &registry, Catalogue::built_in()).await {
         Ok(r) => r,
         Err(e) => return file_error(&e),
     };
+    let demo_dir = if demo {
+        match console::demo_dir() {
+            Ok(d) => Some(d),
+            Err(e) => {
+                eprintln!("seabus demo: {e}");
+                runtime.shutdown().await;
+                return ExitCode::from(2);
+            }
+        }
+    } else {
+        None
+    };
+    let consoles = match console::start(&spec, &registry, &runtime, demo_dir.as_deref()).await {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("{e}");
+            runtime.shutdown().await;
+            return ExitCode::from(2);
+        }
+    };
+    for c in &consoles {
+        eprintln!("  Console: http://{}", c.addr());
+    }
     tracing::info!(
         node = %runtime.node().name,
         "running {}: media {}; modules {}",
@@ -344,6 +395,10 @@ async fn run(spec: SystemSpec, duration: Option<f64>) -> ExitCode {
         None => terminated().await,
     }
     tracing::info!("shutting down");
+    drop(consoles);
+    if let Some(dir) = demo_dir {
+        let _ = std::fs::remove_dir_all(dir);
+    }
     runtime.shutdown().await;
     ExitCode::SUCCESS
 }
@@ -353,7 +408,9 @@ fn check(file: &std::path::Path) -> ExitCode {
         Ok(s) => s,
         Err(e) => return file_error(&e),
     };
-    match system::check(&spec, &registry(), &Catalogue::built_in()) {
+    let checked = system::check(&spec, &registry(), &Catalogue::built_in())
+        .and_then(|report| seabus_ui::console::specs(&spec).map(|_| report));
+    match checked {
         Err(e) => file_error(&e),
         Ok(report) if report.warnings.is_empty() => {
             println!(

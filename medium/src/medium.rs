@@ -1059,19 +1059,34 @@ impl Interface {
         topic: impl IntoTopic,
         payload: impl Into<Payload>,
     ) -> Result<(), SendError> {
+        self.publish_numbered(kind, topic, payload)
+            .await
+            .map(|_| ())
+    }
+
+    /// Publishes like [`publish`](Self::publish) and returns the message's sequence number, which
+    /// with the medium's [`origin`](Medium::origin) names it (drivers quote both in
+    /// acknowledgements).
+    pub async fn publish_numbered(
+        &self,
+        kind: Kind,
+        topic: impl IntoTopic,
+        payload: impl Into<Payload>,
+    ) -> Result<u64, SendError> {
         let inner = &self.medium.inner;
+        let seq = inner.next_seq();
         let msg = Message {
             topic: topic.into_topic()?,
             kind,
             provenance: Provenance {
                 origin: inner.origin.clone(),
-                seq: inner.next_seq(),
+                seq,
                 hops: 0,
             },
             stamp: Stamp::now(),
             payload: payload.into(),
         };
-        inner.send(msg, self.id, true).await
+        inner.send(msg, self.id, true).await.map(|()| seq)
     }
 
     /// Sends a message that already has a provenance (a bridge forwarding it), keeping it. A

@@ -1,0 +1,353 @@
+//! The console's HTTP server: log-in, the embedded page, and the WebSocket at `/ws` that only a
+//! logged-in session may open.
+//!
+//! Routes: `GET /` (the console, or a redirect to `/login`), `GET /login` and `POST /login`
+//! (form fields `name`, `password`; limited by [`crate::auth::Limiter`]), `GET /logout`,
+//! `GET /assets/{file}` (embedded), `GET /ws`. Every connection is a [`Client`] of the [`Hub`].
+
+use crate::assets;
+use crate::auth::{COOKIE, Session};
+use crate::hub::{Client, Hub};
+use axum::Router;
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{ConnectInfo, Form, Path, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Redirect, Response};
+use axum::routing::get;
+use futures_util::{SinkExt, StreamExt};
+use seabus_medium::DataMap;
+use serde_json::{Value as Json, json};
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// How often a connection gets the data that changed: at most 20 times a second.
+pub const DATA_EVERY: Duration = Duration::from_millis(50);
+/// The largest message a page may send (a layout saved from the designer).
+pub const MAX_MESSAGE: usize = 1 << 20;
+
+/// The console's routes.
+pub fn router(hub: Arc<Hub>) -> Router {
+    Router::new()
+        .route("/", get(index))
+        .route("/login", get(login_page).post(login))
+        .route("/logout", get(logout))
+        .route("/assets/{file}", get(asset))
+        .route("/ws", get(ws))
+        .with_state(hub)
+}
+
+/// Serves the console on `listener` until the task is dropped.
+pub async fn serve(listener: tokio::net::TcpListener, hub: Arc<Hub>) -> std::io::Result<()> {
+    axum::serve(
+        listener,
+        router(hub).into_make_service_with_connect_info::<SocketAddr>(),
+    )
+    .await
+}
+
+/// The session token in the request's cookies.
+fn token(headers: &HeaderMap) -> Option<String> {
+    headers
+        .get_all(header::COOKIE)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .flat_map(|v| v.split(';'))
+        .filter_map(|kv| kv.trim().split_once('='))
+        .find(|(k, _)| *k == COOKIE)
+        .map(|(_, v)| v.to_string())
+}
+
+fn session(hub: &Hub, headers: &HeaderMap) -> Option<(String, Session)> {
+    let t = token(headers)?;
+    let s = hub.sessions.get(&t)?;
+    Some((t, s))
+}
+
+fn file(name: &str) -> Response {
+    match assets::get(name) {
+        Some((mime, body)) => (
+            [
+                (header::CONTENT_TYPE, HeaderValue::from_static(mime)),
+                (header::CACHE_CONTROL, HeaderValue::from_static("no-cache")),
+            ],
+            body,
+        )
+            .into_response(),
+        None => (StatusCode::NOT_FOUND, "not found").into_response(),
+    }
+}
+
+async fn index(State(hub): State<Arc<Hub>>, headers: HeaderMap) -> Response {
+    if session(&hub, &headers).is_none() {
+        return Redirect::to("/login").into_response();
+    }
+    file("index.html")
+}
+
+async fn login_page() -> Response {
+    file("login.html")
+}
+
+async fn asset(Path(name): Path<String>) -> Response {
+    file(&name)
+}
+
+/// The log-in form.
+#[derive(serde::Deserialize)]
+struct LoginForm {
+    name: String,
+    password: String,
+}
+
+fn back_to_login(error: &str) -> Response {
+    let q: String = error
+        .bytes()
+        .map(|b| match b {
+            b'a'..=b'z' | b'A'..=b'Z' | b'0'..=b'9' | b'-' | b'.' | b'_' => (b as char).to_string(),
+            b' ' => "+".to_string(),
+            _ => format!("%{b:02X}"),
+        })
+        .collect();
+    Redirect::to(&format!("/login?error={q}")).into_response()
+}
+
+async fn login(
+    State(hub): State<Arc<Hub>>,
+    ConnectInfo(addr): ConnectInfo<SocketAddr>,
+    Form(form): Form<LoginForm>,
+) -> Response {
+    let ip = addr.ip();
+    if let Err(wait) = hub.limiter.check(ip, &form.name) {
+        tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in refused: too many failures");
+        let mut r = back_to_login(&format!(
+            "Too many failed log-ins: try again in {} s",
+            wait.as_secs().max(1)
+        ));
+        *r.status_mut() = StatusCode::TOO_MANY_REQUESTS;
+        return r;
+    }
+    let checked = {
+        let hub = hub.clone();
+        let name = form.name.clone();
+        tokio::task::spawn_blocking(move || {
+            hub.users
+                .verify(&name, &form.password)
+                .map(|u| u.roles.clone())
+        })
+        .await
+        .ok()
+        .flatten()
+    };
+    let Some(roles) = checked else {
+        hub.limiter.fail(ip, &form.name);
+        tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in failed");
+        return back_to_login("Wrong name or password");
+    };
+    hub.limiter.succeed(&form.name);
+    let Some(t) = hub.sessions.start(&form.name, &roles) else {
+        return (
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "no randomness for a session",
+        )
+            .into_response();
+    };
+    tracing::info!(component = "console", address = %ip, user = %form.name, "logged in");
+    let cookie = format!("{COOKIE}={t}; HttpOnly; SameSite=Strict; Path=/");
+    let mut r = Redirect::to("/").into_response();
+    if let Ok(v) = HeaderValue::from_str(&cookie) {
+        r.headers_mut().insert(header::SET_COOKIE, v);
+    }
+    r
+}
+
+async fn logout(State(hub): State<Arc<Hub>>, headers: HeaderMap) -> Response {
+    if let Some(t) = token(&headers)
+        && let Some(user) = hub.sessions.end(&t)
+    {
+        tracing::info!(component = "console", user = %user, "logged out");
+    }
+    let mut r = Redirect::to("/login").into_response();
+    r.headers_mut().insert(
+        header::SET_COOKIE,
+        HeaderValue::from_static("seabus_session=; Max-Age=0; Path=/"),
+    );
+    r
+}
+
+/// Whether a browser's `Origin` (when it sends one) is this server.
+fn same_origin(headers: &HeaderMap) -> bool {
+    let Some(origin) = headers.get(header::ORIGIN).and_then(|v| v.to_str().ok()) else {
+        return true;
+    };
+    let host = headers
+        .get(header::HOST)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    origin
+        .split_once("://")
+        .is_some_and(|(_, rest)| rest == host)
+}
+
+async fn ws(
+    State(hub): State<Arc<Hub>>,
+    headers: HeaderMap,
+    upgrade: WebSocketUpgrade,
+) -> Response {
+    let Some((token, session)) = session(&hub, &headers) else {
+        return (StatusCode::UNAUTHORIZED, "log in first").into_response();
+    };
+    if !same_origin(&headers) {
+        return (StatusCode::FORBIDDEN, "another site's page").into_response();
+    }
+    upgrade
+        .max_message_size(MAX_MESSAGE)
+        .on_upgrade(move |socket| connection(hub, token, session, socket))
+}
+
+async fn connection(hub: Arc<Hub>, token: String, session: Session, socket: WebSocket) {
+    let mut client = hub.connect(session);
+    let (mut sink, mut stream) = socket.split();
+    let mut events = hub.events();
+    let mut tick = tokio::time::interval(DATA_EVERY);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let mut out = vec![hub.hello(&client), hub.history()];
+    'conn: loop {
+        for v in out.drain(..) {
+            if sink
+                .send(Message::Text(v.to_string().into()))
+                .await
+                .is_err()
+            {
+                break 'conn;
+            }
+        }
+        tokio::select! {
+            msg = stream.next() => match msg {
+                Some(Ok(Message::Text(t))) => out = handle(&hub, &mut client, &t).await,
+                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                Some(Ok(_)) => {}
+            },
+            ev = events.recv() => match ev {
+                Ok(text) => {
+                    if sink.send(Message::Text(text.to_string().into())).await.is_err() {
+                        break;
+                    }
+                }
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {
+                    out.push(hub.lease_json());
+                    out.push(hub.history());
+                }
+                Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
+            },
+            _ = tick.tick() => {
+                // logged out elsewhere: the connection ends with the session
+                if hub.sessions.get(&token).is_none() {
+                    break;
+                }
+                if let Some(data) = hub.data_for(&mut client) {
+                    out.push(data);
+                }
+            }
+        }
+    }
+    hub.disconnect(&client).await;
+}
+
+fn error(message: impl Into<String>) -> Json {
+    json!({"type": "error", "message": message.into()})
+}
+
+/// Answers one message from the page.
+pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
+    let Ok(msg) = serde_json::from_str::<Json>(text) else {
+        return vec![error("not a JSON message")];
+    };
+    let s = |k: &str| msg.get(k).and_then(Json::as_str).unwrap_or("").to_string();
+    let fields = || -> Result<DataMap, String> {
+        match msg.get("fields") {
+            None => Ok(DataMap::new()),
+            Some(f) => {
+                serde_json::from_value::<DataMap>(f.clone()).map_err(|e| format!("fields: {e}"))
+            }
+        }
+    };
+    match s("type").as_str() {
+        "open" => {
+            let vars: BTreeMap<String, String> = msg
+                .get("vars")
+                .and_then(Json::as_object)
+                .map(|o| {
+                    o.iter()
+                        .filter_map(|(k, v)| {
+                            let v = match v {
+                                Json::String(s) => s.clone(),
+                                Json::Number(n) => n.to_string(),
+                                _ => return None,
+                            };
+                            Some((k.clone(), v))
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            vec![hub.open(client, &s("layout"), &vars)]
+        }
+        "lease" => {
+            let take = match s("action").as_str() {
+                "take" => true,
+                "release" => false,
+                other => return vec![error(format!("lease action `{other}`: take or release"))],
+            };
+            match hub.lease(&client.session, take).await {
+                Ok(()) => Vec::new(),
+                Err(e) => vec![error(e), hub.lease_json()],
+            }
+        }
+        "arm" => match hub.arm(client, &s("layout"), &s("command")) {
+            Ok(id) => vec![json!({"type": "armed", "command": s("command"), "arm": id})],
+            Err(e) => vec![error(e)],
+        },
+        "send" => {
+            let set = match fields() {
+                Ok(f) => f,
+                Err(e) => return vec![error(e)],
+            };
+            let confirmed = msg.get("confirmed").and_then(Json::as_u64);
+            match hub
+                .send(client, &s("layout"), &s("command"), &set, confirmed)
+                .await
+            {
+                Ok(_) => Vec::new(),
+                Err(e) => vec![error(e)],
+            }
+        }
+        "drive" => {
+            let set = match fields() {
+                Ok(f) => f,
+                Err(e) => return vec![error(e)],
+            };
+            match hub.drive(client, &s("layout"), &s("command"), &set).await {
+                Ok(()) => Vec::new(),
+                Err(e) => vec![error(e)],
+            }
+        }
+        "release" => {
+            hub.release(client, &s("layout"), &s("command")).await;
+            Vec::new()
+        }
+        "save" => {
+            let name = s("layout");
+            match hub.save(&client.session, &name, &s("xml")) {
+                Ok(()) => vec![
+                    json!({"type": "saved", "layout": name}),
+                    hub.open(client, &name, &BTreeMap::new()),
+                ],
+                Err(e) => vec![
+                    json!({"type": "error", "message": e.get("text").or(e.get("message")).cloned().unwrap_or_default(), "error": e}),
+                ],
+            }
+        }
+        other => vec![error(format!("unknown message type `{other}`"))],
+    }
+}

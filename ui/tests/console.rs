@@ -1,0 +1,593 @@
+//! The console server driven as a page drives it — log-in over HTTP, then JSON over the WebSocket
+//! — with a bus where a test driver receives the commands and acknowledges them. Every rule is
+//! checked on the server side: sessions, log-in limits, roles, control, confirmation, dead-man
+//! commands, acknowledgements, bound fields only, the designer's saves.
+
+use futures_util::{SinkExt, StreamExt};
+use seabus_medium::{DataMap, Interface, Kind, Medium, Message, Node, Value};
+use seabus_modules::system::SystemSpec;
+use seabus_ui::console::{self, Console};
+use seabus_ui::users::{Users, add_user};
+use serde_json::{Value as Json, json};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+use tokio_tungstenite::tungstenite::http::HeaderValue;
+use tokio_tungstenite::{WebSocketStream, client_async, tungstenite};
+
+const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot">
+  <command name="course" topic="cmd.course" fields="heading=0, depth=0, speed=0" rate="5Hz"
+           neutral="speed=0" max.speed="3"/>
+  <command name="start" topic="cmd.mission" fields="action=start, name=survey" confirm="hold"
+           hold="300ms"/>
+  <command name="stop" topic="cmd.mission" fields="action=stop" confirm="dialog"/>
+  <command name="camera" topic="cmd.camera" fields="on=false" lease="false"/>
+  <column>
+    <readout bind="nav.depth.depth" unit="m"/>
+    <slider command="course.heading" min="0" max="359"/>
+    <slider command="course.speed" min="0" max="3"/>
+    <button command="start"/>
+    <button command="stop"/>
+    <toggle command="camera.on"/>
+  </column>
+</layout>
+"#;
+
+const WATCH: &str = r#"<layout name="watch" title="Watch" roles="observer pilot">
+  <grid columns="1">
+    <readout bind="nav.depth.depth" unit="m"/>
+  </grid>
+</layout>
+"#;
+
+struct Setup {
+    _dir: tempfile::TempDir,
+    dir: PathBuf,
+    addr: SocketAddr,
+    _console: Console,
+    bus: Medium,
+}
+
+async fn setup() -> Setup {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().to_path_buf();
+    std::fs::write(d.join("pilot.xml"), PILOT).unwrap();
+    std::fs::write(d.join("watch.xml"), WATCH).unwrap();
+    let users = d.join("users.xml");
+    add_user(
+        &users,
+        "ana",
+        &["pilot".into(), "designer".into()],
+        "ana-password",
+    )
+    .unwrap();
+    add_user(&users, "bo", &["pilot".into()], "bo-password1").unwrap();
+    add_user(&users, "ivo", &["observer".into()], "ivo-password").unwrap();
+    let system = d.join("system.xml");
+    std::fs::write(
+        &system,
+        r#"<seabus node="t">
+  <medium name="bus" url="inproc://"/>
+  <console medium="bus" listen="127.0.0.1:0" users="users.xml" layouts="pilot.xml watch.xml"
+           ack_timeout="600ms" log="commands.csv"/>
+</seabus>"#,
+    )
+    .unwrap();
+    let spec = SystemSpec::load(&system).unwrap();
+    let cs = console::specs(&spec).unwrap().remove(0);
+    let bus = Medium::in_process("bus", &Node::new("t"));
+    let console = Console::start(&cs, Users::load(&users).unwrap(), &bus, Vec::new())
+        .await
+        .unwrap();
+    Setup {
+        _dir: dir,
+        dir: d,
+        addr: console.addr(),
+        _console: console,
+        bus,
+    }
+}
+
+/// A raw HTTP request; returns the status code and the response's head.
+async fn http(addr: SocketAddr, request: String) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).await.unwrap();
+    s.write_all(request.as_bytes()).await.unwrap();
+    let mut out = Vec::new();
+    tokio::time::timeout(Duration::from_secs(10), s.read_to_end(&mut out))
+        .await
+        .expect("an answer")
+        .unwrap();
+    let text = String::from_utf8_lossy(&out).into_owned();
+    let status = text
+        .split_whitespace()
+        .nth(1)
+        .and_then(|c| c.parse().ok())
+        .unwrap_or(0);
+    (status, text)
+}
+
+/// Logs in; returns the status and the session cookie, if one was set.
+async fn login(addr: SocketAddr, name: &str, password: &str) -> (u16, Option<String>, String) {
+    let body = format!("name={name}&password={password}");
+    let (status, head) = http(
+        addr,
+        format!(
+            "POST /login HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/x-www-form-urlencoded\r\n\
+             Content-Length: {}\r\nConnection: close\r\n\r\n{body}",
+            body.len()
+        ),
+    )
+    .await;
+    let cookie = head
+        .lines()
+        .find_map(|l| {
+            l.strip_prefix("set-cookie: ")
+                .or(l.strip_prefix("Set-Cookie: "))
+        })
+        .and_then(|c| c.split(';').next())
+        .filter(|c| c.starts_with("seabus_session=") && c.len() > "seabus_session=".len())
+        .map(str::to_string);
+    (status, cookie, head)
+}
+
+type Ws = WebSocketStream<TcpStream>;
+
+async fn open_ws(addr: SocketAddr, cookie: Option<&str>) -> Result<Ws, tungstenite::Error> {
+    let mut req = format!("ws://{addr}/ws").into_client_request().unwrap();
+    if let Some(c) = cookie {
+        req.headers_mut()
+            .insert("cookie", HeaderValue::from_str(c).unwrap());
+    }
+    let tcp = TcpStream::connect(addr).await.unwrap();
+    client_async(req, tcp).await.map(|(ws, _)| ws)
+}
+
+async fn connect(s: &Setup, name: &str, password: &str) -> Ws {
+    let (_, cookie, head) = login(s.addr, name, password).await;
+    let cookie = cookie.unwrap_or_else(|| panic!("{name} logged in: {head}"));
+    let mut ws = open_ws(s.addr, Some(&cookie)).await.unwrap();
+    let hello = next(&mut ws, "hello").await;
+    assert_eq!(hello["user"], name);
+    ws
+}
+
+async fn send(ws: &mut Ws, v: Json) {
+    ws.send(tungstenite::Message::Text(v.to_string().into()))
+        .await
+        .unwrap();
+}
+
+/// The next message of `kind`, skipping others; panics after 5 s.
+async fn next(ws: &mut Ws, kind: &str) -> Json {
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let msg = tokio::time::timeout(left, ws.next())
+            .await
+            .unwrap_or_else(|_| panic!("no `{kind}` message within 5 s"))
+            .expect("open")
+            .expect("readable");
+        if let tungstenite::Message::Text(t) = msg {
+            let v: Json = serde_json::from_str(&t).unwrap();
+            if v["type"] == kind {
+                return v;
+            }
+        }
+    }
+}
+
+/// The next message of `kind` that satisfies `pick`.
+async fn next_where(ws: &mut Ws, kind: &str, pick: impl Fn(&Json) -> bool) -> Json {
+    for _ in 0..200 {
+        let v = next(ws, kind).await;
+        if pick(&v) {
+            return v;
+        }
+    }
+    panic!("no matching `{kind}`");
+}
+
+async fn open(ws: &mut Ws, layout: &str) -> Json {
+    send(ws, json!({"type": "open", "layout": layout})).await;
+    next(ws, "layout").await
+}
+
+/// An interface on the bus that sees the commands.
+fn driver(bus: &Medium) -> Interface {
+    let mut d = bus.attach("driver");
+    d.subscribe_kind("cmd.**", Some(Kind::Command)).unwrap();
+    d
+}
+
+/// The commands the driver receives within `wait`.
+async fn received(d: &mut Interface, wait: Duration) -> Vec<Message> {
+    let mut out = Vec::new();
+    let deadline = Instant::now() + wait;
+    while let Ok(Some(m)) =
+        tokio::time::timeout(deadline.saturating_duration_since(Instant::now()), d.recv()).await
+    {
+        out.push(m);
+    }
+    out
+}
+
+fn field(m: &Message, k: &str) -> Option<Value> {
+    m.payload.as_map().and_then(|p| p.get(k)).cloned()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn log_in_needs_the_password_and_is_rate_limited() {
+    let s = setup().await;
+    // the page and the socket need a session
+    let (status, head) = http(
+        s.addr,
+        format!(
+            "GET / HTTP/1.1\r\nHost: {}\r\nConnection: close\r\n\r\n",
+            s.addr
+        ),
+    )
+    .await;
+    assert_eq!(status, 303, "{head}");
+    assert!(head.to_lowercase().contains("location: /login"), "{head}");
+    assert!(open_ws(s.addr, None).await.is_err());
+    assert!(
+        open_ws(s.addr, Some("seabus_session=0123456789abcdef"))
+            .await
+            .is_err()
+    );
+    // wrong passwords: refused, then limited for the name from any address
+    for i in 0..5 {
+        let (status, cookie, head) = login(s.addr, "bo", "guess").await;
+        assert_eq!(
+            (status, cookie.is_none()),
+            (303, true),
+            "attempt {i}: {head}"
+        );
+        assert!(head.contains("error=Wrong"), "{head}");
+    }
+    let (status, cookie, _) = login(s.addr, "bo", "bo-password1").await;
+    assert_eq!(
+        (status, cookie),
+        (429, None),
+        "the right password is refused while limited"
+    );
+    // and this address is held back for every name
+    let (status, _, _) = login(s.addr, "ana", "ana-password").await;
+    assert_eq!(status, 429);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_observer_cannot_command_even_with_a_forged_message() {
+    let s = setup().await;
+    let mut d = driver(&s.bus);
+    let mut ivo = connect(&s, "ivo", "ivo-password").await;
+    // the pilot layout is not ivo's
+    send(&mut ivo, json!({"type": "open", "layout": "pilot"})).await;
+    let e = next(&mut ivo, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("no layout"), "{e}");
+    let l = open(&mut ivo, "watch").await;
+    assert_eq!(l["layout"]["name"], "watch");
+    // forged: a command of a layout ivo never opened, and control
+    send(
+        &mut ivo,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"speed": 2}}),
+    )
+    .await;
+    let e = next(&mut ivo, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("not open"), "{e}");
+    send(&mut ivo, json!({"type": "lease", "action": "take"})).await;
+    let e = next(&mut ivo, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("role pilot"), "{e}");
+    send(
+        &mut ivo,
+        json!({"type": "drive", "layout": "watch", "command": "course", "fields": {"speed": 2}}),
+    )
+    .await;
+    next(&mut ivo, "error").await;
+    assert!(
+        received(&mut d, Duration::from_millis(300))
+            .await
+            .is_empty(),
+        "nothing reached the bus"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn only_the_holder_of_control_commands_and_acknowledgements_show() {
+    let s = setup().await;
+    let mut d = driver(&s.bus);
+    let mut ana = connect(&s, "ana", "ana-password").await;
+    let mut bo = connect(&s, "bo", "bo-password1").await;
+    open(&mut ana, "pilot").await;
+    open(&mut bo, "pilot").await;
+    // without control: refused, and the refusal is in everyone's history
+    send(
+        &mut ana,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 90}}),
+    )
+    .await;
+    let refused = next(&mut bo, "command").await;
+    assert_eq!(refused["state"], "refused");
+    assert!(refused["reason"].as_str().unwrap().contains("no control"));
+    send(&mut ana, json!({"type": "lease", "action": "take"})).await;
+    let lease = next_where(&mut bo, "lease", |v| v["holder"] == "ana").await;
+    assert!(lease["since"].as_f64().is_some());
+    // bo can neither take control nor command while ana has it
+    send(&mut bo, json!({"type": "lease", "action": "take"})).await;
+    let e = next(&mut bo, "error").await;
+    assert!(
+        e["message"].as_str().unwrap().contains("ana has control"),
+        "{e}"
+    );
+    send(
+        &mut bo,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 10}}),
+    )
+    .await;
+    let e = next(&mut bo, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("ana has it"), "{e}");
+    // ana commands: the driver gets the whole command, and acknowledges it
+    send(
+        &mut ana,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 90, "speed": 1.5}}),
+    )
+    .await;
+    let got = received(&mut d, Duration::from_millis(300)).await;
+    assert_eq!(got.len(), 1, "{got:?}");
+    let m = &got[0];
+    assert_eq!(m.topic.as_str(), "cmd.course");
+    assert_eq!(field(m, "heading").and_then(|v| v.as_f64()), Some(90.0));
+    assert_eq!(field(m, "speed").and_then(|v| v.as_f64()), Some(1.5));
+    assert_eq!(field(m, "depth").and_then(|v| v.as_f64()), Some(0.0));
+    let pending = next_where(&mut bo, "command", |v| v["state"] == "pending").await;
+    assert_eq!(pending["user"], "ana");
+    let status = DataMap::new()
+        .with("command", "OMS")
+        .with("state", "acknowledged")
+        .with("origin", m.provenance.origin.to_string())
+        .with("request_seq", m.provenance.seq as i64);
+    d.send("cmd.status", status).await.unwrap();
+    let acked = next_where(&mut bo, "command", |v| v["id"] == pending["id"]).await;
+    assert_eq!(acked["state"], "acknowledged");
+    // out of range: refused by the server with the reason
+    send(
+        &mut ana,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"speed": 9}}),
+    )
+    .await;
+    next(&mut ana, "error").await;
+    // unanswered: timed out after ack_timeout
+    send(
+        &mut ana,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 180}}),
+    )
+    .await;
+    let late = next_where(&mut ana, "command", |v| v["state"] == "timed-out").await;
+    assert_eq!(late["fields"]["heading"].as_f64(), Some(180.0));
+    // a command that needs no control goes from bo too
+    send(
+        &mut bo,
+        json!({"type": "send", "layout": "pilot", "command": "camera", "fields": {"on": true}}),
+    )
+    .await;
+    // ana releases; now bo takes control and commands
+    send(&mut ana, json!({"type": "lease", "action": "release"})).await;
+    next_where(&mut bo, "lease", |v| v["holder"].is_null()).await;
+    send(&mut bo, json!({"type": "lease", "action": "take"})).await;
+    next_where(&mut ana, "lease", |v| v["holder"] == "bo").await;
+    send(
+        &mut bo,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 45}}),
+    )
+    .await;
+    let got = received(&mut d, Duration::from_millis(300)).await;
+    let topics: Vec<&str> = got.iter().map(|m| m.topic.as_str()).collect();
+    assert!(
+        topics.contains(&"cmd.camera") && topics.contains(&"cmd.course"),
+        "{topics:?}"
+    );
+    // every command is in the log with its user and state
+    let log = std::fs::read_to_string(s.dir.join("commands.csv")).unwrap();
+    assert!(
+        log.lines()
+            .any(|l| l.contains(",ana,course,") && l.contains("acknowledged"))
+    );
+    assert!(log.lines().any(|l| l.contains(",bo,camera,")));
+    assert!(log.lines().any(|l| l.contains("timed-out")));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn confirmed_commands_must_be_armed_and_held() {
+    let s = setup().await;
+    let mut d = driver(&s.bus);
+    let mut ana = connect(&s, "ana", "ana-password").await;
+    open(&mut ana, "pilot").await;
+    send(&mut ana, json!({"type": "lease", "action": "take"})).await;
+    next_where(&mut ana, "lease", |v| v["holder"] == "ana").await;
+    let start = json!({"type": "send", "layout": "pilot", "command": "start"});
+    send(&mut ana, start.clone()).await;
+    let e = next(&mut ana, "error").await;
+    assert!(
+        e["message"].as_str().unwrap().contains("not confirmed"),
+        "{e}"
+    );
+    // armed, but let go before the hold time
+    send(
+        &mut ana,
+        json!({"type": "arm", "layout": "pilot", "command": "start"}),
+    )
+    .await;
+    let arm = next(&mut ana, "armed").await["arm"].clone();
+    let mut early = start.clone();
+    early["confirmed"] = arm;
+    send(&mut ana, early).await;
+    let e = next(&mut ana, "error").await;
+    assert!(e["message"].as_str().unwrap().contains("held"), "{e}");
+    // held long enough
+    send(
+        &mut ana,
+        json!({"type": "arm", "layout": "pilot", "command": "start"}),
+    )
+    .await;
+    let arm = next(&mut ana, "armed").await["arm"].clone();
+    tokio::time::sleep(Duration::from_millis(350)).await;
+    let mut held = start.clone();
+    held["confirmed"] = arm.clone();
+    send(&mut ana, held.clone()).await;
+    let got = received(&mut d, Duration::from_millis(300)).await;
+    assert_eq!(got.len(), 1);
+    assert_eq!(
+        field(&got[0], "action")
+            .and_then(|v| v.as_str().map(str::to_string))
+            .as_deref(),
+        Some("start")
+    );
+    // an arm is used once
+    send(&mut ana, held).await;
+    next(&mut ana, "error").await;
+    assert!(
+        received(&mut d, Duration::from_millis(200))
+            .await
+            .is_empty()
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dead_man_command_goes_neutral_once_when_its_re_sends_stop() {
+    let s = setup().await;
+    let mut d = driver(&s.bus);
+    let mut ana = connect(&s, "ana", "ana-password").await;
+    open(&mut ana, "pilot").await;
+    send(&mut ana, json!({"type": "lease", "action": "take"})).await;
+    next_where(&mut ana, "lease", |v| v["holder"] == "ana").await;
+    let drive = json!({"type": "drive", "layout": "pilot", "command": "course", "fields": {"speed": 2, "heading": 30}});
+    for _ in 0..5 {
+        send(&mut ana, drive.clone()).await;
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    // the page stops (frozen): within three periods the neutral command goes, once
+    let got = received(&mut d, Duration::from_millis(1500)).await;
+    let speeds: Vec<f64> = got
+        .iter()
+        .filter_map(|m| field(m, "speed").and_then(|v| v.as_f64()))
+        .collect();
+    assert_eq!(speeds.len(), 6, "five drives and one neutral: {speeds:?}");
+    assert!(speeds[..5].iter().all(|v| *v == 2.0));
+    assert_eq!(speeds[5], 0.0);
+    // the neutral keeps the other fields as last driven
+    assert_eq!(
+        field(&got[5], "heading").and_then(|v| v.as_f64()),
+        Some(30.0)
+    );
+    assert!(
+        received(&mut d, Duration::from_millis(800))
+            .await
+            .is_empty(),
+        "then nothing"
+    );
+
+    // driving, then the connection drops: neutral once
+    send(&mut ana, drive.clone()).await;
+    assert_eq!(received(&mut d, Duration::from_millis(100)).await.len(), 1);
+    drop(ana);
+    let got = received(&mut d, Duration::from_millis(400)).await;
+    let speeds: Vec<f64> = got
+        .iter()
+        .filter_map(|m| field(m, "speed").and_then(|v| v.as_f64()))
+        .collect();
+    assert_eq!(speeds, [0.0], "neutral once when the connection closed");
+
+    // an explicit release: neutral once, at once
+    let mut ana = connect(&s, "ana", "ana-password").await;
+    open(&mut ana, "pilot").await;
+    send(&mut ana, drive.clone()).await;
+    send(
+        &mut ana,
+        json!({"type": "release", "layout": "pilot", "command": "course"}),
+    )
+    .await;
+    let got = received(&mut d, Duration::from_millis(300)).await;
+    let speeds: Vec<f64> = got
+        .iter()
+        .filter_map(|m| field(m, "speed").and_then(|v| v.as_f64()))
+        .collect();
+    assert_eq!(speeds, [2.0, 0.0]);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_gets_only_the_fields_it_binds_at_most_twenty_times_a_second() {
+    let s = setup().await;
+    let mut ivo = connect(&s, "ivo", "ivo-password").await;
+    let layout = open(&mut ivo, "watch").await;
+    assert_eq!(layout["producers"]["nav.depth"], false, "{layout}");
+    let tx = s.bus.attach("sensor");
+    for i in 0..100 {
+        tx.send(
+            "nav.depth",
+            DataMap::new().with("depth", f64::from(i)).with("raw", 7i64),
+        )
+        .await
+        .unwrap();
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let mut frames = Vec::new();
+    loop {
+        let v = next(&mut ivo, "data").await;
+        let depth = v["topics"]["nav.depth"]["fields"]["depth"].as_f64();
+        assert!(
+            v["topics"]["nav.depth"]["fields"].get("raw").is_none(),
+            "{v}"
+        );
+        frames.push(v);
+        if depth == Some(99.0) {
+            break;
+        }
+    }
+    // 100 messages over ~0.5 s arrive as at most ~11 frames (50 ms apart), the last value last
+    assert!(frames.len() <= 15, "{} frames", frames.len());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_designer_saves_layouts_that_read_and_refuses_others_with_their_place() {
+    let s = setup().await;
+    let mut bo = connect(&s, "bo", "bo-password1").await;
+    send(
+        &mut bo,
+        json!({"type": "save", "layout": "watch", "xml": WATCH}),
+    )
+    .await;
+    let e = next(&mut bo, "error").await;
+    assert!(
+        e["message"].as_str().unwrap().contains("role designer"),
+        "{e}"
+    );
+    let mut ana = connect(&s, "ana", "ana-password").await;
+    let bad = WATCH.replace(
+        "<readout bind=\"nav.depth.depth\"",
+        "<readout bind=\"nav.depth.depth\" colour=",
+    );
+    send(
+        &mut ana,
+        json!({"type": "save", "layout": "watch", "xml": bad}),
+    )
+    .await;
+    let e = next(&mut ana, "error").await;
+    assert_eq!(e["error"]["line"], 3, "{e}");
+    assert!(e["error"]["col"].as_u64().unwrap() > 1, "{e}");
+    let good = WATCH.replace("title=\"Watch\"", "title=\"Watch floor\"");
+    send(
+        &mut ana,
+        json!({"type": "save", "layout": "watch", "xml": good}),
+    )
+    .await;
+    next(&mut ana, "saved").await;
+    let l = next(&mut ana, "layout").await;
+    assert_eq!(l["layout"]["title"], "Watch floor");
+    assert_eq!(
+        std::fs::read_to_string(s.dir.join("watch.xml.bak")).unwrap(),
+        WATCH
+    );
+}
