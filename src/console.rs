@@ -68,7 +68,16 @@ pub async fn start(
                 .to_string());
         };
         let produced = console::produced_topics(spec, registry, &Catalogue::built_in());
-        out.push(Console::start(&cs, users, medium, produced).await?);
+        let console = match Console::start(&cs, users.clone(), medium, produced.clone()).await {
+            // the demo takes any free port when its usual one is taken
+            Err(e) if demo_dir.is_some() => {
+                eprintln!("  {e}; the console takes another port");
+                cs.settings.listen.set_port(0);
+                Console::start(&cs, users, medium, produced).await?
+            }
+            other => other?,
+        };
+        out.push(console);
     }
     Ok(out)
 }

@@ -101,7 +101,8 @@ struct LoginForm {
     password: String,
 }
 
-fn back_to_login(error: &str) -> Response {
+/// The log-in page's address with `error` for it to show.
+fn login_url(error: &str) -> String {
     let q: String = error
         .bytes()
         .map(|b| match b {
@@ -110,7 +111,11 @@ fn back_to_login(error: &str) -> Response {
             _ => format!("%{b:02X}"),
         })
         .collect();
-    Redirect::to(&format!("/login?error={q}")).into_response()
+    format!("/login?error={q}")
+}
+
+fn back_to_login(error: &str) -> Response {
+    Redirect::to(&login_url(error)).into_response()
 }
 
 async fn login(
@@ -121,11 +126,18 @@ async fn login(
     let ip = addr.ip();
     if let Err(wait) = hub.limiter.check(ip, &form.name) {
         tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in refused: too many failures");
-        let mut r = back_to_login(&format!(
+        // 429 for programs; a browser is sent on to the log-in page, which says why
+        let to = login_url(&format!(
             "Too many failed log-ins: try again in {} s",
             wait.as_secs().max(1)
         ));
-        *r.status_mut() = StatusCode::TOO_MANY_REQUESTS;
+        let page = format!(
+            "<!doctype html><meta http-equiv=\"refresh\" content=\"0; url={to}\"><title>seabus console</title>"
+        );
+        let mut r = (StatusCode::TOO_MANY_REQUESTS, axum::response::Html(page)).into_response();
+        if let Ok(v) = HeaderValue::from_str(&wait.as_secs().max(1).to_string()) {
+            r.headers_mut().insert(header::RETRY_AFTER, v);
+        }
         return r;
     }
     let checked = {

@@ -1,0 +1,689 @@
+//! The console in a real browser: headless Chromium driven over WebDriver (Debian's chromium and
+//! chromedriver, which scripts/test installs) against `seabus run` of a system with the simulated
+//! Iver2 frontseat, its driver and the shipped pilot and scientist layouts; users made with
+//! `seabus user add`. What reaches the bus is watched with `seabus spy` on a loopback group.
+//! Screenshots go to `target/console-screenshots/`.
+
+mod common;
+
+use common::{Running, group, seabus, spy_json, wait_for_line};
+use fantoccini::{Client, ClientBuilder, Locator};
+use serde_json::{Value as Json, json};
+use std::io::{BufRead, Write};
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+
+/// A running system with a console, and the directory of its files.
+struct System {
+    _dir: tempfile::TempDir,
+    dir: PathBuf,
+    _run: Running,
+    url: String,
+    /// The bus as `seabus spy` shows it (commands and statuses).
+    spy: mpsc::Receiver<Json>,
+    _spy: Running,
+}
+
+/// The repository's file `rel`, as an absolute path.
+fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+/// Adds a user with `seabus user add`, the password on stdin.
+fn add_user(users: &Path, name: &str, roles: &str, password: &str) {
+    let mut child = seabus()
+        .args(["user", "add"])
+        .arg(users)
+        .args([name, "--roles", roles])
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("seabus user add runs");
+    writeln!(child.stdin.take().expect("stdin"), "{password}").expect("password written");
+    let out = child.wait_with_output().expect("it ends");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Starts the system with `layouts` (paths) and waits for its console's address.
+fn start(layouts: &[PathBuf]) -> System {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let d = dir.path().to_path_buf();
+    let users = d.join("users.xml");
+    add_user(&users, "pilot", "pilot designer", "pilot-password");
+    add_user(&users, "copilot", "pilot", "copilot-password");
+    add_user(&users, "ivo", "observer", "observer-password");
+    let group = group();
+    let port = common::free_port();
+    let net = format!("udp://{group}:{port}?ttl=0");
+    let layouts: Vec<String> = layouts.iter().map(|p| p.display().to_string()).collect();
+    let text = format!(
+        r#"<seabus node="console-test">
+  <medium name="bus" url="inproc://"/>
+  <medium name="frontseat" url="pty://{d}/frontseat?framing=lines"/>
+  <medium name="serial" url="serial://{d}/frontseat?baud=19200&amp;framing=nmea"/>
+  <medium name="sensors-out" url="pty://{d}/sensors"/>
+  <medium name="sensors" url="serial://{d}/sensors?baud=4800&amp;framing=nmea"/>
+  <medium name="net" url="{net}"/>
+  <module name="frontseat-sim" type="iver2-sim" media="frontseat sensors-out"
+          lat="43.5081" lon="16.4402" heading="0" autostart="true" noise="0.2"/>
+  <module name="iver" type="iver2" media="serial bus" version="5" request_every="250ms"/>
+  <module name="gps" type="nmea-gps" media="sensors bus"/>
+  <module name="compass" type="nmea-heading" media="sensors bus"/>
+  <bridge name="watch" media="bus net">
+    <route from="bus" to="net" topics="cmd.**"/>
+  </bridge>
+  <console medium="bus" listen="127.0.0.1:0" users="users.xml" layouts="{layouts}"
+           log="commands.csv"/>
+</seabus>"#,
+        d = d.display(),
+        layouts = layouts.join(" "),
+    );
+    let path = d.join("system.xml");
+    std::fs::write(&path, text).expect("system written");
+    let (spy_run, spy) = spy_json(&net, 120);
+    let mut run = Running(
+        seabus()
+            .arg("run")
+            .arg(&path)
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("seabus run starts"),
+    );
+    let (tx, rx) = mpsc::channel();
+    let err = run.0.stderr.take().expect("stderr piped");
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(err).lines().map_while(Result::ok) {
+            if let Some(url) = line.trim().strip_prefix("Console: ") {
+                let _ = tx.send(url.to_string());
+            }
+        }
+    });
+    let url = rx
+        .recv_timeout(Duration::from_secs(30))
+        .expect("the console starts and says where");
+    System {
+        _dir: dir,
+        dir: d,
+        _run: run,
+        url,
+        spy,
+        _spy: spy_run,
+    }
+}
+
+/// chromedriver, stopped when dropped.
+struct Driver {
+    _child: Running,
+    url: String,
+}
+
+fn chromedriver() -> Driver {
+    assert!(
+        Path::new(CHROMEDRIVER).exists() && Path::new(CHROMIUM).exists(),
+        "the console tests need Debian's chromium and chromium-driver (scripts/test installs them)"
+    );
+    let port = common::free_port();
+    let child = Running(
+        std::process::Command::new(CHROMEDRIVER)
+            .arg(format!("--port={port}"))
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("chromedriver starts"),
+    );
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        assert!(Instant::now() < deadline, "chromedriver does not listen");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    Driver {
+        _child: child,
+        url: format!("http://127.0.0.1:{port}"),
+    }
+}
+
+async fn browser(driver: &Driver) -> Client {
+    let mut caps = serde_json::Map::new();
+    caps.insert(
+        "goog:chromeOptions".into(),
+        json!({
+            "binary": CHROMIUM,
+            "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage",
+                     "--window-size=1400,1000"],
+        }),
+    );
+    ClientBuilder::new(hyper_util::client::legacy::connect::HttpConnector::new())
+        .capabilities(caps)
+        .connect(&driver.url)
+        .await
+        .expect("a browser session")
+}
+
+async fn log_in(c: &Client, base: &str, name: &str, password: &str) {
+    c.goto(&format!("{base}/login")).await.expect("login page");
+    c.find(Locator::Css("input[name=name]"))
+        .await
+        .expect("name field")
+        .send_keys(name)
+        .await
+        .expect("typed");
+    c.find(Locator::Css("input[name=password]"))
+        .await
+        .expect("password field")
+        .send_keys(password)
+        .await
+        .expect("typed");
+    c.find(Locator::Css("[data-testid=login-submit]"))
+        .await
+        .expect("submit")
+        .click()
+        .await
+        .expect("clicked");
+}
+
+/// Runs `script` in the page and returns its value.
+async fn js(c: &Client, script: &str) -> Json {
+    c.execute(script, vec![]).await.expect("script runs")
+}
+
+/// Waits (at most `limit`) until `script` returns something truthy; returns it.
+async fn until(c: &Client, limit: Duration, what: &str, script: &str) -> Json {
+    let deadline = Instant::now() + limit;
+    loop {
+        let v = js(c, script).await;
+        let truthy =
+            !matches!(v, Json::Null | Json::Bool(false)) && v != json!(0) && v != json!("");
+        if truthy {
+            return v;
+        }
+        assert!(Instant::now() < deadline, "{what}: not within {limit:?}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+async fn screenshot(c: &Client, name: &str) {
+    let png = c.screenshot().await.expect("a screenshot");
+    let dir = repo("target/console-screenshots");
+    std::fs::create_dir_all(&dir).expect("screenshot directory");
+    std::fs::write(dir.join(name), png).expect("screenshot written");
+}
+
+const STATE: &str = "return window.seabusConsole && window.seabusConsole.state();";
+
+/// The text of the widget with `id`.
+fn widget_text(id: &str) -> String {
+    format!(
+        "const w = document.querySelector('[data-widget-id=\"{id}\"]'); return w ? w.innerText : null;"
+    )
+}
+
+/// The commands `seabus spy` saw within `limit` on `topic`.
+fn commands_on(spy: &mpsc::Receiver<Json>, topic: &str, limit: Duration) -> Vec<Json> {
+    let deadline = Instant::now() + limit;
+    let mut out = Vec::new();
+    while Instant::now() < deadline {
+        if let Ok(v) = spy.recv_timeout(Duration::from_millis(50))
+            && v["topic"] == topic
+        {
+            out.push(v);
+        }
+    }
+    out
+}
+
+/// Takes control from the header.
+async fn take_control(c: &Client, user: &str) {
+    until(
+        c,
+        Duration::from_secs(10),
+        "the take-control button",
+        "const b = document.querySelector('[data-testid=take-control]'); return b && !b.hidden && !b.disabled;",
+    )
+    .await;
+    c.find(Locator::Css("[data-testid=take-control]"))
+        .await
+        .expect("take button")
+        .click()
+        .await
+        .expect("clicked");
+    until(
+        c,
+        Duration::from_secs(5),
+        "control",
+        &format!("return window.seabusConsole.state().lease === '{user}';"),
+    )
+    .await;
+}
+
+/// Sets a slider to `value` and lets go of it, as a user dragging it does.
+async fn slide(c: &Client, id: &str, value: f64) {
+    js(
+        c,
+        &format!(
+            "const r = document.querySelector('[data-widget-id=\"{id}\"] input[type=range]');
+             r.value = '{value}';
+             r.dispatchEvent(new Event('input', {{bubbles: true}}));
+             r.dispatchEvent(new Event('change', {{bubbles: true}}));
+             return true;"
+        ),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
+    let sys = start(&[repo("configs/console/pilot.xml")]);
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    // the layout renders, and values arrive
+    until(
+        &c,
+        Duration::from_secs(15),
+        "the pilot layout",
+        "return document.querySelector('[data-kind=track]') && document.querySelector('[data-widget-id=heading]');",
+    )
+    .await;
+    let depth_id = js(
+        &c,
+        "return document.querySelectorAll('[data-kind=readout]')[1].dataset.widgetId;",
+    )
+    .await;
+    let depth_id = depth_id.as_str().expect("a readout id").to_string();
+    let first = until(
+        &c,
+        Duration::from_secs(15),
+        "a live heading",
+        "const r = document.querySelectorAll('[data-kind=readout]')[0]; return r && /[0-9]/.test(r.innerText) && !/no data/.test(r.innerText) && r.innerText;",
+    )
+    .await;
+    assert!(js(&c, &widget_text(&depth_id)).await.is_string());
+    // values keep changing (the simulated vehicle moves)
+    let mut changed = false;
+    for _ in 0..50 {
+        tokio::time::sleep(Duration::from_millis(200)).await;
+        let now = js(
+            &c,
+            "return document.querySelectorAll('[data-kind=readout]')[0].innerText;",
+        )
+        .await;
+        if now != first {
+            changed = true;
+            break;
+        }
+    }
+    let speed = js(&c, "return [...document.querySelectorAll('[data-kind=readout]')].map(r => r.innerText).join(' | ');").await;
+    assert!(changed, "the readouts never changed: {speed}");
+
+    take_control(&c, "pilot").await;
+    slide(&c, "heading", 123.0).await;
+    // the command reaches the vehicle through the driver …
+    let mut seen = Vec::new();
+    let course = wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(10),
+        "cmd.course",
+        |v| v["topic"] == "cmd.course",
+    );
+    assert_eq!(
+        course["payload"]["heading"].as_f64(),
+        Some(123.0),
+        "{course}"
+    );
+    // … and its acknowledgement from the simulated frontseat shows in the history
+    until(
+        &c,
+        Duration::from_secs(10),
+        "an acknowledged command in the history",
+        "const h = document.querySelector('[data-kind=history]'); return h && /acknowledged/.test(h.innerText) && h.innerText;",
+    )
+    .await;
+    screenshot(&c, "pilot.png").await;
+    let log = std::fs::read_to_string(sys.dir.join("commands.csv")).expect("the command log");
+    assert!(
+        log.lines()
+            .any(|l| l.contains(",pilot,course,") && l.contains("acknowledged")),
+        "{log}"
+    );
+    c.close().await.expect("closed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
+    let sys = start(&[
+        repo("configs/console/pilot.xml"),
+        repo("configs/console/scientist.xml"),
+    ]);
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "ivo", "observer-password").await;
+    until(
+        &c,
+        Duration::from_secs(15),
+        "the scientist layout",
+        "return document.querySelector('[data-kind=health]') && document.querySelector('[data-kind=plot]');",
+    )
+    .await;
+    let controls = js(
+        &c,
+        "return document.querySelectorAll('[data-kind=slider],[data-kind=button],[data-kind=number],[data-kind=toggle],[data-kind=text]').length
+              + document.querySelectorAll('[data-testid=take-control]:not([hidden])').length;",
+    )
+    .await;
+    assert_eq!(controls, json!(0), "an observer sees no command controls");
+    screenshot(&c, "observer.png").await;
+    // a forged command over the page's own session: refused by the server
+    js(
+        &c,
+        "window.forged = [];
+         const ws = new WebSocket(`ws://${location.host}/ws`);
+         ws.onmessage = (e) => window.forged.push(JSON.parse(e.data));
+         ws.onopen = () => {
+           ws.send(JSON.stringify({type: 'open', layout: 'pilot'}));
+           ws.send(JSON.stringify({type: 'lease', action: 'take'}));
+           ws.send(JSON.stringify({type: 'send', layout: 'pilot', command: 'course', fields: {speed: 2.5}}));
+           ws.send(JSON.stringify({type: 'drive', layout: 'scientist', command: 'course', fields: {speed: 2.5}}));
+         };
+         return true;",
+    )
+    .await;
+    let errors = until(
+        &c,
+        Duration::from_secs(10),
+        "the refusals",
+        "const e = (window.forged || []).filter(m => m.type === 'error'); return e.length >= 4 && e.map(m => m.message);",
+    )
+    .await;
+    let text = errors.to_string();
+    assert!(
+        text.contains("no layout") && text.contains("role pilot"),
+        "{text}"
+    );
+    assert!(
+        commands_on(&sys.spy, "cmd.course", Duration::from_secs(2)).is_empty(),
+        "nothing reached the bus"
+    );
+    c.close().await.expect("closed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_pilot_cannot_command_until_the_first_releases_control() {
+    let sys = start(&[repo("configs/console/pilot.xml")]);
+    let driver = chromedriver();
+    let a = browser(&driver).await;
+    let b = browser(&driver).await;
+    log_in(&a, &sys.url, "pilot", "pilot-password").await;
+    log_in(&b, &sys.url, "copilot", "copilot-password").await;
+    take_control(&a, "pilot").await;
+    // everyone sees who has control; the second pilot's controls say why they are off
+    until(
+        &b,
+        Duration::from_secs(5),
+        "the holder shown",
+        "return /pilot/.test(document.querySelector('[data-testid=lease-holder]').innerText);",
+    )
+    .await;
+    let blocked = js(
+        &b,
+        "const b = document.querySelector('[data-testid=take-control]');
+         const r = document.querySelector('[data-widget-id=heading] input[type=range]');
+         return {take: b.hidden || b.disabled, slider: r.disabled};",
+    )
+    .await;
+    assert_eq!(blocked, json!({"take": true, "slider": true}));
+    // even sent anyway (as a modified page would), the server refuses
+    js(
+        &b,
+        "const ws = new WebSocket(`ws://${location.host}/ws`);
+         window.forged = [];
+         ws.onmessage = (e) => window.forged.push(JSON.parse(e.data));
+         ws.onopen = () => {
+           ws.send(JSON.stringify({type: 'open', layout: 'pilot'}));
+           ws.send(JSON.stringify({type: 'send', layout: 'pilot', command: 'course', fields: {heading: 10}}));
+         };
+         return true;",
+    )
+    .await;
+    let refused = until(
+        &b,
+        Duration::from_secs(5),
+        "the refusal",
+        "const e = (window.forged || []).find(m => m.type === 'error'); return e && e.message;",
+    )
+    .await;
+    assert!(
+        refused.as_str().unwrap_or("").contains("pilot has it"),
+        "{refused}"
+    );
+    assert!(commands_on(&sys.spy, "cmd.course", Duration::from_secs(1)).is_empty());
+    // released: the second pilot takes control and commands
+    a.find(Locator::Css("[data-testid=release-control]"))
+        .await
+        .expect("release button")
+        .click()
+        .await
+        .expect("clicked");
+    take_control(&b, "copilot").await;
+    slide(&b, "depth", 4.5).await;
+    let got = commands_on(&sys.spy, "cmd.course", Duration::from_secs(3));
+    assert_eq!(got.len(), 1, "{got:?}");
+    assert_eq!(got[0]["payload"]["depth"].as_f64(), Some(4.5));
+    a.close().await.expect("closed");
+    b.close().await.expect("closed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gamepad_that_freezes_mid_command_sends_neutral_once_then_nothing() {
+    let sys = start(&[repo("configs/console/pilot.xml")]);
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    take_control(&c, "pilot").await;
+    // a gamepad: centred first, then the speed stick (axis 1) pushed forward, its readings
+    // changing as a live pad's do
+    js(
+        &c,
+        "window.pad = {id: 'test pad', index: 0, connected: true, mapping: 'standard',
+                       timestamp: 1, axes: [0, 0, 0, 0], buttons: []};
+         window.padLive = true;
+         navigator.getGamepads = () => [window.pad];
+         window.dispatchEvent(Object.assign(new Event('gamepadconnected'), {gamepad: window.pad}));
+         setTimeout(() => {
+           window.padTimer = setInterval(() => {
+             if (!window.padLive) return;
+             window.pad = Object.assign({}, window.pad, {timestamp: window.pad.timestamp + 16,
+               axes: [0, -0.8 - Math.random() * 0.01, 0, 0]});
+           }, 16);
+         }, 300);
+         return true;",
+    )
+    .await;
+    until(
+        &c,
+        Duration::from_secs(10),
+        "drive messages",
+        "return window.seabusConsole.state().drives >= 5;",
+    )
+    .await;
+    // the pad freezes: same timestamp, same readings, stick still deflected
+    js(&c, "window.padLive = false; return true;").await;
+    let released = until(
+        &c,
+        Duration::from_secs(5),
+        "the release",
+        "const s = window.seabusConsole.state(); return s.releases >= 1 && s;",
+    )
+    .await;
+    assert_eq!(released["releases"], json!(1), "{released}");
+    // on the bus: drives at speed > 0, then one neutral (speed 0), then nothing
+    let mut seen = Vec::new();
+    wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(5),
+        "the neutral command",
+        |v| v["topic"] == "cmd.course" && v["payload"]["speed"].as_f64() == Some(0.0),
+    );
+    let driven: Vec<f64> = seen
+        .iter()
+        .filter(|v| v["topic"] == "cmd.course")
+        .filter_map(|v| v["payload"]["speed"].as_f64())
+        .collect();
+    assert!(
+        driven.len() >= 3 && driven[..driven.len() - 1].iter().all(|s| *s > 1.5),
+        "{driven:?}"
+    );
+    let after = commands_on(&sys.spy, "cmd.course", Duration::from_secs(2));
+    assert!(
+        after.is_empty(),
+        "commands after the neutral one: {after:?}"
+    );
+    let state = js(&c, STATE).await;
+    assert_eq!(state["releases"], json!(1), "{state}");
+    c.close().await.expect("closed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_bad_layout_shows_its_line_and_column_and_log_ins_are_limited() {
+    let bad_dir = tempfile::tempdir().expect("dir");
+    let bad = bad_dir.path().join("bad.xml");
+    std::fs::write(
+        &bad,
+        "<layout name=\"bad\" roles=\"pilot\">\n  <column>\n    <readout bind=\"nav.depth.depth\" precision=\"two\"/>\n  </column>\n</layout>\n",
+    )
+    .expect("written");
+    // the check command names the place …
+    let out = seabus()
+        .args(["layout", "check"])
+        .arg(&bad)
+        .arg(repo("configs/demo.xml"))
+        .output()
+        .expect("seabus layout check runs");
+    let err =
+        String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("bad.xml:3:"), "{err}");
+    // … and so does the page
+    let sys = start(std::slice::from_ref(&bad));
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    let shown = until(
+        &c,
+        Duration::from_secs(15),
+        "the layout error",
+        "const e = document.querySelector('[data-testid=layout-error]'); return e && !e.hidden && e.innerText;",
+    )
+    .await;
+    let shown = shown.as_str().unwrap_or("").to_string();
+    assert!(
+        shown.contains("bad.xml:3:") || shown.contains("line 3"),
+        "{shown}"
+    );
+    screenshot(&c, "layout-error.png").await;
+    // wrong passwords: after five, even the right one is refused for a while
+    c.goto(&format!("{}/logout", sys.url))
+        .await
+        .expect("log out");
+    for _ in 0..5 {
+        log_in(&c, &sys.url, "copilot", "wrong-password").await;
+        until(
+            &c,
+            Duration::from_secs(5),
+            "the refusal",
+            "const e = document.querySelector('[data-testid=login-error]'); return e && !e.hidden && e.innerText;",
+        )
+        .await;
+    }
+    log_in(&c, &sys.url, "copilot", "copilot-password").await;
+    let limited = until(
+        &c,
+        Duration::from_secs(5),
+        "the limit",
+        "const e = document.querySelector('[data-testid=login-error]'); return e && !e.hidden && e.innerText;",
+    )
+    .await;
+    assert!(
+        limited.as_str().unwrap_or("").contains("Too many"),
+        "{limited}"
+    );
+    c.close().await.expect("closed");
+}
+
+#[test]
+fn only_the_demo_has_passwords_of_its_own_and_it_prints_them() {
+    // a console without a users file does not start
+    let dir = tempfile::tempdir().expect("dir");
+    let path = dir.path().join("s.xml");
+    std::fs::write(
+        &path,
+        r#"<seabus node="n"><medium name="bus" url="inproc://"/>
+  <console medium="bus" listen="127.0.0.1:0" layouts="x.xml"/></seabus>"#,
+    )
+    .expect("written");
+    let out = seabus()
+        .args(["run"])
+        .arg(&path)
+        .args(["--for", "5"])
+        .output()
+        .expect("runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("needs `users`"), "{err}");
+    // the demo prints its users and passwords, and they log in
+    let mut demo = Running(
+        seabus()
+            .args(["demo", "--for", "30"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the demo starts"),
+    );
+    let err = demo.0.stderr.take().expect("piped");
+    let mut lines = std::io::BufReader::new(err).lines();
+    let mut password = None;
+    let mut url = None;
+    for line in lines.by_ref().take(200).map_while(Result::ok) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if words.first() == Some(&"observer") && words.len() >= 3 {
+            password = Some(words[1].to_string());
+        }
+        if let Some(u) = line.trim().strip_prefix("Console: ") {
+            url = Some(u.to_string());
+            break;
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    let (password, url) = (
+        password.expect("the demo prints the observer's password"),
+        url.expect("the demo prints its console"),
+    );
+    let addr = url.trim_start_matches("http://");
+    let body = format!("name=observer&password={password}");
+    let mut s = std::net::TcpStream::connect(addr).expect("the console listens");
+    write!(
+        s,
+        "POST /login HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("sent");
+    let mut answer = String::new();
+    std::io::Read::read_to_string(&mut s, &mut answer).expect("answer");
+    assert!(
+        answer
+            .to_lowercase()
+            .contains("set-cookie: seabus_session="),
+        "{answer}"
+    );
+}
