@@ -1,0 +1,263 @@
+//! The console's cost: 50 bound variables (10 topics × 5 fields) updated at 20 Hz, sent to 10
+//! logged-in WebSocket clients for 10 s. Printed: the server process's CPU share (of one core) and
+//! the bytes per second each client receives; then the same for the floor — every bus message
+//! written raw (JSON lines) to 10 plain TCP sockets, no coalescing, no WebSocket.
+//!
+//! The clients run in a child process (this binary again), so the CPU figure is the server's
+//! alone (with the publisher, which both runs share).
+//!
+//! ```text
+//! cargo bench -p seabus-ui --bench console
+//! ```
+
+use futures_util::StreamExt;
+use seabus_medium::{DataMap, Medium, Node};
+use seabus_modules::system::SystemSpec;
+use seabus_ui::console::{self, Console};
+use seabus_ui::users::Users;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+
+const TOPICS: usize = 10;
+const FIELDS: usize = 5;
+const RATE_HZ: f64 = 20.0;
+const CLIENTS: usize = 10;
+const SECONDS: u64 = 10;
+
+fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage fills the struct we own
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+    let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+    t(u.ru_utime) + t(u.ru_stime)
+}
+
+fn layout() -> String {
+    let mut widgets = String::new();
+    for t in 0..TOPICS {
+        for f in 0..FIELDS {
+            widgets += &format!("    <readout bind=\"bench.t{t}.f{f}\" precision=\"3\"/>\n");
+        }
+    }
+    format!(
+        "<layout name=\"bench\" roles=\"observer\">\n  <grid columns=\"5\">\n{widgets}  </grid>\n</layout>\n"
+    )
+}
+
+/// Publishes every topic at [`RATE_HZ`] until dropped.
+fn publish(bus: &Medium) -> tokio::task::JoinHandle<()> {
+    let tx = bus.attach("sensors");
+    tokio::spawn(async move {
+        let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / RATE_HZ));
+        let mut n = 0u64;
+        loop {
+            tick.tick().await;
+            n += 1;
+            for t in 0..TOPICS {
+                let mut m = DataMap::new();
+                for f in 0..FIELDS {
+                    m.insert(format!("f{f}"), (n as f64) * 0.001 + f as f64);
+                }
+                let _ = tx.send(format!("bench.t{t}").as_str(), m).await;
+            }
+        }
+    })
+}
+
+/// Runs the clients (in the child process); prints the bytes each received.
+async fn clients(mode: &str, addr: &str, cookie: &str) {
+    let mut tasks = Vec::new();
+    for _ in 0..CLIENTS {
+        let (mode, addr, cookie) = (mode.to_string(), addr.to_string(), cookie.to_string());
+        tasks.push(tokio::spawn(async move {
+            let deadline = Instant::now() + Duration::from_secs(SECONDS);
+            let mut bytes = 0usize;
+            if mode == "raw" {
+                let mut s = TcpStream::connect(&addr).await.expect("raw server");
+                let mut buf = vec![0u8; 65536];
+                while let Ok(Ok(n)) =
+                    tokio::time::timeout_at(deadline.into(), s.read(&mut buf)).await
+                {
+                    if n == 0 {
+                        break;
+                    }
+                    bytes += n;
+                }
+            } else {
+                use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+                let mut req = format!("ws://{addr}/ws")
+                    .into_client_request()
+                    .expect("request");
+                req.headers_mut()
+                    .insert("cookie", cookie.parse().expect("cookie header"));
+                let tcp = TcpStream::connect(&addr).await.expect("console");
+                let (mut ws, _) = tokio_tungstenite::client_async(req, tcp)
+                    .await
+                    .expect("websocket");
+                use futures_util::SinkExt;
+                ws.send(tokio_tungstenite::tungstenite::Message::Text(
+                    r#"{"type":"open","layout":"bench"}"#.into(),
+                ))
+                .await
+                .expect("open");
+                while let Ok(Some(Ok(m))) =
+                    tokio::time::timeout_at(deadline.into(), ws.next()).await
+                {
+                    bytes += m.len();
+                }
+            }
+            bytes
+        }));
+    }
+    for t in tasks {
+        println!("{}", t.await.expect("client"));
+    }
+}
+
+async fn login(addr: std::net::SocketAddr) -> String {
+    let body = "name=bench&password=bench-password";
+    let mut s = TcpStream::connect(addr).await.expect("console");
+    s.write_all(
+        format!(
+            "POST /login HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+            body.len()
+        )
+        .as_bytes(),
+    )
+    .await
+    .expect("sent");
+    let mut out = String::new();
+    s.read_to_string(&mut out).await.expect("answer");
+    out.lines()
+        .find_map(|l| {
+            l.to_lowercase()
+                .starts_with("set-cookie: ")
+                .then(|| l[12..].to_string())
+        })
+        .and_then(|c| c.split(';').next().map(str::to_string))
+        .expect("a session cookie")
+}
+
+/// Runs the clients in a child process while measuring this one; returns (CPU share, bytes/s
+/// per client).
+async fn measure(mode: &str, addr: String, cookie: String) -> (f64, f64) {
+    let exe = std::env::current_exe().expect("this binary");
+    let child = tokio::process::Command::new(exe)
+        .args(["--clients", mode, &addr, &cookie])
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .expect("clients start");
+    // the clients connect; measuring starts once they are in
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    let (cpu0, t0) = (cpu_seconds(), Instant::now());
+    let out = child.wait_with_output().await.expect("clients end");
+    let (cpu, wall) = (cpu_seconds() - cpu0, t0.elapsed().as_secs_f64());
+    let per: Vec<f64> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.trim().parse().ok())
+        .collect();
+    let mean = per.iter().sum::<f64>() / per.len().max(1) as f64 / SECONDS as f64;
+    (100.0 * cpu / wall, mean)
+}
+
+async fn console_run() -> (f64, f64) {
+    let dir = tempfile::tempdir().expect("dir");
+    std::fs::write(dir.path().join("bench.xml"), layout()).expect("layout");
+    std::fs::write(
+        dir.path().join("users.xml"),
+        Users::with_passwords(&[("bench", &["observer"], "bench-password")])
+            .expect("users")
+            .to_xml(),
+    )
+    .expect("users");
+    let system = dir.path().join("system.xml");
+    std::fs::write(
+        &system,
+        r#"<seabus node="b"><medium name="bus" url="inproc://"/>
+  <console medium="bus" listen="127.0.0.1:0" users="users.xml" layouts="bench.xml"/></seabus>"#,
+    )
+    .expect("system");
+    let spec = SystemSpec::load(&system).expect("system reads");
+    let cs = console::specs(&spec).expect("console reads").remove(0);
+    let bus = Medium::in_process("bus", &Node::new("b"));
+    let users = Users::load(&dir.path().join("users.xml")).expect("users read");
+    let console = Console::start(&cs, users, &bus, Vec::new())
+        .await
+        .expect("console starts");
+    let publisher = publish(&bus);
+    let cookie = login(console.addr()).await;
+    let r = measure("console", console.addr().to_string(), cookie).await;
+    publisher.abort();
+    r
+}
+
+async fn raw_run() -> (f64, f64) {
+    let bus = Medium::in_process("bus", &Node::new("b"));
+    let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+    let addr = listener.local_addr().expect("addr");
+    let server = tokio::spawn({
+        let bus = bus.clone();
+        async move {
+            loop {
+                let Ok((mut sock, _)) = listener.accept().await else {
+                    return;
+                };
+                let mut rx = bus.attach("raw");
+                let _ = rx.subscribe("bench.**");
+                tokio::spawn(async move {
+                    while let Some(m) = rx.recv().await {
+                        let Some(map) = m.payload.as_map() else {
+                            continue;
+                        };
+                        let mut line = format!(
+                            "{{\"topic\":\"{}\",\"stamp\":{},\"fields\":{}}}\n",
+                            m.topic,
+                            m.stamp.as_secs_f64(),
+                            seabus_medium::json::to_json(map).unwrap_or_default()
+                        );
+                        if sock.write_all(line.as_bytes()).await.is_err() {
+                            return;
+                        }
+                        line.clear();
+                    }
+                });
+            }
+        }
+    });
+    let publisher = publish(&bus);
+    let r = measure("raw", addr.to_string(), String::new()).await;
+    publisher.abort();
+    server.abort();
+    r
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    if let Some(i) = args.iter().position(|a| a == "--clients") {
+        let get = |k: usize| args.get(i + k).cloned().unwrap_or_default();
+        rt.block_on(clients(&get(1), &get(2), &get(3)));
+        return;
+    }
+    if args.iter().any(|a| a == "--bench") || args.len() == 1 {
+        let (c_cpu, c_bytes) = rt.block_on(console_run());
+        let (r_cpu, r_bytes) = rt.block_on(raw_run());
+        println!(
+            "console: {} variables ({TOPICS} topics x {FIELDS} fields) at {RATE_HZ} Hz to {CLIENTS} clients, {SECONDS} s:",
+            TOPICS * FIELDS
+        );
+        println!(
+            "  console (WebSocket, bound fields, <= 20 frames/s)  server CPU {c_cpu:.1} % of a core, {:.1} kB/s per client",
+            c_bytes / 1e3
+        );
+        println!(
+            "  raw (every message as a JSON line on TCP)          server CPU {r_cpu:.1} % of a core, {:.1} kB/s per client",
+            r_bytes / 1e3
+        );
+    }
+}
