@@ -687,3 +687,81 @@ fn only_the_demo_has_passwords_of_its_own_and_it_prints_them() {
         "{answer}"
     );
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_designer_adds_a_bound_widget_and_saves_the_layout_as_xml() {
+    let copy_dir = tempfile::tempdir().expect("dir");
+    let layout = copy_dir.path().join("pilot.xml");
+    std::fs::copy(repo("configs/console/pilot.xml"), &layout).expect("copied");
+    let sys = start(std::slice::from_ref(&layout));
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    until(
+        &c,
+        Duration::from_secs(15),
+        "the layout",
+        "return document.querySelector('[data-kind=track]');",
+    )
+    .await;
+    let click = |sel: &'static str| {
+        let c = c.clone();
+        async move {
+            c.find(Locator::Css(sel))
+                .await
+                .unwrap_or_else(|_| panic!("{sel}"))
+                .click()
+                .await
+                .unwrap_or_else(|_| panic!("click {sel}"));
+        }
+    };
+    click("[data-testid=edit-toggle]").await;
+    click("[data-testid=add-readout]").await;
+    // the new readout is selected: bind it and label it in the side panel
+    js(
+        &c,
+        "const set = (k, v) => { const i = document.querySelector(`[data-testid=attributes] [data-attr=${k}]`);
+                                 i.value = v; i.dispatchEvent(new Event('change', {bubbles: true})); };
+         set('bind', 'nav.altitude.altitude'); set('label', 'Clearance'); set('unit', 'm');
+         return true;",
+    )
+    .await;
+    click("[data-testid=save-layout]").await;
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let text = loop {
+        let text = std::fs::read_to_string(&layout).expect("the layout file");
+        if text.contains("Clearance") {
+            break text;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the layout was not saved:\n{text}"
+        );
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert!(text.contains("nav.altitude.altitude"), "{text}");
+    assert!(text.contains("roles=\"pilot\""), "roles kept: {text}");
+    assert!(copy_dir.path().join("pilot.xml.bak").exists());
+    // what was saved reads, and checks against the system
+    let out = seabus()
+        .args(["layout", "check"])
+        .arg(&layout)
+        .arg(repo("configs/demo.xml"))
+        .output()
+        .expect("layout check runs");
+    assert!(
+        out.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // and the page shows the new widget, reloaded from the server
+    until(
+        &c,
+        Duration::from_secs(10),
+        "the new readout",
+        "return [...document.querySelectorAll('[data-kind=readout]')].some(r => /Clearance/i.test(r.innerText));",
+    )
+    .await;
+    c.close().await.expect("closed");
+}
