@@ -147,6 +147,8 @@ fn a_valid_file_checks_clean_and_a_missing_one_is_an_error() {
     );
 }
 
+/// Every system file in configs/ (files whose root is `<seabus>`), and every console layout in
+/// configs/console/ with `seabus layout check` against the demo.
 #[test]
 fn every_shipped_config_is_valid() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
@@ -167,4 +169,30 @@ fn every_shipped_config_is_valid() {
         }
     }
     assert!(checked >= 1);
+    let demo = dir.join("demo.xml");
+    let mut layouts = 0;
+    for entry in std::fs::read_dir(dir.join("console")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "xml") {
+            continue;
+        }
+        let out = seabus()
+            .args(["layout", "check"])
+            .arg(&path)
+            .arg(&demo)
+            .output()
+            .expect("seabus runs");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(0), "{}: {stderr}", path.display());
+        // the demo has no health monitor: only a health table may lack its producer
+        for line in stderr.lines() {
+            assert!(
+                line.contains("warning: no module of") && line.contains("`vehicle.health`"),
+                "{}: {line}",
+                path.display()
+            );
+        }
+        layouts += 1;
+    }
+    assert!(layouts >= 2);
 }
