@@ -67,7 +67,11 @@ pub async fn start(
                 .error(format!("no medium `{}`", cs.medium))
                 .to_string());
         };
-        let produced = console::produced_topics(spec, registry, &Catalogue::built_in());
+        let produced: Vec<seabus_medium::Pattern> =
+            seabus_ui::layout::producers(spec, registry, &Catalogue::built_in(), &cs.medium)
+                .into_iter()
+                .map(|p| p.pattern)
+                .collect();
         let console = match Console::start(&cs, users.clone(), medium, produced.clone()).await {
             // the demo takes any free port when its usual one is taken
             Err(e) if demo_dir.is_some() => {

@@ -408,8 +408,15 @@ fn check(file: &std::path::Path) -> ExitCode {
         Ok(s) => s,
         Err(e) => return file_error(&e),
     };
-    let checked = system::check(&spec, &registry(), &Catalogue::built_in())
-        .and_then(|report| seabus_ui::console::specs(&spec).map(|_| report));
+    // a console's layouts must read (`seabus layout check` compares them with the system)
+    let checked = system::check(&spec, &registry(), &Catalogue::built_in()).and_then(|report| {
+        for console in seabus_ui::console::specs(&spec)? {
+            for layout in &console.settings.layouts {
+                seabus_ui::Layout::load(layout, &Default::default())?;
+            }
+        }
+        Ok(report)
+    });
     match checked {
         Err(e) => file_error(&e),
         Ok(report) if report.warnings.is_empty() => {

@@ -301,6 +301,46 @@ pub fn parse(file: &str, text: &str) -> Result<Element, FileError> {
     })
 }
 
+/// Where attribute `key` starts in an element's raw attribute text, searching from `from`, and
+/// where its value ends: a name standing on its own (not inside an earlier attribute's value), so
+/// `<t command="course.on" on="1">` places `on` at the second one.
+fn find_attr(raw: &[u8], from: usize, key: &[u8]) -> Option<(usize, usize)> {
+    let mut i = from;
+    while i < raw.len() {
+        let c = raw[i];
+        if c == b'"' || c == b'\'' {
+            // a value: skip to its closing quote
+            i = raw[i + 1..]
+                .iter()
+                .position(|x| *x == c)
+                .map_or(raw.len(), |p| i + 1 + p + 1);
+            continue;
+        }
+        let boundary = i == 0 || raw[i - 1].is_ascii_whitespace();
+        if boundary && raw[i..].starts_with(key) {
+            let after = raw.get(i + key.len()).copied();
+            if matches!(after, None | Some(b'=')) || after.is_some_and(|b| b.is_ascii_whitespace())
+            {
+                // past its value
+                let mut j = i + key.len();
+                while j < raw.len() && raw[j] != b'"' && raw[j] != b'\'' {
+                    j += 1;
+                }
+                let end = match raw.get(j) {
+                    Some(q) => raw[j + 1..]
+                        .iter()
+                        .position(|x| x == q)
+                        .map_or(raw.len(), |p| j + 1 + p + 1),
+                    None => raw.len(),
+                };
+                return Some((i, end));
+            }
+        }
+        i += 1;
+    }
+    None
+}
+
 /// Reads and parses a file.
 pub fn parse_file(path: &std::path::Path) -> Result<Element, FileError> {
     let name = path.display().to_string();
@@ -342,12 +382,10 @@ fn element(
             }
         })?;
         let key = a.key.as_ref().to_string();
-        let rel = raw[search_from..]
-            .find(key.as_str())
-            .map(|i| i + search_from);
-        let attr_at = rel.map_or(at, |r| raw_start + r);
-        if let Some(r) = rel {
-            search_from = r + key.len();
+        let rel = find_attr(raw.as_bytes(), search_from, key.as_bytes());
+        let attr_at = rel.map_or(at, |(r, _)| raw_start + r);
+        if let Some((_, end)) = rel {
+            search_from = end;
         }
         let value = a
             .normalized_value(quick_xml::XmlVersion::Implicit1_0)
@@ -380,6 +418,18 @@ fn element(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_attribute_is_placed_at_its_name_not_inside_an_earlier_value() {
+        let root = parse(
+            "t.xml",
+            "<toggle command=\"course.on\" on=\"yes\" off='on'/>",
+        )
+        .unwrap();
+        assert_eq!(root.attr("command").unwrap().pos.col, 9);
+        assert_eq!(root.attr("on").unwrap().pos.col, 29);
+        assert_eq!(root.attr("off").unwrap().pos.col, 38);
+    }
 
     #[test]
     fn positions_are_lines_and_columns() {

@@ -14,7 +14,6 @@ use crate::users::Users;
 use seabus_medium::xml::{Element, FileError};
 use seabus_medium::{Kind, Medium, Pattern};
 use seabus_modules::system::SystemSpec;
-use seabus_modules::{Catalogue, Registry};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -43,8 +42,8 @@ pub struct ConsoleSpec {
 fn duration(el: &Element, name: &str, default: Duration) -> Result<Duration, FileError> {
     match el.attr(name) {
         None => Ok(default),
-        Some(a) => humantime::parse_duration(a.value.trim())
-            .map_err(|e| a.error(format!("`{}`: {e} (a duration such as 5s)", a.value))),
+        Some(a) => seabus_medium::parse::parse_duration(&a.value)
+            .ok_or_else(|| a.error(format!("`{}` is not a duration (such as 5s)", a.value))),
     }
 }
 
@@ -123,30 +122,6 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<ConsoleSpec>, FileError> {
         });
     }
     Ok(out)
-}
-
-/// The topics a system's modules declare producing, and those its bridges bring from other media.
-pub fn produced_topics(
-    spec: &SystemSpec,
-    registry: &Registry,
-    catalogue: &Catalogue,
-) -> Vec<Pattern> {
-    let mut out = Vec::new();
-    for m in &spec.modules {
-        if let Ok(built) = registry.build_module(m, catalogue) {
-            for t in &built.decl.produces {
-                if let Ok(p) = Pattern::new(&t.topic) {
-                    out.push(p);
-                }
-            }
-        }
-    }
-    for b in &spec.bridges {
-        for r in &b.routes {
-            out.push(r.out_pattern().clone());
-        }
-    }
-    out
 }
 
 /// A running console.

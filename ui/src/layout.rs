@@ -13,6 +13,7 @@
 use seabus_medium::parse::{parse_duration, parse_rate};
 use seabus_medium::xml::{self, Attr, Element, FileError, Pos};
 use seabus_medium::{DataMap, Kind, Pattern, Topic, Value};
+use seabus_modules::system::RouteSpec;
 use seabus_modules::{Catalogue, Registry, SystemSpec};
 use serde_json::{Map, Value as Json, json};
 use std::collections::{BTreeMap, BTreeSet};
@@ -477,57 +478,19 @@ impl Layout {
             .map(str::trim)
             .or_else(|| spec.media.first().map(|m| m.name.as_str()))
             .unwrap_or_default();
-        struct Producer {
-            pattern: Pattern,
-            /// The fields it declares; `None` when unknown.
-            fields: Option<BTreeSet<String>>,
-        }
-        let mut produced: Vec<Producer> = Vec::new();
+        let produced = producers(spec, registry, catalogue, console);
         let mut accepted: Vec<(&str, Pattern)> = Vec::new();
         for m in &spec.modules {
             let Ok(built) = registry.build_module(m, catalogue) else {
                 continue;
             };
-            for t in &built.decl.produces {
-                if m.media.get(t.port).map(String::as_str) != Some(console) {
-                    continue;
-                }
-                let Ok(pattern) = Pattern::new(&t.topic) else {
-                    continue;
-                };
-                let dataset = t.dataset.as_deref().and_then(|d| catalogue.get(d));
-                let fields = (dataset.is_some() || !t.fields.is_empty()).then(|| {
-                    dataset
-                        .iter()
-                        .flat_map(|d| d.fields.iter().map(|f| f.name.clone()))
-                        .chain(t.fields.iter().map(|f| f.name.clone()))
-                        .collect()
-                });
-                produced.push(Producer { pattern, fields });
-            }
             for t in &built.decl.accepts {
                 if let (Some(medium), Ok(p)) = (m.media.get(t.port), Pattern::new(&t.topic)) {
                     accepted.push((medium.as_str(), p));
                 }
             }
         }
-        let legs = || {
-            spec.bridges.iter().flat_map(|b| {
-                b.routes.iter().flat_map(move |r| {
-                    r.legs(&b.media[0], &b.media[1])
-                        .into_iter()
-                        .map(move |(from, to)| (from, to, r))
-                })
-            })
-        };
-        for (_, to, r) in legs() {
-            if to == console && r.kind != Some(Kind::Command) {
-                produced.push(Producer {
-                    pattern: r.out_pattern().clone(),
-                    fields: None,
-                });
-            }
-        }
+        let legs = || route_legs(spec);
         let mut warnings = Vec::new();
         for b in self.bindings() {
             let Ok(pattern) = Pattern::new(&b.topic) else {
@@ -666,6 +629,68 @@ impl Layout {
             "gamepad": {"axes": axes, "buttons": buttons},
         })
     }
+}
+
+/// What puts a topic on the console's medium: a module's declaration or a bridge route into it.
+#[derive(Debug, Clone)]
+pub struct Producer {
+    /// The topics.
+    pub pattern: Pattern,
+    /// The fields it declares; `None` when unknown.
+    pub fields: Option<BTreeSet<String>>,
+}
+
+/// Every route leg of a system's bridges: (from medium, to medium, route).
+fn route_legs(spec: &SystemSpec) -> impl Iterator<Item = (&str, &str, &RouteSpec)> {
+    spec.bridges.iter().flat_map(|b| {
+        b.routes.iter().flat_map(move |r| {
+            r.legs(&b.media[0], &b.media[1])
+                .into_iter()
+                .map(move |(from, to)| (from, to, r))
+        })
+    })
+}
+
+/// What produces topics on `medium`: the modules that declare them there, and the bridge routes
+/// that bring data into it.
+pub fn producers(
+    spec: &SystemSpec,
+    registry: &Registry,
+    catalogue: &Catalogue,
+    medium: &str,
+) -> Vec<Producer> {
+    let mut produced = Vec::new();
+    for m in &spec.modules {
+        let Ok(built) = registry.build_module(m, catalogue) else {
+            continue;
+        };
+        for t in &built.decl.produces {
+            if m.media.get(t.port).map(String::as_str) != Some(medium) {
+                continue;
+            }
+            let Ok(pattern) = Pattern::new(&t.topic) else {
+                continue;
+            };
+            let dataset = t.dataset.as_deref().and_then(|d| catalogue.get(d));
+            let fields = (dataset.is_some() || !t.fields.is_empty()).then(|| {
+                dataset
+                    .iter()
+                    .flat_map(|d| d.fields.iter().map(|f| f.name.clone()))
+                    .chain(t.fields.iter().map(|f| f.name.clone()))
+                    .collect()
+            });
+            produced.push(Producer { pattern, fields });
+        }
+    }
+    for (_, to, r) in route_legs(spec) {
+        if to == medium && r.kind != Some(Kind::Command) {
+            produced.push(Producer {
+                pattern: r.out_pattern().clone(),
+                fields: None,
+            });
+        }
+    }
+    produced
 }
 
 /// A number as JSON: an integer when it is whole and small, `null` when it is not finite.
