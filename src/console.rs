@@ -8,13 +8,20 @@ use seabus_ui::users::{self, Users};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-/// The demo's layouts, built in: written to a directory of their own when the demo starts, so the
-/// designer can save them there.
-const DEMO_LAYOUTS: [(&str, &str); 2] = [
-    ("pilot.xml", include_str!("../configs/console/pilot.xml")),
+/// The demo's files besides its system file, built in: written with it to a directory of its
+/// own when the demo starts, where its relative paths find them (and the designer can save).
+const DEMO_FILES: [(&str, &str); 3] = [
     (
-        "scientist.xml",
+        "console/pilot.xml",
+        include_str!("../configs/console/pilot.xml"),
+    ),
+    (
+        "console/scientist.xml",
         include_str!("../configs/console/scientist.xml"),
+    ),
+    (
+        "demo-health.xml",
+        include_str!("../configs/demo-health.xml"),
     ),
 ];
 
@@ -26,31 +33,21 @@ const DEMO_USERS: [(&str, &[&str]); 4] = [
     ("observer", &["observer"]),
 ];
 
-/// Starts every console of `spec` on the runtime's media. In the demo (`demo_dir` given) the
-/// consoles get the demo's users, with fresh passwords printed, and the built-in layouts written
-/// there; elsewhere a console needs its users file.
+/// Starts every console of `spec` on the runtime's media. In the demo the consoles get the
+/// demo's users, with fresh passwords printed; elsewhere a console needs its users file.
 pub async fn start(
     spec: &SystemSpec,
     registry: &Registry,
     runtime: &Runtime,
-    demo_dir: Option<&Path>,
+    demo: bool,
 ) -> Result<Vec<Console>, String> {
     let specs = console::specs(spec).map_err(|e| e.to_string())?;
     let mut out = Vec::new();
     for mut cs in specs {
-        let users = match (demo_dir, &cs.users) {
-            (Some(dir), _) => {
-                let mut layouts = Vec::new();
-                for (name, text) in DEMO_LAYOUTS {
-                    let path = dir.join(name);
-                    std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
-                    layouts.push(path);
-                }
-                cs.settings.layouts = layouts;
-                demo_users()?
-            }
-            (None, Some(path)) => Users::load(path).map_err(|e| e.to_string())?,
-            (None, None) => {
+        let users = match (demo, &cs.users) {
+            (true, _) => demo_users()?,
+            (false, Some(path)) => Users::load(path).map_err(|e| e.to_string())?,
+            (false, None) => {
                 return Err(cs
                     .element
                     .error(
@@ -74,7 +71,7 @@ pub async fn start(
                 .collect();
         let console = match Console::start(&cs, users.clone(), medium, produced.clone()).await {
             // the demo takes any free port when its usual one is taken
-            Err(e) if demo_dir.is_some() => {
+            Err(e) if demo => {
                 eprintln!("  {e}; the console takes another port");
                 cs.settings.listen.set_port(0);
                 Console::start(&cs, users, medium, produced).await?
@@ -147,9 +144,21 @@ fn read_password(name: &str) -> Result<String, String> {
     }
 }
 
-/// A directory of the demo's own, under the system's temporary directory.
-pub fn demo_dir() -> Result<PathBuf, String> {
-    let dir = std::env::temp_dir().join(format!("seabus-demo-console-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    Ok(dir)
+/// Writes the demo's system file `text` and its other files to a directory of its own under the
+/// system's temporary directory; returns the directory and the system file's path.
+pub fn write_demo(text: &str) -> Result<(PathBuf, PathBuf), String> {
+    let dir = std::env::temp_dir().join(format!("seabus-demo-{}", std::process::id()));
+    let write = |rel: &str, text: &str| -> Result<PathBuf, String> {
+        let path = dir.join(rel);
+        if let Some(parent) = path.parent() {
+            std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
+        }
+        std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        Ok(path)
+    };
+    for (rel, body) in DEMO_FILES {
+        write(rel, body)?;
+    }
+    let system = write("demo.xml", text)?;
+    Ok((dir, system))
 }

@@ -242,21 +242,32 @@ fn main() -> ExitCode {
     let code = rt.block_on(async move {
         match cli.command {
             Command::Run { file, duration } => match SystemSpec::load(&file) {
-                Ok(spec) => run(spec, duration, false).await,
+                Ok(spec) => run(spec, duration, None).await,
                 Err(e) => file_error(&e),
             },
-            Command::Demo { duration } => match SystemSpec::parse("configs/demo.xml (built in)", DEMO) {
-                Ok(spec) => {
-                    eprintln!(
-                        "seabus demo: a simulated Iver2 frontseat on a pseudo-terminal, the Iver2 driver on the\n  \
-                         backseat, NMEA GPS and compass, and a helm driving the vehicle around a square.\n  \
-                         The traffic is on udp://239.255.42.1:47800 (loopback only): in another terminal run\n  \
-                         seabus spy udp://239.255.42.1:47800\n  Ctrl-C stops."
-                    );
-                    run(spec, duration, true).await
+            Command::Demo { duration } => {
+                // the demo's files, written where its relative paths find them
+                let written = console::write_demo(DEMO).and_then(|(dir, file)| {
+                    SystemSpec::load(&file)
+                        .map(|spec| (dir, spec))
+                        .map_err(|e| e.to_string())
+                });
+                match written {
+                    Ok((dir, spec)) => {
+                        eprintln!(
+                            "seabus demo: a simulated Iver2 frontseat on a pseudo-terminal, the Iver2 driver on the\n  \
+                             backseat, NMEA GPS and compass, and a helm driving the vehicle around a square.\n  \
+                             The traffic is on udp://239.255.42.1:47800 (loopback only): in another terminal run\n  \
+                             seabus spy udp://239.255.42.1:47800\n  Ctrl-C stops."
+                        );
+                        run(spec, duration, Some(dir)).await
+                    }
+                    Err(e) => {
+                        eprintln!("seabus demo: {e}");
+                        ExitCode::from(2)
+                    }
                 }
-                Err(e) => file_error(&e),
-            },
+            }
             Command::Check { file } => check(&file),
             Command::Spy {
                 url,
@@ -340,7 +351,9 @@ fn seconds(value: Option<f64>) -> Result<Option<Duration>, ExitCode> {
     }
 }
 
-async fn run(spec: SystemSpec, duration: Option<f64>, demo: bool) -> ExitCode {
+/// Runs a system until Ctrl-C, SIGTERM or `duration`; `demo_dir` is the demo's own directory
+/// (its consoles get the demo's users; it is removed at the end).
+async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>) -> ExitCode {
     let duration = match seconds(duration) {
         Ok(d) => d,
         Err(code) => return code,
@@ -350,19 +363,7 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo: bool) -> ExitCode {
         Ok(r) => r,
         Err(e) => return file_error(&e),
     };
-    let demo_dir = if demo {
-        match console::demo_dir() {
-            Ok(d) => Some(d),
-            Err(e) => {
-                eprintln!("seabus demo: {e}");
-                runtime.shutdown().await;
-                return ExitCode::from(2);
-            }
-        }
-    } else {
-        None
-    };
-    let consoles = match console::start(&spec, &registry, &runtime, demo_dir.as_deref()).await {
+    let consoles = match console::start(&spec, &registry, &runtime, demo_dir.is_some()).await {
         Ok(c) => c,
         Err(e) => {
             eprintln!("{e}");

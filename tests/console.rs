@@ -78,6 +78,7 @@ fn start(layouts: &[PathBuf]) -> System {
   <module name="iver" type="iver2" media="serial bus" version="5" request_every="250ms"/>
   <module name="gps" type="nmea-gps" media="sensors bus"/>
   <module name="compass" type="nmea-heading" media="sensors bus"/>
+  <module name="health" type="health-monitor" media="bus serial sensors" rules="{rules}"/>
   <bridge name="watch" media="bus net">
     <route from="bus" to="net" topics="cmd.**"/>
   </bridge>
@@ -86,6 +87,7 @@ fn start(layouts: &[PathBuf]) -> System {
 </seabus>"#,
         d = d.display(),
         layouts = layouts.join(" "),
+        rules = repo("configs/demo-health.xml").display(),
     );
     let path = d.join("system.xml");
     std::fs::write(&path, text).expect("system written");
@@ -382,6 +384,19 @@ async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
     )
     .await;
     assert_eq!(controls, json!(0), "an observer sees no command controls");
+    // the health table: each component and the vehicle's severity, live
+    let health = until(
+        &c,
+        Duration::from_secs(15),
+        "the health table",
+        "const h = document.querySelector('[data-kind=health]'); return h && /Frontseat/.test(h.innerText) && /Sensors/.test(h.innerText) && h.innerText;",
+    )
+    .await;
+    let health = health.as_str().unwrap_or("").to_string();
+    assert!(
+        health.contains("NONE") || health.contains("HEALTHY"),
+        "{health}"
+    );
     screenshot(&c, "observer.png").await;
     // a forged command over the page's own session: refused by the server
     js(
