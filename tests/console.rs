@@ -213,6 +213,15 @@ async fn until(c: &Client, limit: Duration, what: &str, script: &str) -> Json {
     }
 }
 
+/// Waits like [`until`] for `script` to return text; returns the text.
+async fn until_text(c: &Client, limit: Duration, what: &str, script: &str) -> String {
+    until(c, limit, what, script)
+        .await
+        .as_str()
+        .unwrap_or_default()
+        .to_string()
+}
+
 async fn screenshot(c: &Client, name: &str) {
     let png = c.screenshot().await.expect("a screenshot");
     let dir = repo("target/console-screenshots");
@@ -385,14 +394,13 @@ async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
     .await;
     assert_eq!(controls, json!(0), "an observer sees no command controls");
     // the health table: each component and the vehicle's severity, live
-    let health = until(
+    let health = until_text(
         &c,
         Duration::from_secs(15),
         "the health table",
         "const h = document.querySelector('[data-kind=health]'); return h && /Frontseat/.test(h.innerText) && /Sensors/.test(h.innerText) && h.innerText;",
     )
     .await;
-    let health = health.as_str().unwrap_or("").to_string();
     assert!(
         health.contains("NONE") || health.contains("HEALTHY"),
         "{health}"
@@ -594,14 +602,13 @@ async fn a_bad_layout_shows_its_line_and_column_and_log_ins_are_limited() {
     let driver = chromedriver();
     let c = browser(&driver).await;
     log_in(&c, &sys.url, "pilot", "pilot-password").await;
-    let shown = until(
+    let shown = until_text(
         &c,
         Duration::from_secs(15),
         "the layout error",
         "const e = document.querySelector('[data-testid=layout-error]'); return e && !e.hidden && e.innerText;",
     )
     .await;
-    let shown = shown.as_str().unwrap_or("").to_string();
     assert!(
         shown.contains("bad.xml:3:") || shown.contains("line 3"),
         "{shown}"

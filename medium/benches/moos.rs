@@ -25,22 +25,7 @@ fn quantiles(mut v: Vec<Duration>) -> (f64, f64) {
 async fn raw(db: std::net::SocketAddr, name: &str, register: Option<&str>) -> (TcpStream, Vec<u8>) {
     let mut s = TcpStream::connect(db).await.unwrap();
     s.set_nodelay(true).unwrap();
-    let intro = MoosMsg {
-        id: -1,
-        kind: kind::DATA,
-        data_type: data::STRING,
-        key: b"asynchronous".to_vec(),
-        string: name.as_bytes().to_vec(),
-        ..MoosMsg::default()
-    };
-    let mut hello = wire::handshake().to_vec();
-    hello.extend(
-        Packet {
-            messages: vec![intro],
-        }
-        .encode(),
-    );
-    s.write_all(&hello).await.unwrap();
+    s.write_all(&wire::hello(name, 0.0)).await.unwrap();
     let mut buf = Vec::new();
     wire::next_packet(&mut s, &mut buf, Duration::from_secs(5))
         .await

@@ -440,22 +440,7 @@ struct Raw {
 impl Raw {
     async fn connect(db: SocketAddr, name: &str) -> Raw {
         let mut sock = tokio::net::TcpStream::connect(db).await.unwrap();
-        let intro = MoosMsg {
-            id: -1,
-            kind: kind::DATA,
-            data_type: data::STRING,
-            key: b"asynchronous".to_vec(),
-            string: name.as_bytes().to_vec(),
-            ..MoosMsg::default()
-        };
-        let mut hello = wire::handshake().to_vec();
-        hello.extend(
-            Packet {
-                messages: vec![intro],
-            }
-            .encode(),
-        );
-        sock.write_all(&hello).await.unwrap();
+        sock.write_all(&wire::hello(name, 0.0)).await.unwrap();
         let mut raw = Raw {
             sock,
             buf: Vec::new(),

@@ -284,23 +284,7 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
     .map_err(|_| "no connection within 5 s".to_string())?
     .map_err(|e| format!("cannot connect: {e}"))?;
     let _ = sock.set_nodelay(true);
-    let intro = MoosMsg {
-        id: -1,
-        kind: kind::DATA,
-        data_type: data::STRING,
-        key: b"asynchronous".to_vec(),
-        time: local_now(),
-        string: cfg.name.as_bytes().to_vec(),
-        ..MoosMsg::default()
-    };
-    let mut hello = wire::handshake().to_vec();
-    hello.extend(
-        Packet {
-            messages: vec![intro],
-        }
-        .encode(),
-    );
-    sock.write_all(&hello)
+    sock.write_all(&wire::hello(&cfg.name, local_now()))
         .await
         .map_err(|e| format!("handshake: {e}"))?;
     let mut buf = Vec::new();

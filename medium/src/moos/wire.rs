@@ -351,6 +351,28 @@ pub fn handshake() -> [u8; HANDSHAKE_LEN] {
     h
 }
 
+/// What a client sends first: the handshake, then a packet with its `name` (and its clock, `time`,
+/// from which the DB works out the skew).
+pub fn hello(name: &str, time: f64) -> Vec<u8> {
+    let intro = MoosMsg {
+        id: -1,
+        kind: kind::DATA,
+        data_type: data::STRING,
+        key: b"asynchronous".to_vec(),
+        time,
+        string: name.as_bytes().to_vec(),
+        ..MoosMsg::default()
+    };
+    let mut out = handshake().to_vec();
+    out.extend(
+        Packet {
+            messages: vec![intro],
+        }
+        .encode(),
+    );
+    out
+}
+
 /// Reads from `sock` until `buf` holds a whole packet (waiting at most `silence` for each read);
 /// takes the packet out of `buf`. The error says why: closed, silent, or malformed.
 pub async fn next_packet(
