@@ -706,8 +706,15 @@ mod tests {
 
     #[test]
     fn the_demo_system_is_valid() {
-        let spec = SystemSpec::parse("demo.xml", DEMO).unwrap();
+        // as `seabus demo` runs it: from its own directory, with its built-in files
+        let (dir, file) = console::write_demo(DEMO).unwrap();
+        let spec = SystemSpec::load(&file).unwrap();
         let report = system::check(&spec, &registry(), &Catalogue::built_in()).unwrap();
+        let consoles = seabus_ui::console::specs(&spec).unwrap();
+        for layout in &consoles[0].settings.layouts {
+            seabus_ui::Layout::load(layout, &Default::default()).unwrap();
+        }
+        std::fs::remove_dir_all(dir).unwrap();
         assert!(report.warnings.is_empty(), "{:?}", report.warnings);
     }
 }
