@@ -70,7 +70,7 @@ fn kind_attrs(kind: &str) -> Option<&'static [&'static str]> {
         "tab" => &["title"],
         "grid" => &["columns"],
         "readout" => &["bind", "unit", "precision", "fresh"],
-        "gauge" => &["bind", "min", "max", "unit", "ranges", "fresh"],
+        "gauge" => &["bind", "min", "max", "unit", "precision", "ranges", "fresh"],
         "plot" => &["window", "min", "max", "fresh"],
         "series" => &["bind", "colour"],
         "track" => &["position", "heading", "trail", "waypoints", "grid", "fresh"],
