@@ -26,6 +26,8 @@ pub const HISTORY: usize = 200;
 pub const ARM_LIFETIME: Duration = Duration::from_secs(10);
 /// How long control stays with a holder whose connections have all closed.
 pub const LEASE_GRACE: Duration = Duration::from_secs(10);
+/// Where the console publishes who holds control.
+pub const CONTROL_TOPIC: &str = "console.control";
 /// Dead-man re-sends may be this many periods late before the neutral command goes.
 pub const DRIVE_PERIODS: u32 = 3;
 
@@ -414,9 +416,21 @@ impl Hub {
             "{} control",
             if take { "took" } else { "released" }
         );
-        self.broadcast(&self.lease_json());
+        self.lease_changed().await;
         self.neutral(stopped, "control released").await;
         Ok(())
+    }
+
+    /// Shows the lease to every page, and publishes it on the bus (`console.control`: `holder`,
+    /// empty when free, and `since`) for modules that step back while someone has control.
+    async fn lease_changed(&self) {
+        let lease = self.state().lease.clone();
+        self.broadcast(&lease_json(&lease));
+        let (holder, since) = lease.unwrap_or_default();
+        let map = DataMap::new().with("holder", holder).with("since", since);
+        if let Err(e) = self.port.send(CONTROL_TOPIC, map).await {
+            tracing::warn!(component = "console", "{CONTROL_TOPIC}: {e}");
+        }
     }
 
     /// The declaration of `command` in the layout the client opened as `layout`.
@@ -781,7 +795,7 @@ impl Hub {
             self.changed(e);
         }
         if let Some(released) = lease_gone {
-            self.broadcast(&self.lease_json());
+            self.lease_changed().await;
             self.neutral(released, "control released").await;
         }
     }

@@ -299,6 +299,8 @@ async fn an_observer_cannot_command_even_with_a_forged_message() {
 async fn only_the_holder_of_control_commands_and_acknowledgements_show() {
     let s = setup().await;
     let mut d = driver(&s.bus);
+    let mut control = s.bus.attach("control");
+    control.subscribe("console.control").unwrap();
     let mut ana = connect(&s, "ana", "ana-password").await;
     let mut bo = connect(&s, "bo", "bo-password1").await;
     open(&mut ana, "pilot").await;
@@ -315,6 +317,17 @@ async fn only_the_holder_of_control_commands_and_acknowledgements_show() {
     send(&mut ana, json!({"type": "lease", "action": "take"})).await;
     let lease = next_where(&mut bo, "lease", |v| v["holder"] == "ana").await;
     assert!(lease["since"].as_f64().is_some());
+    // modules on the bus see who has control too
+    let m = tokio::time::timeout(Duration::from_secs(2), control.recv())
+        .await
+        .expect("console.control")
+        .expect("open");
+    assert_eq!(
+        field(&m, "holder")
+            .and_then(|v| v.as_str().map(str::to_string))
+            .as_deref(),
+        Some("ana")
+    );
     // bo can neither take control nor command while ana has it
     send(&mut bo, json!({"type": "lease", "action": "take"})).await;
     let e = next(&mut bo, "error").await;

@@ -4,7 +4,11 @@
 //! vehicle's keep-alive), and turns 90° once the vehicle has covered `side` metres on the current
 //! leg, measured from `nav.position`. Parameters: `side` (m, default 100), `speed` (m/s, 1.5),
 //! `depth` (m, 0), `heading` (first leg, deg, 0), `turn` (`right` or `left`), `timeout` (s, the
-//! course command's validity, 5).
+//! course command's validity, 5), `yield_to` (a topic whose `holder` field, when not empty, names
+//! someone else in control — the console's `console.control` by default; empty: never yields).
+//!
+//! While someone holds control it sends nothing; when they release it, it starts a new leg where
+//! the vehicle is.
 
 use crate::datasets::Catalogue;
 use crate::geo::{distance, wrap360};
@@ -33,6 +37,10 @@ struct Square {
     leg_start: Option<(f64, f64)>,
     legs: i64,
     course_topic: Topic,
+    /// The topic naming who else is in control, if it yields.
+    yield_to: Option<Topic>,
+    /// Who holds control now, when someone does.
+    held_by: Option<String>,
 }
 
 fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
@@ -47,13 +55,20 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         Some(_) => return Err(p.required("turn")?.error("expected right or left")),
     };
     let course_topic = p.dataset_topic(cat, "course-command", "cmd.course")?;
-    let decl = Declaration::new(ModuleKind::Supporting)
+    let yield_to = match p.str("yield_to").map(str::trim) {
+        Some("") => None,
+        _ => Some(p.topic_or("yield_to", "console.control")?),
+    };
+    let mut decl = Declaration::new(ModuleKind::Supporting)
         .consumes(TopicDecl::dataset(
             cat.topic_of("position", "nav.position"),
             "position",
         ))
         .produces(TopicDecl::dataset(&course_topic, "course-command"))
         .default_tick(Duration::from_secs(1));
+    if let Some(t) = &yield_to {
+        decl = decl.consumes(TopicDecl::topic(t.as_str()).field("holder", ""));
+    }
     Ok(Built {
         decl,
         module: Box::new(Square {
@@ -66,6 +81,8 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             leg_start: None,
             legs: 0,
             course_topic,
+            yield_to,
+            held_by: None,
         }),
     })
 }
@@ -91,6 +108,27 @@ impl Module for Square {
         let Some(pos) = msg.payload.as_map() else {
             return Ok(());
         };
+        if self.yield_to.as_ref() == Some(&msg.topic) {
+            let holder = pos
+                .get("holder")
+                .and_then(seabus_medium::Value::as_str)
+                .filter(|h| !h.is_empty())
+                .map(str::to_string);
+            if holder != self.held_by {
+                match &holder {
+                    Some(h) => tracing::info!(module = ctx.name(), "{h} has control: pausing"),
+                    None => {
+                        tracing::info!(module = ctx.name(), "control released: a new leg");
+                        self.leg_start = None;
+                    }
+                }
+                self.held_by = holder;
+            }
+            return Ok(());
+        }
+        if self.held_by.is_some() {
+            return Ok(());
+        }
         let (Some(lat), Some(lon)) = (pos.get_f64("lat"), pos.get_f64("lon")) else {
             return Ok(());
         };
@@ -115,6 +153,9 @@ impl Module for Square {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
+        if self.held_by.is_some() {
+            return Ok(());
+        }
         ctx.command_dataset("course-command", &self.course_topic, self.command())
             .await
     }
