@@ -15,6 +15,8 @@ pub const SESSION_LIFETIME: Duration = Duration::from_secs(12 * 3600);
 pub const MAX_FAILURES: usize = 5;
 /// The window failures are counted in, and how long attempts are refused after.
 pub const WINDOW: Duration = Duration::from_secs(60);
+/// Sessions one user may have at once; a new one ends the oldest.
+pub const SESSIONS_PER_USER: usize = 16;
 /// The name of the session cookie.
 pub const COOKIE: &str = "seabus_session";
 
@@ -55,6 +57,18 @@ impl Sessions {
         let mut map = self.map.lock().unwrap_or_else(|p| p.into_inner());
         let now = Instant::now();
         map.retain(|_, s| s.expires > now);
+        // a user's oldest sessions end past the limit
+        let mut mine: Vec<(String, Instant)> = map
+            .iter()
+            .filter(|(_, s)| s.user == user)
+            .map(|(t, s)| (t.clone(), s.expires))
+            .collect();
+        if mine.len() >= SESSIONS_PER_USER {
+            mine.sort_by_key(|(_, e)| *e);
+            for (t, _) in mine.iter().take(mine.len() + 1 - SESSIONS_PER_USER) {
+                map.remove(t);
+            }
+        }
         map.insert(
             t.clone(),
             Session {
@@ -85,6 +99,8 @@ impl Sessions {
 #[derive(Debug, Default)]
 pub struct Limiter {
     failures: Mutex<HashMap<String, VecDeque<Instant>>>,
+    /// Held while an attempt is checked and counted.
+    attempts: Mutex<()>,
 }
 
 impl Limiter {
@@ -116,6 +132,17 @@ impl Limiter {
         if wait.is_zero() { Ok(()) } else { Err(wait) }
     }
 
+    /// Starts an attempt: refused (`Err(wait)`) while limited; otherwise counted as a failure at
+    /// once, in the same step, so attempts made together cannot all pass the check before any is
+    /// counted. [`succeed`](Self::succeed) takes it back.
+    pub fn attempt(&self, addr: IpAddr, name: &str) -> Result<(), Duration> {
+        let now = Instant::now();
+        let _guard = self.attempts.lock().unwrap_or_else(|p| p.into_inner());
+        self.check_at(addr, name, now)?;
+        self.fail_at(addr, name, now);
+        Ok(())
+    }
+
     /// Counts a failed attempt.
     pub fn fail(&self, addr: IpAddr, name: &str) {
         self.fail_at(addr, name, Instant::now());
@@ -136,16 +163,30 @@ impl Limiter {
         }
     }
 
-    /// Forgets the failures for `name` after a successful log-in.
-    pub fn succeed(&self, name: &str) {
+    /// A successful log-in: forgets the failures for `name`, and takes back the address's count
+    /// of this attempt.
+    pub fn succeed(&self, addr: IpAddr, name: &str) {
         let mut map = self.failures.lock().unwrap_or_else(|p| p.into_inner());
         map.remove(&format!("name {name}"));
+        if let Some(times) = map.get_mut(&format!("addr {addr}")) {
+            times.pop_back();
+        }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_user_has_a_bounded_number_of_sessions() {
+        let s = Sessions::default();
+        let first = s.start("ana", &[]).unwrap();
+        for _ in 0..SESSIONS_PER_USER {
+            s.start("ana", &[]).unwrap();
+        }
+        assert!(s.get(&first).is_none(), "the oldest ended");
+    }
 
     #[test]
     fn sessions_start_and_end() {
@@ -167,6 +208,10 @@ mod tests {
             assert!(l.check_at(a, "ana", t0).is_ok(), "attempt {i}");
             l.fail_at(a, "ana", t0);
         }
+        // attempts are counted as they start, so many at once cannot pass together
+        let l2 = Limiter::default();
+        let passed = (0..20).filter(|_| l2.attempt(b, "bo").is_ok()).count();
+        assert_eq!(passed, MAX_FAILURES);
         // the address, for any name; and the name, from any address
         assert!(l.check_at(a, "ivo", t0).is_err());
         let wait = l.check_at(b, "ana", t0).unwrap_err();

@@ -24,8 +24,14 @@ use tokio::sync::broadcast;
 pub const HISTORY: usize = 200;
 /// How long an armed command may wait for its send.
 pub const ARM_LIFETIME: Duration = Duration::from_secs(10);
+/// Confirmations one connection may have waiting.
+pub const ARMS_PER_CONNECTION: usize = 8;
 /// How long control stays with a holder whose connections have all closed.
 pub const LEASE_GRACE: Duration = Duration::from_secs(10);
+/// The longest text a refusal keeps of what a page sent.
+pub const MAX_TEXT: usize = 256;
+/// Password checks at once (each takes ~19 MiB for tens of milliseconds).
+pub const PASSWORD_CHECKS: usize = 4;
 /// Where the console publishes who holds control.
 pub const CONTROL_TOPIC: &str = "console.control";
 /// Dead-man re-sends may be this many periods late before the neutral command goes.
@@ -105,7 +111,10 @@ struct Drive {
     topic: Topic,
     neutral: DataMap,
     period: Duration,
+    /// The last re-send from the page.
     last: Instant,
+    /// The last one published.
+    sent: Instant,
 }
 
 #[derive(Default)]
@@ -134,6 +143,8 @@ pub struct Hub {
     pub sessions: Sessions,
     /// Failed log-ins.
     pub limiter: Limiter,
+    /// Password checks running at once, at most [`PASSWORD_CHECKS`].
+    pub checks: tokio::sync::Semaphore,
     port: Interface,
     origin: String,
     produced: Vec<Pattern>,
@@ -175,6 +186,7 @@ impl Hub {
             users,
             sessions: Sessions::default(),
             limiter: Limiter::default(),
+            checks: tokio::sync::Semaphore::new(PASSWORD_CHECKS),
             port,
             origin,
             produced,
@@ -477,6 +489,9 @@ impl Hub {
         let now = Instant::now();
         st.arms
             .retain(|_, a| now.duration_since(a.at) < ARM_LIFETIME);
+        if st.arms.values().filter(|a| a.conn == client.conn).count() >= ARMS_PER_CONNECTION {
+            return Err("too many commands waiting for confirmation".into());
+        }
         st.next_arm += 1;
         let id = st.next_arm;
         st.arms.insert(
@@ -509,10 +524,11 @@ impl Hub {
                     .await
             }
             Err(reason) => {
-                let topic = Hub::decl(client, layout, command)
-                    .map(|d| d.topic.to_string())
-                    .unwrap_or_default();
-                self.record_refusal(&client.session.user, command, &topic, set, &reason);
+                // a command the layout declares is refused in everyone's history; anything
+                // else is only answered to the page that sent it
+                if let Ok(decl) = Hub::decl(client, layout, command) {
+                    self.record_refusal(&client.session.user, decl, set, &reason);
+                }
                 Err(reason)
             }
         }
@@ -537,10 +553,13 @@ impl Hub {
         if let Some(hold) = hold {
             let id = confirmed.ok_or("not confirmed")?;
             let mut st = self.state();
+            let mine = st.arms.get(&id).is_some_and(|a| {
+                a.conn == client.conn && a.layout == layout && a.command == command
+            });
             let arm = st
                 .arms
                 .remove(&id)
-                .filter(|a| a.conn == client.conn && a.layout == layout && a.command == command)
+                .filter(|_| mine)
                 .ok_or("not confirmed: arm it first")?;
             let age = arm.at.elapsed();
             if age > ARM_LIFETIME {
@@ -584,14 +603,40 @@ impl Hub {
         Ok(id)
     }
 
-    fn record_refusal(&self, user: &str, command: &str, topic: &str, set: &DataMap, reason: &str) {
+    /// Records a refusal of a declared command; of what the page proposed, only the command's own
+    /// fields are kept, and text no longer than [`MAX_TEXT`].
+    fn record_refusal(&self, user: &str, decl: &CommandDecl, set: &DataMap, reason: &str) {
+        let mut fields = DataMap::new();
+        for (k, v) in set.iter() {
+            if decl.fields.get(k).is_none() {
+                continue;
+            }
+            let v = match v {
+                Value::Str(t) if t.len() > MAX_TEXT => {
+                    Value::from(t.chars().take(MAX_TEXT).collect::<String>())
+                }
+                Value::Bytes(_) | Value::List(_) | Value::Map(_) => Value::from("…"),
+                other => other.clone(),
+            };
+            fields.insert(k.to_string(), v);
+        }
+        let reason: String = reason.chars().take(MAX_TEXT).collect();
+        let command = decl.name.as_str();
         tracing::warn!(
             component = "console",
             user,
             command,
             "command refused: {reason}"
         );
-        self.record(user, command, topic, set, "refused", reason, None);
+        self.record(
+            user,
+            command,
+            decl.topic.as_str(),
+            &fields,
+            "refused",
+            &reason,
+            None,
+        );
     }
 
     #[allow(clippy::too_many_arguments)]
@@ -691,13 +736,7 @@ impl Hub {
                 let running = self.state().drives.contains_key(&key);
                 // a refusal once, not at every re-send
                 if !running {
-                    self.record_refusal(
-                        &client.session.user,
-                        command,
-                        decl.topic.as_str(),
-                        set,
-                        &reason,
-                    );
+                    self.record_refusal(&client.session.user, decl, set, &reason);
                 }
                 return Err(reason);
             }
@@ -708,33 +747,55 @@ impl Hub {
         }
         client.values.insert(command.to_string(), fields.clone());
         let key = (client.conn, layout.to_string(), command.to_string());
-        let first = {
+        let period = Duration::from_secs_f64(1.0 / rate.max(0.01));
+        let now = Instant::now();
+        let (first, due) = {
             let mut st = self.state();
-            let first = !st.drives.contains_key(&key);
+            let previous = st.drives.get(&key).map(|d| d.sent);
+            // re-sends faster than the command's rate keep it alive but are not all published
+            let due = previous.is_none_or(|t| now.duration_since(t) >= period.mul_f64(0.8));
             st.drives.insert(
-                key,
+                key.clone(),
                 Drive {
                     user: client.session.user.clone(),
                     name: command.to_string(),
                     topic: topic.clone(),
-                    neutral,
-                    period: Duration::from_secs_f64(1.0 / rate.max(0.01)),
-                    last: Instant::now(),
+                    neutral: neutral.clone(),
+                    period,
+                    last: now,
+                    sent: if due { now } else { previous.unwrap_or(now) },
                 },
             );
-            first
+            (previous.is_none(), due)
         };
-        if first {
+        let sent = if first {
             // the history shows the start of a drive; re-sends are not acknowledged one by one
             self.publish(&client.session.user, command, &topic, fields)
                 .await
                 .map(|_| ())
-        } else {
+        } else if due {
             self.port
-                .command(topic, fields)
+                .command(topic.clone(), fields)
                 .await
                 .map_err(|e| format!("not sent: {e}"))
+        } else {
+            Ok(())
+        };
+        // stopped while this was being sent (released, control lost): its neutral may have gone
+        // first, so it goes again after
+        if due && !self.state().drives.contains_key(&key) {
+            let stopped = Drive {
+                user: client.session.user.clone(),
+                name: command.to_string(),
+                topic,
+                neutral,
+                period,
+                last: now,
+                sent: now,
+            };
+            self.neutral(vec![stopped], "stopped while sending").await;
         }
+        sent
     }
 
     /// The end of a dead-man command (`release`): neutral once.
@@ -863,14 +924,28 @@ impl Hub {
                 json!({"message": format!("saving layouts needs role {}", self.settings.designer_role)}),
             );
         }
-        let path = self
+        let (path, old) = self
             .settings
             .layouts
             .iter()
-            .find(|p| Layout::load(p, &BTreeMap::new()).is_ok_and(|l| l.name == name))
-            .ok_or_else(|| json!({"message": format!("no layout `{name}`")}))?;
+            .find_map(|p| {
+                Layout::load(p, &BTreeMap::new())
+                    .ok()
+                    .filter(|l| l.name == name && l.visible_to(&session.roles))
+                    .map(|l| (p, l))
+            })
+            .ok_or_else(|| json!({"message": format!("no layout `{name}` for you")}))?;
         let file = path.display().to_string();
         let layout = Layout::parse(&file, xml, &BTreeMap::new()).map_err(|e| error_json(&e))?;
+        // what may be sent and by whom is for those who may take control, not for designers alone
+        let json = (old.to_json(), layout.to_json());
+        let rules_changed = json.0["commands"] != json.1["commands"] || old.roles != layout.roles;
+        if rules_changed && !session.has(&self.settings.lease_role) {
+            return Err(json!({"message": format!(
+                "changing a layout's commands or roles needs role {}",
+                self.settings.lease_role
+            )}));
+        }
         if layout.name != name {
             return Err(
                 json!({"message": format!("the layout is called `{}`, not `{name}`", layout.name)}),
@@ -879,7 +954,9 @@ impl Hub {
         let io = |e: std::io::Error| json!({"message": format!("{file}: {e}")});
         let bak = PathBuf::from(format!("{file}.bak"));
         std::fs::copy(path, &bak).map_err(io)?;
-        let tmp = PathBuf::from(format!("{file}.tmp"));
+        static SAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let n = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = PathBuf::from(format!("{file}.{}.{n}.tmp", std::process::id()));
         std::fs::write(&tmp, xml).map_err(io)?;
         std::fs::rename(&tmp, path).map_err(io)?;
         tracing::info!(component = "console", user = %session.user, "saved layout {name} to {file}");

@@ -24,6 +24,12 @@ use std::time::Duration;
 
 /// How often a connection gets the data that changed: at most 20 times a second.
 pub const DATA_EVERY: Duration = Duration::from_millis(50);
+/// How long a page may take to take a message; a connection that stops reading is closed.
+pub const SEND_LIMIT: Duration = Duration::from_secs(5);
+/// How often the server pings a page.
+pub const PING_EVERY: Duration = Duration::from_secs(5);
+/// A page silent this long (no message, no answer to pings) is gone.
+pub const SILENCE_LIMIT: Duration = Duration::from_secs(20);
 /// The largest message a page may send (a layout saved from the designer).
 pub const MAX_MESSAGE: usize = 1 << 20;
 
@@ -121,10 +127,17 @@ fn back_to_login(error: &str) -> Response {
 async fn login(
     State(hub): State<Arc<Hub>>,
     ConnectInfo(addr): ConnectInfo<SocketAddr>,
+    headers: HeaderMap,
     Form(form): Form<LoginForm>,
 ) -> Response {
     let ip = addr.ip();
-    if let Err(wait) = hub.limiter.check(ip, &form.name) {
+    if !same_origin(&headers) {
+        return (StatusCode::FORBIDDEN, "another site's page").into_response();
+    }
+    if !crate::users::is_name(&form.name) {
+        return back_to_login("Wrong name or password");
+    }
+    if let Err(wait) = hub.limiter.attempt(ip, &form.name) {
         tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in refused: too many failures");
         // 429 for programs; a browser is sent on to the log-in page, which says why
         let to = login_url(&format!(
@@ -140,6 +153,12 @@ async fn login(
         }
         return r;
     }
+    // a password check takes tens of milliseconds and ~19 MiB: a few at a time
+    let Ok(_permit) = hub.checks.try_acquire() else {
+        let mut r = back_to_login("The console is busy: try again");
+        *r.status_mut() = StatusCode::SERVICE_UNAVAILABLE;
+        return r;
+    };
     let checked = {
         let hub = hub.clone();
         let name = form.name.clone();
@@ -153,11 +172,10 @@ async fn login(
         .flatten()
     };
     let Some(roles) = checked else {
-        hub.limiter.fail(ip, &form.name);
         tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in failed");
         return back_to_login("Wrong name or password");
     };
-    hub.limiter.succeed(&form.name);
+    hub.limiter.succeed(ip, &form.name);
     let Some(t) = hub.sessions.start(&form.name, &roles) else {
         return (
             StatusCode::INTERNAL_SERVER_ERROR,
@@ -175,10 +193,13 @@ async fn login(
 }
 
 async fn logout(State(hub): State<Arc<Hub>>, headers: HeaderMap) -> Response {
-    if let Some(t) = token(&headers)
-        && let Some(user) = hub.sessions.end(&t)
-    {
-        tracing::info!(component = "console", user = %user, "logged out");
+    if let Some((t, session)) = session(&hub, &headers) {
+        hub.sessions.end(&t);
+        tracing::info!(component = "console", user = %session.user, "logged out");
+        // control goes with its holder's log-out
+        if hub.lease_json()["holder"] == session.user.as_str() {
+            let _ = hub.lease(&session, false).await;
+        }
     }
     let mut r = Redirect::to("/login").into_response();
     r.headers_mut().insert(
@@ -225,25 +246,32 @@ async fn connection(hub: Arc<Hub>, token: String, session: Session, socket: WebS
     let mut tick = tokio::time::interval(DATA_EVERY);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     let mut out = vec![hub.hello(&client), hub.history()];
+    let mut ping = tokio::time::interval(PING_EVERY);
+    let mut heard = tokio::time::Instant::now();
     'conn: loop {
         for v in out.drain(..) {
-            if sink
-                .send(Message::Text(v.to_string().into()))
-                .await
-                .is_err()
-            {
+            if !put(&mut sink, Message::Text(v.to_string().into())).await {
                 break 'conn;
             }
         }
         tokio::select! {
-            msg = stream.next() => match msg {
-                Some(Ok(Message::Text(t))) => out = handle(&hub, &mut client, &t).await,
-                Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
-                Some(Ok(_)) => {}
-            },
+            msg = stream.next() => {
+                heard = tokio::time::Instant::now();
+                match msg {
+                    Some(Ok(Message::Text(t))) => out = handle(&hub, &mut client, &t).await,
+                    Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                    Some(Ok(_)) => {}
+                }
+            }
+            _ = ping.tick() => {
+                // a page that answers nothing, not even pings, is gone
+                if heard.elapsed() > SILENCE_LIMIT || !put(&mut sink, Message::Ping(Default::default())).await {
+                    break;
+                }
+            }
             ev = events.recv() => match ev {
                 Ok(text) => {
-                    if sink.send(Message::Text(text.to_string().into())).await.is_err() {
+                    if !put(&mut sink, Message::Text(text.to_string().into())).await {
                         break;
                     }
                 }
@@ -265,6 +293,15 @@ async fn connection(hub: Arc<Hub>, token: String, session: Session, socket: WebS
         }
     }
     hub.disconnect(&client).await;
+}
+
+/// Sends one message; false when the page is gone or takes longer than [`SEND_LIMIT`] (a
+/// connection that stops reading must not hold its user's control or the server).
+async fn put(sink: &mut futures_util::stream::SplitSink<WebSocket, Message>, msg: Message) -> bool {
+    matches!(
+        tokio::time::timeout(SEND_LIMIT, sink.send(msg)).await,
+        Ok(Ok(()))
+    )
 }
 
 fn error(message: impl Into<String>) -> Json {
@@ -298,7 +335,13 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
                                 Json::Number(n) => n.to_string(),
                                 _ => return None,
                             };
-                            Some((k.clone(), v))
+                            // a value names a vehicle or such: nothing that could change the
+                            // meaning of the attribute it lands in
+                            let plain = !v.is_empty()
+                                && v.len() <= 64
+                                && v.chars()
+                                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+                            plain.then(|| (k.clone(), v))
                         })
                         .collect()
                 })

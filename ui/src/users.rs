@@ -74,8 +74,8 @@ pub fn random_password() -> Result<String, String> {
     Err("no randomness".into())
 }
 
-/// Whether a name or role is acceptable: letters, digits, `_`, `-`, `.`, `@`.
-fn is_name(s: &str) -> bool {
+/// Whether a name or role is acceptable: letters, digits, `_`, `-`, `.`, `@`; at most 64.
+pub fn is_name(s: &str) -> bool {
     !s.is_empty()
         && s.len() <= 64
         && s.chars()
