@@ -36,6 +36,19 @@ async fn up(m: &Medium) {
     .expect("the medium is open");
 }
 
+/// Waits (at most 5 s) for the link to go down with a reason containing `why`; returns the state.
+async fn down(m: &Medium, why: &str) -> LinkState {
+    let mut link = m.watch_link();
+    tokio::time::timeout(
+        Duration::from_secs(5),
+        link.wait_for(|s| matches!(s, LinkState::Down(r) if r.contains(why))),
+    )
+    .await
+    .unwrap_or_else(|_| panic!("the link down ({why}) within 5 s"))
+    .expect("the medium is open")
+    .clone()
+}
+
 /// The next message, at most `within` away.
 async fn next(i: &mut Interface, within: Duration) -> Option<Message> {
     tokio::time::timeout(within, i.recv()).await.ok().flatten()
@@ -148,15 +161,7 @@ async fn keep_alive_names_taken_and_a_restarting_db() {
 
     // a second client with the same name is refused, saying why
     let twin = client(addr, "pQuiet", "*");
-    let mut link = twin.watch_link();
-    let refused = tokio::time::timeout(
-        Duration::from_secs(5),
-        link.wait_for(|s| matches!(s, LinkState::Down(r) if r.contains("refused"))),
-    )
-    .await
-    .expect("the refusal within 5 s")
-    .unwrap()
-    .clone();
+    let refused = down(&twin, "refused").await;
     assert!(
         matches!(&refused, LinkState::Down(r) if r.contains("a client called `pQuiet` is already connected")),
         "{refused:?}"
@@ -166,14 +171,7 @@ async fn keep_alive_names_taken_and_a_restarting_db() {
     // the DB goes away: the link goes down; it comes back on the same port: the client connects
     // and registers again
     drop(db);
-    let mut link = quiet.watch_link();
-    tokio::time::timeout(
-        Duration::from_secs(5),
-        link.wait_for(|s| matches!(s, LinkState::Down(_))),
-    )
-    .await
-    .expect("the link goes down")
-    .unwrap();
+    down(&quiet, "").await;
     let db = {
         let deadline = Instant::now() + Duration::from_secs(5);
         loop {
@@ -294,18 +292,10 @@ async fn the_skew_is_taken_and_garbage_from_the_db_is_refused() {
         now + 100.0
     );
     assert_eq!(notify.source, b"pSkew");
-    let mut link = m.watch_link();
-    let down = tokio::time::timeout(
-        Duration::from_secs(5),
-        link.wait_for(|s| matches!(s, LinkState::Down(r) if r.contains("malformed"))),
-    )
-    .await
-    .expect("the garbage takes the link down")
-    .unwrap()
-    .clone();
+    let gone = down(&m, "malformed").await;
     assert!(
-        matches!(&down, LinkState::Down(r) if r.contains("a packet length of -5")),
-        "{down:?}"
+        matches!(&gone, LinkState::Down(r) if r.contains("a packet length of -5")),
+        "{gone:?}"
     );
     assert_eq!(m.stats().rejected.get("moos-bad-length"), Some(&1));
 }

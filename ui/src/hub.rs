@@ -15,9 +15,9 @@ use serde_json::{Value as Json, json};
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::io::Write;
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::{Duration, Instant};
+use std::time::{Duration, Instant, SystemTime};
 use tokio::sync::broadcast;
 
 /// Commands kept in the history.
@@ -150,7 +150,12 @@ pub struct Hub {
     produced: Vec<Pattern>,
     state: Mutex<State>,
     events: broadcast::Sender<Arc<str>>,
+    /// Layout files as last read without variables, with the time they were modified.
+    layouts: Mutex<LayoutCache>,
 }
+
+/// Layouts read, by file: when the file was modified, and what reading it gave.
+type LayoutCache = HashMap<PathBuf, (Option<SystemTime>, Result<Layout, FileError>)>;
 
 /// One connection's view: its user, the layout it opened and the values its inputs set.
 pub struct Client {
@@ -192,6 +197,7 @@ impl Hub {
             produced,
             state: Mutex::new(State::default()),
             events: broadcast::channel(1024).0,
+            layouts: Mutex::new(HashMap::new()),
         }
     }
 
@@ -241,6 +247,25 @@ impl Hub {
         self.neutral(stopped, "the connection closed").await;
     }
 
+    /// Layout file `path` read with `vars`; without variables it is read again only when the
+    /// file has changed since (every connection lists every layout).
+    fn load(&self, path: &Path, vars: &BTreeMap<String, String>) -> Result<Layout, FileError> {
+        if !vars.is_empty() {
+            return Layout::load(path, vars);
+        }
+        let modified = std::fs::metadata(path).and_then(|m| m.modified()).ok();
+        let mut cache = self.layouts.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((when, read)) = cache.get(path)
+            && modified.is_some()
+            && *when == modified
+        {
+            return read.clone();
+        }
+        let read = Layout::load(path, vars);
+        cache.insert(path.to_path_buf(), (modified, read.clone()));
+        read
+    }
+
     /// The `lease` message.
     pub fn lease_json(&self) -> Json {
         let st = self.state();
@@ -252,7 +277,7 @@ impl Hub {
     pub fn layouts_for(&self, session: &Session) -> Vec<Json> {
         let mut out = Vec::new();
         for path in &self.settings.layouts {
-            match Layout::load(path, &BTreeMap::new()) {
+            match self.load(path, &BTreeMap::new()) {
                 Ok(l) if l.visible_to(&session.roles) => {
                     out.push(json!({"name": l.name, "title": l.title}))
                 }
@@ -297,7 +322,7 @@ impl Hub {
     /// error that stops it loading).
     pub fn open(&self, client: &mut Client, name: &str, vars: &BTreeMap<String, String>) -> Json {
         for path in &self.settings.layouts {
-            let layout = match Layout::load(path, vars) {
+            let layout = match self.load(path, vars) {
                 Ok(l) => l,
                 Err(e) => {
                     let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
@@ -929,7 +954,7 @@ impl Hub {
             .layouts
             .iter()
             .find_map(|p| {
-                Layout::load(p, &BTreeMap::new())
+                self.load(p, &BTreeMap::new())
                     .ok()
                     .filter(|l| l.name == name && l.visible_to(&session.roles))
                     .map(|l| (p, l))

@@ -197,6 +197,13 @@ async fn next_where(ws: &mut Ws, kind: &str, pick: impl Fn(&Json) -> bool) -> Js
     panic!("no matching `{kind}`");
 }
 
+/// Sends `v` and expects the error that says `why`.
+async fn refused_with(ws: &mut Ws, v: Json, why: &str) {
+    send(ws, v).await;
+    let e = next(ws, "error").await;
+    assert!(e["message"].as_str().unwrap_or("").contains(why), "{e}");
+}
+
 async fn open(ws: &mut Ws, layout: &str) -> Json {
     send(ws, json!({"type": "open", "layout": layout})).await;
     next(ws, "layout").await
@@ -272,22 +279,27 @@ async fn an_observer_cannot_command_even_with_a_forged_message() {
     let mut d = driver(&s.bus);
     let mut ivo = connect(&s, "ivo", "ivo-password").await;
     // the pilot layout is not ivo's
-    send(&mut ivo, json!({"type": "open", "layout": "pilot"})).await;
-    let e = next(&mut ivo, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("no layout"), "{e}");
+    refused_with(
+        &mut ivo,
+        json!({"type": "open", "layout": "pilot"}),
+        "no layout",
+    )
+    .await;
     let l = open(&mut ivo, "watch").await;
     assert_eq!(l["layout"]["name"], "watch");
     // forged: a command of a layout ivo never opened, and control
-    send(
+    refused_with(
         &mut ivo,
         json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"speed": 2}}),
+        "not open",
     )
     .await;
-    let e = next(&mut ivo, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("not open"), "{e}");
-    send(&mut ivo, json!({"type": "lease", "action": "take"})).await;
-    let e = next(&mut ivo, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("role pilot"), "{e}");
+    refused_with(
+        &mut ivo,
+        json!({"type": "lease", "action": "take"}),
+        "role pilot",
+    )
+    .await;
     send(
         &mut ivo,
         json!({"type": "drive", "layout": "watch", "command": "course", "fields": {"speed": 2}}),
@@ -336,19 +348,18 @@ async fn only_the_holder_of_control_commands_and_acknowledgements_show() {
         Some("ana")
     );
     // bo can neither take control nor command while ana has it
-    send(&mut bo, json!({"type": "lease", "action": "take"})).await;
-    let e = next(&mut bo, "error").await;
-    assert!(
-        e["message"].as_str().unwrap().contains("ana has control"),
-        "{e}"
-    );
-    send(
+    refused_with(
         &mut bo,
-        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 10}}),
+        json!({"type": "lease", "action": "take"}),
+        "ana has control",
     )
     .await;
-    let e = next(&mut bo, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("ana has it"), "{e}");
+    refused_with(
+        &mut bo,
+        json!({"type": "send", "layout": "pilot", "command": "course", "fields": {"heading": 10}}),
+        "ana has it",
+    )
+    .await;
     // ana commands: the driver gets the whole command, and acknowledges it
     send(
         &mut ana,
@@ -428,12 +439,7 @@ async fn confirmed_commands_must_be_armed_and_held() {
     send(&mut ana, json!({"type": "lease", "action": "take"})).await;
     next_where(&mut ana, "lease", |v| v["holder"] == "ana").await;
     let start = json!({"type": "send", "layout": "pilot", "command": "start"});
-    send(&mut ana, start.clone()).await;
-    let e = next(&mut ana, "error").await;
-    assert!(
-        e["message"].as_str().unwrap().contains("not confirmed"),
-        "{e}"
-    );
+    refused_with(&mut ana, start.clone(), "not confirmed").await;
     // armed, but let go before the hold time
     send(
         &mut ana,
@@ -443,9 +449,7 @@ async fn confirmed_commands_must_be_armed_and_held() {
     let arm = next(&mut ana, "armed").await["arm"].clone();
     let mut early = start.clone();
     early["confirmed"] = arm;
-    send(&mut ana, early).await;
-    let e = next(&mut ana, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("held"), "{e}");
+    refused_with(&mut ana, early, "held").await;
     // held long enough
     send(
         &mut ana,
@@ -580,16 +584,12 @@ async fn a_page_gets_only_the_fields_it_binds_at_most_twenty_times_a_second() {
 async fn the_designer_saves_layouts_that_read_and_refuses_others_with_their_place() {
     let s = setup().await;
     let mut bo = connect(&s, "bo", "bo-password1").await;
-    send(
+    refused_with(
         &mut bo,
         json!({"type": "save", "layout": "watch", "xml": WATCH}),
+        "role designer",
     )
     .await;
-    let e = next(&mut bo, "error").await;
-    assert!(
-        e["message"].as_str().unwrap().contains("role designer"),
-        "{e}"
-    );
     let mut ana = connect(&s, "ana", "ana-password").await;
     let bad = WATCH.replace(
         "<readout bind=\"nav.depth.depth\"",
@@ -672,25 +672,23 @@ async fn a_designer_alone_cannot_change_who_may_command() {
     let s = setup().await;
     let mut dee = connect(&s, "dee", "dee-password").await;
     // the pilot's layout is not dee's to save
-    send(
+    refused_with(
         &mut dee,
         json!({"type": "save", "layout": "pilot", "xml": PILOT}),
+        "no layout",
     )
     .await;
-    let e = next(&mut dee, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("no layout"), "{e}");
     // dee's own layout: a new title is fine, a command or a role is not
     let armed = WATCH.replace(
         "  <grid columns=\"1\">",
         "  <command name=\"go\" topic=\"cmd.mission\" fields=\"action=start\" role=\"designer\" lease=\"false\"/>\n  <grid columns=\"1\">",
     );
-    send(
+    refused_with(
         &mut dee,
         json!({"type": "save", "layout": "watch", "xml": armed}),
+        "role pilot",
     )
     .await;
-    let e = next(&mut dee, "error").await;
-    assert!(e["message"].as_str().unwrap().contains("role pilot"), "{e}");
     let wider = WATCH.replace(
         "roles=\"observer pilot\"",
         "roles=\"observer pilot designer\"",

@@ -297,8 +297,11 @@ impl Module for Convert {
             if c.target != c.source {
                 work.remove(&c.source);
             }
-            work.insert(c.target.clone(), c.apply(x));
-            out.insert(c.target.clone(), c.apply(x));
+            let y = c.apply(x);
+            work.insert(c.target.clone(), y);
+            if !self.keep {
+                out.insert(c.target.clone(), y);
+            }
         }
         let attitude = match (&self.attitude, &self.latest_attitude) {
             (Some((_, age)), Some((stamp, map)))
@@ -332,7 +335,9 @@ impl Module for Convert {
             };
             for (name, v) in t.outputs.iter().zip(values) {
                 work.insert(name.clone(), v);
-                out.insert(name.clone(), v);
+                if !self.keep {
+                    out.insert(name.clone(), v);
+                }
             }
         }
         let out = if self.keep { work } else { out };
