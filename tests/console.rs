@@ -354,6 +354,14 @@ async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
     assert!(changed, "the readouts never changed: {speed}");
 
     take_control(&c, "pilot").await;
+    // the driver sends commands once the frontseat takes them (it refuses them while offline)
+    until(
+        &c,
+        Duration::from_secs(20),
+        "a frontseat that takes commands",
+        "const l = document.querySelector('[data-kind=log]'); return l && /control=(accepting|in-control)/.test(l.innerText);",
+    )
+    .await;
     slide(&c, "heading", 123.0).await;
     // the command reaches the vehicle through the driver …
     let mut seen = Vec::new();
@@ -370,13 +378,14 @@ async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
         "{course}"
     );
     // … and its acknowledgement from the simulated frontseat shows in the history
-    until(
+    let history = until_text(
         &c,
         Duration::from_secs(20),
-        "an acknowledged command in the history",
-        "const h = document.querySelector('[data-kind=history]'); return h && /acknowledged/.test(h.innerText) && h.innerText;",
+        "a settled command in the history",
+        "const h = document.querySelector('[data-kind=history]'); return h && /acknowledged|refused|timed-out/.test(h.innerText) && h.innerText;",
     )
     .await;
+    assert!(history.contains("acknowledged"), "{history}");
     screenshot(&c, "pilot.png").await;
     let log = std::fs::read_to_string(sys.dir.join("commands.csv")).expect("the command log");
     assert!(
