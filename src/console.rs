@@ -153,7 +153,8 @@ pub fn write_demo(text: &str) -> Result<(PathBuf, PathBuf), String> {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
         }
-        std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        seabus_medium::fs::atomic_write(&path, text.as_bytes())
+            .map_err(|e| format!("{}: {e}", path.display()))?;
         Ok(path)
     };
     for (rel, body) in DEMO_FILES {

@@ -1,7 +1,7 @@
 //! `seabus export`: a time window of the binary logs the `logger` module (or `seabus record`)
 //! writes, as JSON lines or as one CSV per topic.
 
-use seabus_medium::lcm::eventlog::Reader;
+use seabus_medium::eventlog::Reader;
 use seabus_medium::{DataMap, Pattern, Topic, Value, binary, json};
 use std::collections::BTreeMap;
 use std::io::Write;
@@ -91,7 +91,7 @@ impl CsvFiles {
         for c in columns.iter() {
             row.push(',');
             if let Some(v) = map.get(c) {
-                row.push_str(&seabus_modules::support::logger::cell(v));
+                row.push_str(&seabus_medium::csv::cell(v));
             }
         }
         writeln!(out, "{row}")

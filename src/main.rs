@@ -3,14 +3,15 @@
 
 mod console;
 mod export;
+mod lcmtypes;
 mod logtail;
+mod media;
 mod record;
 mod spy;
 
 use clap::{Parser, Subcommand};
-use seabus_medium::lcm::types::ResolvedTypes;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, Medium, Node, Payload, Stamp, Value};
+use seabus_medium::{Format, Kind, Node, Payload, Stamp};
 use seabus_modules::system::{self, SystemSpec};
 use seabus_modules::{Catalogue, Registry, Runtime};
 use std::path::PathBuf;
@@ -109,6 +110,8 @@ enum Command {
     },
     /// List the module types, bridge types, medium schemes and standard datasets.
     Types,
+    /// List the medium schemes compiled into this seabus, and the media left out.
+    Schemes,
 }
 
 /// What `seabus layout` does.
@@ -187,7 +190,11 @@ struct PubArgs {
 }
 
 fn registry() -> Registry {
-    let mut reg = seabus_modules::registry();
+    let mut reg = Registry::new();
+    reg.set_schemes(media::schemes());
+    seabus_support::register(&mut reg);
+    #[cfg(feature = "dsaav")]
+    seabus_dsaav::register(&mut reg);
     seabus_drivers::register(&mut reg);
     seabus_bridges::register(&mut reg);
     seabus_ui::register(&mut reg);
@@ -219,15 +226,25 @@ fn init_logs(verbose: u8) {
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .with_filter(filter);
+    let logs = tracing_subscriber::registry().with(terminal);
     // a system with a <log> element also sends every record to the DSAAV central log
-    tracing_subscriber::registry()
-        .with(terminal)
-        .with(seabus_modules::dsaav::central::layer())
-        .init();
+    #[cfg(feature = "dsaav")]
+    let logs = logs.with(seabus_dsaav::central::layer());
+    logs.init();
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    use clap::{CommandFactory, FromArgMatches};
+    // `--version` names the media compiled in; made once, for the life of the program
+    let version: &'static str = Box::leak(media::long_version().into_boxed_str());
+    let cli = match Cli::command()
+        .long_version(version)
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m))
+    {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
     init_logs(cli.verbose);
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .enable_all()
@@ -300,6 +317,10 @@ fn main() -> ExitCode {
             Command::User {
                 command: UserCommand::Add { file, name, roles },
             } => console::user_add(&file, &name, &roles),
+            Command::Schemes => {
+                print!("{}", media::describe());
+                ExitCode::SUCCESS
+            }
             Command::Types => {
                 types();
                 ExitCode::SUCCESS
@@ -500,8 +521,8 @@ async fn publish(args: PubArgs) -> ExitCode {
         ));
     };
     let outgoing = match &lcm {
-        Some(name) => match lcm_message(name, &lcm_types, &map) {
-            Ok(o) => o,
+        Some(name) => match lcmtypes::LcmMessage::new(name, &lcm_types, &map) {
+            Ok(m) => Outgoing::Lcm(m),
             Err(e) => return usage(e),
         },
         None => match Payload::from(map).convert(format) {
@@ -510,7 +531,7 @@ async fn publish(args: PubArgs) -> ExitCode {
         },
     };
     let node = Node::new(&format!("pub-{}", std::process::id()));
-    let medium = match Medium::open("pub", &url, &node) {
+    let medium = match media::schemes().open("pub", &url, &node) {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };
@@ -560,68 +581,17 @@ const LINK_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
 /// with the time it is sent in its `utime`.
 enum Outgoing {
     Same(Payload),
-    Lcm {
-        types: ResolvedTypes,
-        name: String,
-        map: DataMap,
-    },
+    Lcm(lcmtypes::LcmMessage),
 }
 
 impl Outgoing {
-    /// An LCM message of type `name` (one of `types`) made from `map`, checked by making it once.
-    fn lcm(types: ResolvedTypes, name: &str, map: &DataMap) -> Result<Outgoing, String> {
-        let outgoing = Outgoing::Lcm {
-            types,
-            name: name.to_string(),
-            map: map.clone(),
-        };
-        outgoing.payload(Stamp::now())?;
-        Ok(outgoing)
-    }
-
     /// The payload of the message sent at `stamp`.
     fn payload(&self, stamp: Stamp) -> Result<Payload, String> {
         match self {
             Outgoing::Same(p) => Ok(p.clone()),
-            Outgoing::Lcm { types, name, map } => lcm_payload(types, name, map, stamp),
+            Outgoing::Lcm(m) => m.payload(stamp),
         }
     }
-}
-
-/// The LCM message of type `name` made from `map`, sent at `stamp`: the type's single `int64_t
-/// utime`, when the fields do not give it, is `stamp` in microseconds.
-fn lcm_payload(
-    types: &ResolvedTypes,
-    name: &str,
-    map: &DataMap,
-    stamp: Stamp,
-) -> Result<Payload, String> {
-    let Some(ty) = types.get(name) else {
-        return Err(format!("--lcm {name}: no such LCM type"));
-    };
-    let bytes = if seabus_bridges::lcm::has_utime(ty) && map.get("utime").is_none() {
-        let mut map = map.clone();
-        map.insert("utime", Value::Int(stamp.0 / 1_000));
-        seabus_medium::lcm::codec::encode(types, ty, &map)
-    } else {
-        seabus_medium::lcm::codec::encode(types, ty, map)
-    };
-    bytes
-        .map(Payload::from)
-        .map_err(|e| format!("--lcm {name}: {e}"))
-}
-
-/// The LCM message of type `name` made from `map`, with the types of `paths` besides the
-/// built-in ones.
-fn lcm_message(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<Outgoing, String> {
-    let types = seabus_bridges::lcm::types_with(paths).map_err(|e| format!("--lcm-types: {e}"))?;
-    if types.get(name).is_none() {
-        return Err(format!(
-            "--lcm {name}: no such LCM type; known types: {}",
-            seabus_bridges::lcm::known_types(&types)
-        ));
-    }
-    Outgoing::lcm(types, name, map)
 }
 
 fn types() {
@@ -634,10 +604,7 @@ fn types() {
     for t in reg.bridge_types() {
         println!("  {:<14} {}", t.name, t.summary);
     }
-    println!(
-        "medium schemes: {}",
-        seabus_medium::medium::schemes().join(", ")
-    );
+    println!("medium schemes: {}", media::schemes().names().join(", "));
     println!("standard datasets:");
     for d in Catalogue::built_in().iter() {
         let required: Vec<&str> = d.required().map(|f| f.name.as_str()).collect();
@@ -653,56 +620,6 @@ fn types() {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn lcm_messages_are_stamped_as_sent_in_a_single_int64_utime_only() {
-        let mut set = seabus_medium::lcm::types::TypeSet::new();
-        set.add_text(
-            "t.lcm",
-            "package t;\n\
-             struct s_t { int64_t utime; double x; }\n\
-             struct d_t { double utime; }\n\
-             struct a_t { int64_t utime[2]; }\n\
-             struct str_t { string utime; }",
-        )
-        .unwrap_or_else(|e| panic!("{e}"));
-        let types = set.resolve().unwrap_or_else(|e| panic!("{e}"));
-        let map = DataMap::new().and("x", 1.5);
-        let decoded = |out: &Outgoing, name: &str, stamp: i64| {
-            let p = out.payload(Stamp(stamp)).unwrap_or_else(|e| panic!("{e}"));
-            let bytes = p.as_bytes().expect("bytes");
-            let ty = types.get(name).expect("type");
-            seabus_medium::lcm::codec::decode(&types, ty, bytes).unwrap_or_else(|e| panic!("{e}"))
-        };
-        // each message sent gets its own time
-        let out = Outgoing::lcm(types.clone(), "t.s_t", &map).unwrap_or_else(|e| panic!("{e}"));
-        for stamp in [1_000_000_000, 2_000_000_000] {
-            let m = decoded(&out, "t.s_t", stamp);
-            assert_eq!(m.get("utime"), Some(&Value::Int(stamp / 1_000)));
-            assert_eq!(m.get("x"), Some(&Value::Float(1.5)));
-        }
-        // one given in the fields stays
-        let given = DataMap::new().and("utime", 7);
-        let out = Outgoing::lcm(types.clone(), "t.s_t", &given).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(
-            decoded(&out, "t.s_t", 5_000).get("utime"),
-            Some(&Value::Int(7))
-        );
-        // a `utime` of another type is left to its default
-        let empty = DataMap::new();
-        let out = Outgoing::lcm(types.clone(), "t.d_t", &empty).unwrap_or_else(|e| panic!("{e}"));
-        assert!(
-            decoded(&out, "t.d_t", 5_000)
-                .get("utime")
-                .and_then(Value::as_f64)
-                .is_some_and(f64::is_nan)
-        );
-        for name in ["t.a_t", "t.str_t"] {
-            let out = Outgoing::lcm(types.clone(), name, &empty).unwrap_or_else(|e| panic!("{e}"));
-            let m = decoded(&out, name, 5_000);
-            assert_ne!(m.get("utime"), Some(&Value::Int(5)), "{name}");
-        }
-    }
 
     #[test]
     fn the_demo_system_is_valid() {

@@ -10,9 +10,9 @@
 //! Replaying publishes each event as data, the channel as topic and the data as a byte payload,
 //! paced by the log's timestamps.
 
-use seabus_medium::lcm::ChannelRegex;
-use seabus_medium::lcm::eventlog::{Damage, Reader, WriteError, Writer, event_data};
-use seabus_medium::{Interface, Kind, Medium, Message, Node, Payload, SendError, Stamp, Topic};
+use seabus_medium::ChannelRegex;
+use seabus_medium::eventlog::{Damage, Reader, WriteError, Writer, event_data};
+use seabus_medium::{Interface, Kind, Message, Node, Payload, SendError, Stamp, Topic};
 use std::collections::{HashMap, HashSet};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -95,7 +95,7 @@ pub async fn record(args: RecordArgs) -> ExitCode {
         Err(code) => return code,
     };
     let node = Node::new(&format!("record-{}", std::process::id()));
-    let medium = match Medium::open("record", &args.url, &node) {
+    let medium = match crate::media::schemes().open("record", &args.url, &node) {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };
@@ -525,7 +525,7 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
         return usage(format!("{}: cannot open: {e}", args.file.display()));
     }
     let node = Node::new(&format!("replay-{}", std::process::id()));
-    let medium = match Medium::open("replay", &args.url, &node) {
+    let medium = match crate::media::schemes().open("replay", &args.url, &node) {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };

@@ -1,8 +1,7 @@
 //! `seabus spy`: a live table of the topics on a medium, or one JSON object per message.
 
-use seabus_bridges::lcm::recognise;
-use seabus_medium::lcm::types::ResolvedTypes;
-use seabus_medium::{Medium, Message, Node, Payload, Topic};
+use crate::lcmtypes::Types;
+use seabus_medium::{Message, Node, Payload, Topic};
 use std::collections::BTreeMap;
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
@@ -13,8 +12,8 @@ use tokio::time::Instant;
 /// (seconds), format, then `lcm_type` for an LCM message of a known type (its payload shown
 /// decoded), then payload (a datamap's entries in their own order; `{"error": …}` for a map nested
 /// too deep for the JSON form).
-pub fn message_json(m: &Message, types: &ResolvedTypes) -> String {
-    match recognise(types, &m.payload) {
+pub fn message_json(m: &Message, types: &Types) -> String {
+    match types.recognise(&m.payload) {
         Some((name, map)) => {
             let mut m = m.clone();
             m.payload = Payload::from(map);
@@ -65,12 +64,7 @@ fn shorten(text: String, max: usize) -> String {
     s
 }
 
-fn print_table(
-    rows: &BTreeMap<Topic, Row>,
-    types: &ResolvedTypes,
-    out: &mut impl Write,
-    clear: bool,
-) {
+fn print_table(rows: &BTreeMap<Topic, Row>, types: &Types, out: &mut impl Write, clear: bool) {
     if clear {
         let _ = write!(out, "\x1b[2J\x1b[H");
     }
@@ -88,7 +82,7 @@ fn print_table(
             r.rate,
             shorten(r.last.origin().to_string(), 22),
             shorten(
-                match recognise(types, &r.last.payload) {
+                match types.recognise(&r.last.payload) {
                     Some((name, map)) => format!("{name} {map}"),
                     None => r.last.payload.to_string(),
                 },
@@ -108,15 +102,15 @@ pub async fn spy(
     topics: &str,
     lcm_types: &[std::path::PathBuf],
 ) -> ExitCode {
-    let types = match seabus_bridges::lcm::types_with(lcm_types) {
+    let types = match crate::lcmtypes::load(lcm_types) {
         Ok(t) => t,
         Err(e) => {
-            eprintln!("seabus spy: --lcm-types: {e}");
+            eprintln!("seabus spy: {e}");
             return ExitCode::from(2);
         }
     };
     let node = Node::new(&format!("spy-{}", std::process::id()));
-    let medium = match Medium::open("spy", url, &node) {
+    let medium = match crate::media::schemes().open("spy", url, &node) {
         Ok(m) => m,
         Err(e) => {
             eprintln!("seabus spy: {e}");
@@ -209,16 +203,17 @@ mod tests {
     use seabus_medium::message::{Kind, Origin, Provenance, Stamp};
     use seabus_medium::{DataMap, Value};
 
-    fn built_in() -> ResolvedTypes {
-        seabus_bridges::lcm::types_with(&[]).unwrap()
+    fn built_in() -> Types {
+        crate::lcmtypes::load(&[]).unwrap()
     }
 
+    #[cfg(feature = "lcm")]
     #[test]
     fn lcm_messages_of_known_types_show_decoded() {
         let types = built_in();
-        let ty = types.get("seabus.depth_t").unwrap();
-        let bytes = seabus_medium::lcm::codec::encode(
-            &types,
+        let ty = types.0.get("seabus.depth_t").unwrap();
+        let bytes = seabus_medium_lcm::codec::encode(
+            &types.0,
             ty,
             &DataMap::new().with("utime", 1i64).with("depth", 12.5f64),
         )
@@ -247,7 +242,7 @@ mod tests {
     }
 
     /// The table `seabus spy` prints after seeing `m` once.
-    fn table_of(m: &Message, types: &ResolvedTypes) -> String {
+    fn table_of(m: &Message, types: &Types) -> String {
         let mut rows = BTreeMap::new();
         rows.insert(
             m.topic.clone(),

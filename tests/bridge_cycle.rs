@@ -4,7 +4,7 @@
 
 mod common;
 use common::*;
-use seabus_medium::{Interface, Medium, Node};
+use seabus_medium::{Interface, Node};
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
@@ -78,12 +78,13 @@ async fn a_cycle_of_faulty_media_delivers_each_message_exactly_once_everywhere()
 
     // observers: one on the runtime's in-process medium, and separate nodes on the wire for b and c
     let spec = SystemSpec::parse(&path.display().to_string(), &text).unwrap();
-    let mut reg = seabus_modules::registry();
+    let mut reg = seabus_support::registry();
     seabus_bridges::register(&mut reg);
+    reg.set_schemes(schemes());
     let plain = |u: &str| u.replace("&amp;", "&");
     let watcher = Node::new("watcher");
-    let wire_b = Medium::open("b", &plain(&b_url), &watcher).unwrap();
-    let wire_c = Medium::open("c", &plain(&c_url), &watcher).unwrap();
+    let wire_b = schemes().open("b", &plain(&b_url), &watcher).unwrap();
+    let wire_c = schemes().open("c", &plain(&c_url), &watcher).unwrap();
     let mut obs_b = wire_b.attach("observer").subscribed("t.**").unwrap();
     let mut obs_c = wire_c.attach("observer").subscribed("t.**").unwrap();
     let mut reports_b = wire_b
@@ -193,8 +194,9 @@ async fn regression_parallel_bridges_never_wait_on_each_other() {
   <bridge name="in" media="c a"><route from="c" topics="cmd.**"/></bridge>
 </seabus>"#;
     let spec = SystemSpec::parse("par.xml", text).unwrap();
-    let mut reg = seabus_modules::registry();
+    let mut reg = seabus_support::registry();
     seabus_bridges::register(&mut reg);
+    reg.set_schemes(schemes());
     let runtime = Runtime::start(&spec, &reg, Catalogue::built_in())
         .await
         .unwrap();

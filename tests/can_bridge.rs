@@ -4,7 +4,7 @@
 
 mod common;
 use common::*;
-use seabus_medium::{DataMap, Medium, Node, Value};
+use seabus_medium::{DataMap, Node, Value};
 use std::net::UdpSocket;
 use std::time::{Duration, Instant};
 
@@ -28,7 +28,7 @@ async fn frames_cross_both_ways_and_echoes_do_not_come_back() {
     );
     let (_dir, path) = system_file("gw.xml", &system);
     let _run = spawn_run(&path, &[]);
-    let bus = Medium::open("bus", &bus_url, &Node::new("test")).unwrap();
+    let bus = schemes().open("bus", &bus_url, &Node::new("test")).unwrap();
     let mut watch = bus.attach("watch");
     watch.subscribe("can.**").unwrap();
     watch.subscribe("seabus.bridge.**").unwrap();

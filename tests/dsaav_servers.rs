@@ -4,11 +4,11 @@
 
 mod common;
 use common::*;
-use seabus_medium::{Medium, Node};
-use seabus_modules::dsaav::Database;
-use seabus_modules::dsaav::config_service::ConfigClient;
-use seabus_modules::dsaav::logging::{Level, Logger};
-use seabus_modules::dsaav::rpc::CallOptions;
+use seabus_dsaav::Database;
+use seabus_dsaav::config_service::ConfigClient;
+use seabus_dsaav::logging::{Level, Logger};
+use seabus_dsaav::rpc::CallOptions;
+use seabus_medium::Node;
 use std::time::{Duration, Instant};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -38,7 +38,9 @@ async fn servers_from_a_system_file_configure_and_log_components() {
     );
     let mut run = spawn_run(&path, &[]);
 
-    let me = Medium::open("dsaav", &format!("{backbone}&node=5"), &Node::new("t")).unwrap();
+    let me = schemes()
+        .open("dsaav", &format!("{backbone}&node=5"), &Node::new("t"))
+        .unwrap();
     let opts = CallOptions::default();
     let cfg = ConfigClient::discover(&me, 7, opts)
         .await

@@ -7,9 +7,9 @@
 
 mod common;
 use common::*;
-use seabus_medium::{Medium, Node};
-use seabus_modules::dsaav::config_service::ConfigClient;
-use seabus_modules::dsaav::rpc::CallOptions;
+use seabus_dsaav::config_service::ConfigClient;
+use seabus_dsaav::rpc::CallOptions;
+use seabus_medium::Node;
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
@@ -24,7 +24,9 @@ fn station(ns: String, me: String, bridge: String, node: u16) -> Result<f64, Str
             .map_err(|e| e.to_string())?;
         rt.block_on(async move {
             let url = format!("dsaav+udp://{me}?peer={bridge}&node={node}");
-            let m = Medium::open("wifi", &url, &Node::new("station")).map_err(|e| e.to_string())?;
+            let m = schemes()
+                .open("wifi", &url, &Node::new("station"))
+                .map_err(|e| e.to_string())?;
             let opts = CallOptions {
                 timeout: Duration::from_secs(3),
                 ..CallOptions::default()

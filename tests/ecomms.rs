@@ -4,10 +4,10 @@
 
 mod common;
 use common::*;
-use seabus_medium::dsaav::wire::Address;
-use seabus_medium::{DataMap, Medium, Node};
-use seabus_modules::dsaav::ecomms::ops;
-use seabus_modules::dsaav::rpc::{self, CallOptions, RpcClient};
+use seabus_dsaav::ecomms::ops;
+use seabus_dsaav::rpc::{self, CallOptions, RpcClient};
+use seabus_medium::{DataMap, Node};
+use seabus_medium_dsaav::wire::Address;
 use std::process::Stdio;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -36,7 +36,9 @@ async fn messages_go_out_through_links_and_come_in_to_listeners() {
         .spawn()
         .unwrap();
 
-    let me = Medium::open("dsaav", &format!("{backbone}&node=9"), &Node::new("t")).unwrap();
+    let me = schemes()
+        .open("dsaav", &format!("{backbone}&node=9"), &Node::new("t"))
+        .unwrap();
     let heard: Arc<Mutex<Vec<DataMap>>> = Arc::default();
     let h = heard.clone();
     let m = me.clone();

@@ -4,9 +4,9 @@
 
 mod common;
 use common::*;
-use seabus_medium::moos::db::MoosDb;
-use seabus_medium::moos::wire::data;
-use seabus_medium::{DataMap, LinkState, Medium, Node};
+use seabus_medium::{DataMap, LinkState, Node};
+use seabus_medium_moos::db::MoosDb;
+use seabus_medium_moos::wire::data;
 use std::time::{Duration, Instant};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -80,12 +80,13 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
     assert_eq!(state.string, b"mode=survey,control=in-control");
 
     // MOOS → bus: an app's double arrives as a named field
-    let app = Medium::open(
-        "app",
-        &format!("moos://127.0.0.1:{port}?name=pHelm&register=NONE"),
-        &Node::new("test"),
-    )
-    .unwrap();
+    let app = schemes()
+        .open(
+            "app",
+            &format!("moos://127.0.0.1:{port}?name=pHelm&register=NONE"),
+            &Node::new("test"),
+        )
+        .unwrap();
     let mut link = app.watch_link();
     tokio::time::timeout(
         Duration::from_secs(5),

@@ -5,7 +5,7 @@
 
 mod common;
 use common::*;
-use seabus_medium::lcm::eventlog::{OwnedEvent, Reader, Writer};
+use seabus_medium::eventlog::{OwnedEvent, Reader, Writer};
 use seabus_medium::{DataMap, Value, binary};
 use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};

@@ -8,10 +8,12 @@
 //! bridge's `lcm_types` parameter lists (space-separated, relative to the system file). A type with
 //! an `int64_t utime` member gets the message's stamp there (microseconds) when the map has none.
 
-use seabus_medium::lcm::codec::{self, CodecError};
-use seabus_medium::lcm::types::{MemberType, Primitive, ResolvedTypes, StructType, TypeSet};
+use crate::route::Problem;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Payload, Stamp, Value};
+use seabus_medium::{Capabilities, DataMap, Payload, Stamp, Value};
+use seabus_medium_lcm::codec::{self, CodecError};
+pub use seabus_medium_lcm::types::ResolvedTypes;
+use seabus_medium_lcm::types::{MemberType, Primitive, StructType, TypeSet};
 use seabus_modules::system::{BridgeSpec, RouteSpec};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -87,21 +89,11 @@ pub struct Mapping {
     utime: bool,
 }
 
-/// True for the URL of an LCM medium.
-pub fn is_lcm(url: &str) -> bool {
-    url.starts_with("udpm:")
-}
-
-/// True for a medium that carries only its own kind of messages (LCM types, DSAAV message types),
-/// where seabus's own reports have no place.
-pub fn is_foreign(url: &str) -> bool {
-    is_lcm(url) || url.starts_with("dsaav+")
-}
-
 impl Mapping {
     /// Compiles a route's `lcm` attribute for the leg from medium `from` to medium `to` (0 or 1).
     pub fn new(
         spec: &BridgeSpec,
+        caps: &[Capabilities; 2],
         route: &RouteSpec,
         types: &ResolvedTypes,
         from: usize,
@@ -116,7 +108,7 @@ impl Mapping {
                 known_types(types)
             )));
         };
-        let (decode, encode) = (is_lcm(&spec.urls[from]), is_lcm(&spec.urls[to]));
+        let (decode, encode) = (caps[from].is_native("lcm"), caps[to].is_native("lcm"));
         if !decode && !encode {
             return Err(route.pos.error(format!(
                 "`lcm=\"{name}\"` needs an LCM medium (udpm://) on one side of the bridge; \
@@ -130,6 +122,16 @@ impl Mapping {
             encode,
             utime: has_utime(ty),
         }))
+    }
+
+    /// Whether messages come from an LCM medium and are decoded.
+    pub fn decodes(&self) -> bool {
+        self.decode
+    }
+
+    /// Whether messages go to an LCM medium and are encoded.
+    pub fn encodes(&self) -> bool {
+        self.encode
     }
 
     /// Decodes LCM bytes read on `channel` into a datamap.
@@ -151,7 +153,7 @@ impl Mapping {
                 ),
             ));
         };
-        codec::decode(types, ty, bytes).map_err(|e| Problem::codec(channel, e))
+        codec::decode(types, ty, bytes).map_err(|e| codec_problem(channel, e))
     }
 
     /// Encodes a datamap as this type, for `channel`; `stamp` fills a missing `utime`.
@@ -172,33 +174,18 @@ impl Mapping {
         } else {
             codec::encode(types, ty, map)
         }
-        .map_err(|e| Problem::codec(channel, e))?;
+        .map_err(|e| codec_problem(channel, e))?;
         Ok(Payload::from(bytes))
     }
 }
 
-/// Why a message could not be carried across: a reason to count it under, and what happened.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Problem {
-    /// The key it is counted under.
-    pub reason: &'static str,
-    /// What happened, naming the channel.
-    pub detail: String,
-}
-
-impl Problem {
-    /// A problem of `reason`.
-    pub fn new(reason: &'static str, detail: String) -> Problem {
-        Problem { reason, detail }
-    }
-
-    fn codec(channel: &str, e: CodecError) -> Problem {
-        let reason = match e {
-            CodecError::Fingerprint { .. } => "lcm-type-mismatch",
-            _ => "lcm-codec",
-        };
-        Problem::new(reason, format!("channel `{channel}`: {e}"))
-    }
+/// A codec error on `channel` as a problem, counted by reason.
+fn codec_problem(channel: &str, e: CodecError) -> Problem {
+    let reason = match e {
+        CodecError::Fingerprint { .. } => "lcm-type-mismatch",
+        _ => "lcm-codec",
+    };
+    Problem::new(reason, format!("channel `{channel}`: {e}"))
 }
 
 #[cfg(test)]

@@ -8,7 +8,17 @@
 //!   an LCM medium into datamaps, or encodes datamaps for one, checking type fingerprints.
 //!
 //! Other typed mappings (MOOS strings, DSAAV sentuators, CAN signals) build on the same routes.
+//!
+//! Bridges ask what their media can do ([`seabus_medium::Capabilities`]), never their URLs' schemes.
+//! The LCM mapping needs the `lcm` feature (default on), which brings in `seabus-medium-lcm`.
+//!
+//! Who may depend on it: the program. It depends on the core, the module framework and (with
+//! `lcm`) the LCM medium's types.
 
+#[cfg(feature = "lcm")]
+pub mod lcm;
+#[cfg(not(feature = "lcm"))]
+#[path = "lcm_off.rs"]
 pub mod lcm;
 pub mod route;
 

@@ -8,21 +8,24 @@
 //! 3. a message that has crossed `hops` bridges is not forwarded again;
 //! 4. a message is never sent to the medium it was first published on, nor back to the side it came
 //!    from (a route leads from one medium to the other);
-//! 5. media whose wire carries no provenance (CAN, serial lines) cannot say a message came from the
-//!    bridge: the bridge remembers what it sent to such a medium ([`EchoMemory`]) and drops the same
-//!    frame coming back from it within [`ECHO_WINDOW`] — once per frame sent, so a device sending
-//!    the same frame loses at most that one.
+//! 5. media whose wire carries no provenance (CAN, serial lines, MOOS, LCM: their
+//!    [`Capabilities`] say so) cannot say a message came from the bridge: the bridge remembers what
+//!    it sent to such a medium ([`EchoMemory`], by the medium's own fingerprint of a message) and
+//!    drops the same message coming back from it within [`ECHO_WINDOW`] — once per message sent,
+//!    so a device sending the same frame loses at most that one.
 //!
 //! Every second (the `report` parameter) it publishes its counters and latency on
-//! `seabus.bridge.<name>` on both its media.
+//! `seabus.bridge.<name>` on each of its media that carries datamaps as they are (not a serial
+//! line, a CAN bus, LCM or DSAAV, which carry only their own kind of messages).
 
-use crate::lcm::Problem;
+use crate::lcm::ResolvedTypes;
 use async_trait::async_trait;
 use seabus_medium::dedup::{Dedup, Seen};
-use seabus_medium::lcm::types::ResolvedTypes;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, Message, Pattern, Payload, Stamp, Topic, Value};
+use seabus_medium::{
+    Capabilities, DataMap, Format, Kind, Medium, Message, Pattern, Payload, Stamp, Topic, Value,
+};
 use seabus_modules::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
@@ -52,42 +55,46 @@ pub const ECHO_WINDOW: Duration = Duration::from_secs(1);
 /// Frames remembered per medium, at most.
 const ECHO_ENTRIES: usize = 4096;
 
-/// Whether a medium's wire carries no seabus provenance, so that the bridge must remember what it
-/// sent there: CAN and serial lines.
-pub fn headerless(url: &str) -> bool {
-    let scheme = url.split("://").next().unwrap_or("");
-    matches!(
-        scheme,
-        "slcan" | "slcan+pty" | "cannelloni" | "socketcan" | "serial" | "pty"
-    )
-}
-
-/// A message's fingerprint as the wire sees it: a CAN frame by its identifier, kind and data,
-/// anything else by topic and payload bytes.
-fn fingerprint(topic: &Topic, payload: &Payload) -> u64 {
-    use std::hash::{Hash, Hasher};
-    let mut h = std::collections::hash_map::DefaultHasher::new();
-    match seabus_medium::can::frame::CanFrame::from_message(topic.as_str(), payload) {
-        Ok(frame) => frame.to_string().hash(&mut h),
-        Err(_) => {
-            topic.as_str().hash(&mut h);
-            match payload {
-                Payload::Bytes(b) => b.hash(&mut h),
-                Payload::Xml(x) => x.hash(&mut h),
-                Payload::Map(m) => seabus_medium::binary::encode(m).ok().hash(&mut h),
-            }
-        }
-    }
-    h.finish()
-}
-
-/// What a bridge sent to a medium without provenance, for [`ECHO_WINDOW`].
-#[derive(Debug, Default)]
+/// What a bridge sent to a medium without provenance, for [`ECHO_WINDOW`], by the medium's
+/// fingerprint of each message ([`Medium::fingerprint`]).
 pub struct EchoMemory {
     sent: std::collections::VecDeque<(u64, Instant)>,
+    fingerprint: Fingerprint,
+}
+
+/// How a medium fingerprints a message (see [`Medium::fingerprint`]).
+type Fingerprint = Box<dyn Fn(&Topic, &Payload) -> u64 + Send + Sync>;
+
+impl Default for EchoMemory {
+    /// A memory that fingerprints messages by topic and payload bytes, until it learns its medium.
+    fn default() -> Self {
+        EchoMemory::with(seabus_medium::medium::fingerprint)
+    }
+}
+
+impl std::fmt::Debug for EchoMemory {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EchoMemory")
+            .field("sent", &self.sent.len())
+            .finish()
+    }
 }
 
 impl EchoMemory {
+    /// A memory fingerprinting messages with `fingerprint`.
+    pub fn with(fingerprint: impl Fn(&Topic, &Payload) -> u64 + Send + Sync + 'static) -> Self {
+        EchoMemory {
+            sent: std::collections::VecDeque::new(),
+            fingerprint: Box::new(fingerprint),
+        }
+    }
+
+    /// A memory of what is sent to `medium`, recognised as its wire sees it.
+    pub fn of(medium: &Medium) -> Self {
+        let medium = medium.clone();
+        EchoMemory::with(move |t, p| medium.fingerprint(t, p))
+    }
+
     fn forget_old(&mut self, now: Instant) {
         while self.sent.front().is_some_and(|(_, t)| {
             now.duration_since(*t) > ECHO_WINDOW || self.sent.len() > ECHO_ENTRIES
@@ -100,13 +107,14 @@ impl EchoMemory {
     pub fn sent(&mut self, topic: &Topic, payload: &Payload) {
         let now = Instant::now();
         self.forget_old(now);
-        self.sent.push_back((fingerprint(topic, payload), now));
+        self.sent
+            .push_back(((self.fingerprint)(topic, payload), now));
     }
 
     /// Whether a message read is the echo of one sent (which is then forgotten).
     pub fn is_echo(&mut self, topic: &Topic, payload: &Payload) -> bool {
         self.forget_old(Instant::now());
-        let f = fingerprint(topic, payload);
+        let f = (self.fingerprint)(topic, payload);
         match self.sent.iter().position(|(g, _)| *g == f) {
             Some(i) => {
                 self.sent.remove(i);
@@ -114,6 +122,22 @@ impl EchoMemory {
             }
             None => false,
         }
+    }
+}
+
+/// Why a message could not be carried across: a reason to count it under, and what happened.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problem {
+    /// The key it is counted under.
+    pub reason: &'static str,
+    /// What happened, naming the channel.
+    pub detail: String,
+}
+
+impl Problem {
+    /// A problem of `reason`.
+    pub fn new(reason: &'static str, detail: String) -> Problem {
+        Problem { reason, detail }
     }
 }
 
@@ -162,7 +186,7 @@ pub struct RouteBridge {
     last_sent: HashMap<(usize, Topic), Instant>,
     report: Option<Duration>,
     report_topic: Topic,
-    /// The ports reports go out on: not LCM or DSAAV media, which carry their own messages only.
+    /// The ports reports go out on: those whose medium carries datamaps as they are.
     report_ports: Vec<usize>,
     /// LCM types, when a route has one.
     types: Option<Arc<ResolvedTypes>>,
@@ -172,8 +196,8 @@ pub struct RouteBridge {
     echo: [Option<EchoMemory>; 2],
 }
 
-fn build(spec: &BridgeSpec, _: &Catalogue) -> Result<Built, FileError> {
-    let (bridge, decl) = RouteBridge::new(spec)?;
+fn build(spec: &BridgeSpec, caps: &[Capabilities; 2], _: &Catalogue) -> Result<Built, FileError> {
+    let (bridge, decl) = RouteBridge::new(spec, caps)?;
     Ok(Built {
         decl,
         module: Box::new(bridge),
@@ -181,8 +205,12 @@ fn build(spec: &BridgeSpec, _: &Catalogue) -> Result<Built, FileError> {
 }
 
 impl RouteBridge {
-    /// Compiles a bridge from its system-file form, with its declaration.
-    pub fn new(spec: &BridgeSpec) -> Result<(RouteBridge, Declaration), FileError> {
+    /// Compiles a bridge from its system-file form and what its media can do, with its
+    /// declaration.
+    pub fn new(
+        spec: &BridgeSpec,
+        caps: &[Capabilities; 2],
+    ) -> Result<(RouteBridge, Declaration), FileError> {
         let port_of = |name: &str| if name == spec.media[0] { 0 } else { 1 };
         let mut legs = Vec::new();
         let mut decl = Declaration::new(ModuleKind::Bridge)
@@ -217,7 +245,7 @@ impl RouteBridge {
                     fields: r.fields.clone(),
                     keep: r.keep,
                     lcm: match &types {
-                        Some(t) => crate::lcm::Mapping::new(spec, r, t, from, to)?,
+                        Some(t) => crate::lcm::Mapping::new(spec, caps, r, t, from, to)?,
                         None => None,
                     },
                 });
@@ -236,12 +264,10 @@ impl RouteBridge {
             last_sent: HashMap::new(),
             report: (!report.is_zero()).then_some(report),
             report_topic,
-            report_ports: (0..2)
-                .filter(|&i| !crate::lcm::is_foreign(&spec.urls[i]))
-                .collect(),
+            report_ports: (0..2).filter(|&i| caps[i].carries_datamaps()).collect(),
             types,
             problems: Tally::new(),
-            echo: [0, 1].map(|i| headerless(&spec.urls[i]).then(EchoMemory::default)),
+            echo: [0, 1].map(|i| (!caps[i].provenance).then(EchoMemory::default)),
         };
         Ok((bridge, decl))
     }
@@ -427,14 +453,14 @@ fn convert_lcm(
     to: &Topic,
     stamp: Stamp,
 ) -> Result<Payload, Problem> {
-    let p = if lcm.decode {
+    let p = if lcm.decodes() {
         Payload::from(lcm.decode(types, from.as_str(), &p)?)
     } else {
         p
     };
     let conversion =
         |e: seabus_medium::ConvertError| Problem::new("conversion", format!("topic `{from}`: {e}"));
-    if !lcm.encode {
+    if !lcm.encodes() {
         return convert(p, &leg.fields, leg.keep, leg.format).map_err(conversion);
     }
     let map = convert(p, &leg.fields, leg.keep, None)
@@ -481,8 +507,20 @@ fn convert(
 #[async_trait]
 impl Module for RouteBridge {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
-        if let Some(r) = self.report {
-            ctx.every(REPORT, r);
+        for (i, memory) in self.echo.iter_mut().enumerate() {
+            if let (Some(memory), Some(port)) = (memory, ctx.port(i)) {
+                *memory = EchoMemory::of(port.medium());
+            }
+        }
+        match self.report {
+            Some(r) if !self.report_ports.is_empty() => ctx.every(REPORT, r),
+            Some(_) => tracing::info!(
+                bridge = ctx.name(),
+                "no report published: neither {} nor {} carries datamaps as they are",
+                self.media[0],
+                self.media[1]
+            ),
+            None => {}
         }
         Ok(())
     }
@@ -506,7 +544,7 @@ impl Module for RouteBridge {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
-        // both media hear about the bridge between them (but an LCM bus, which only carries types)
+        // the media that carry datamaps hear about the bridge between them
         let map = self.report_map();
         for &port in &self.report_ports {
             // a report that cannot go out is counted, never a reason to stop forwarding
@@ -539,7 +577,20 @@ mod tests {
              <bridge name=\"x\" media=\"a b\" hops=\"{hops}\">{routes}</bridge></seabus>"
         );
         let spec = SystemSpec::parse("t.xml", &text).unwrap();
-        RouteBridge::new(&spec.bridges[0]).unwrap().0
+        RouteBridge::new(&spec.bridges[0], &caps(&spec.bridges[0]))
+            .unwrap()
+            .0
+    }
+
+    /// What the media of a bridge can do, as their schemes say.
+    fn caps(spec: &BridgeSpec) -> [Capabilities; 2] {
+        let schemes = seabus_medium::Schemes::with(&[
+            seabus_medium_lcm::register,
+            seabus_medium_can::register,
+            seabus_medium_udp::register,
+            seabus_medium_serial::register,
+        ]);
+        spec.urls.clone().map(|u| schemes.check(&u).unwrap())
     }
 
     fn msg(topic: &str, node: &str, medium: &str, seq: u64, hops: u8) -> Message {
@@ -558,7 +609,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn an_echo_is_dropped_once_per_frame_sent_and_only_for_a_while() {
-        let mut m = EchoMemory::default();
+        let mut m = EchoMemory::with(|t, p| seabus_medium_can::frame_fingerprint(t, p).unwrap());
         let topic = Topic::new("can.123").unwrap();
         let frame = |d: &[u8]| Payload::from(DataMap::new().with("data", Value::Bytes(d.to_vec())));
         // bytes and a datamap of the same frame are the same on the wire
@@ -579,8 +630,38 @@ mod tests {
             !m.is_echo(&topic, &frame(&[1, 2])),
             "forgotten after the window"
         );
-        assert!(headerless("slcan:///dev/ttyACM0") && headerless("cannelloni://1.2.3.4:5"));
-        assert!(!headerless("udp://239.1.1.1:5") && !headerless("inproc://"));
+    }
+
+    #[test]
+    fn media_without_provenance_get_an_echo_memory_and_reports_go_where_datamaps_fit() {
+        let text = "<seabus><medium name=\"line\" url=\"pty:///tmp/x\"/>\
+             <medium name=\"bus\" url=\"cannelloni://127.0.0.1:5\"/>\
+             <medium name=\"net\" url=\"udp://239.1.1.1:5\"/>\
+             <bridge name=\"a\" media=\"line net\"><route topics=\"**\"/></bridge>\
+             <bridge name=\"b\" media=\"net bus\"><route topics=\"**\"/></bridge></seabus>";
+        let spec = SystemSpec::parse("t.xml", text).unwrap();
+        let built: Vec<RouteBridge> = spec
+            .bridges
+            .iter()
+            .map(|b| RouteBridge::new(b, &caps(b)).unwrap().0)
+            .collect();
+        let echo = |b: &RouteBridge| b.echo.each_ref().map(Option::is_some);
+        assert_eq!(
+            echo(&built[0]),
+            [true, false],
+            "a serial line has no provenance"
+        );
+        assert_eq!(echo(&built[1]), [false, true], "nor has CAN");
+        assert_eq!(
+            built[0].report_ports,
+            vec![1],
+            "a serial line carries no datamap report"
+        );
+        assert_eq!(
+            built[1].report_ports,
+            vec![0],
+            "CAN carries only its frames"
+        );
     }
 
     #[test]
@@ -698,6 +779,7 @@ mod tests {
         }
     }
 
+    #[cfg(feature = "lcm")]
     fn lcm_bridge(routes: &str) -> Result<RouteBridge, String> {
         let text = format!(
             "<seabus><medium name=\"a\" url=\"inproc://\"/>\
@@ -705,11 +787,12 @@ mod tests {
              <bridge name=\"x\" media=\"a l\">{routes}</bridge></seabus>"
         );
         let spec = SystemSpec::parse("t.xml", &text).unwrap();
-        RouteBridge::new(&spec.bridges[0])
+        RouteBridge::new(&spec.bridges[0], &caps(&spec.bridges[0]))
             .map(|(b, _)| b)
             .map_err(|e| e.to_string())
     }
 
+    #[cfg(feature = "lcm")]
     #[test]
     fn lcm_routes_encode_for_lcm_and_decode_from_it_checking_the_type() {
         let mut b = lcm_bridge(
@@ -732,22 +815,25 @@ mod tests {
         let types = b.types.clone().unwrap();
         let ty = types.get("seabus.position_t").unwrap();
         assert_eq!(bytes[..8], ty.fingerprint().to_be_bytes());
-        // and back: decoded, with the fields of the type
+        // and back, a message an LCM program sent (not the bridge's own, which it would take for
+        // an echo): decoded, with the fields of the type
+        let from_lcm = DataMap::new().with("lat", 43.5f64).with("utime", 8i64);
         let mut back = msg("NAV_POSITION", "lcm@x", "l", 1, 0);
-        back.payload = Payload::from(bytes.to_vec());
+        back.payload =
+            Payload::from(seabus_medium_lcm::codec::encode(&types, ty, &from_lcm).unwrap());
         let Verdict::Forward(0, out) = b.route("me", 1, back) else {
             panic!("forwarded from the LCM side")
         };
         let map = out.payload.as_map().expect("a datamap");
         assert_eq!(map.get_f64("lat"), Some(43.5));
-        assert_eq!(map.get_i64("utime"), Some(7));
+        assert_eq!(map.get_i64("utime"), Some(8));
         assert!(
             map.get_f64("hdop").is_some_and(f64::is_nan),
             "missing is NaN"
         );
         // another type on the channel is refused and counted
         let heading = types.get("seabus.heading_t").unwrap();
-        let other = seabus_medium::lcm::codec::encode(&types, heading, &DataMap::new()).unwrap();
+        let other = seabus_medium_lcm::codec::encode(&types, heading, &DataMap::new()).unwrap();
         let mut wrong = msg("NAV_POSITION", "lcm@x", "l", 2, 0);
         wrong.payload = Payload::from(other);
         assert_eq!(b.route("me", 1, wrong), Verdict::Drop("conversion"));
@@ -757,6 +843,7 @@ mod tests {
         );
     }
 
+    #[cfg(feature = "lcm")]
     #[test]
     fn lcm_routes_name_unknown_types_and_need_an_lcm_medium() {
         let e = lcm_bridge(r#"<route topics="x" lcm="seabus.nope_t"/>"#)
@@ -769,7 +856,7 @@ mod tests {
         let text = "<seabus><medium name=\"a\" url=\"inproc://\"/><medium name=\"b\" url=\"inproc://\"/>\
              <bridge name=\"x\" media=\"a b\"><route topics=\"x\" lcm=\"seabus.position_t\"/></bridge></seabus>";
         let spec = SystemSpec::parse("t.xml", text).unwrap();
-        let e = RouteBridge::new(&spec.bridges[0])
+        let e = RouteBridge::new(&spec.bridges[0], &caps(&spec.bridges[0]))
             .err()
             .unwrap()
             .to_string();

@@ -11,9 +11,9 @@
 //! Run: `cargo bench -p seabus-drivers --bench can`
 
 use seabus_drivers::can::dbc::Database;
-use seabus_medium::can::frame::CanFrame;
-use seabus_medium::can::slcan::{self, Line, Lines};
-use seabus_medium::{DataMap, Medium, Node, Value};
+use seabus_medium::{DataMap, Node, Value};
+use seabus_medium_can::frame::CanFrame;
+use seabus_medium_can::slcan::{self, Line, Lines};
 use std::hint::black_box;
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -104,9 +104,9 @@ fn latency() {
     rt.block_on(async {
         let path = std::env::temp_dir().join(format!("seabus-bench-can-{}", std::process::id()));
         let node = Node::new("bench");
-        let adapter = Medium::open("adapter", &format!("slcan+pty://{}", path.display()), &node)
+        let adapter = seabus_medium_can::schemes().open("adapter", &format!("slcan+pty://{}", path.display()), &node)
             .expect("the pty adapter");
-        let host = Medium::open(
+        let host = seabus_medium_can::schemes().open(
             "host",
             &format!("slcan://{}?reopen=20ms", path.display()),
             &node,

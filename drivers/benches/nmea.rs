@@ -10,10 +10,10 @@
 
 use seabus_drivers::nmea::sensors::{Role, Sensor};
 use seabus_drivers::nmea::sentence::{build, parse};
-use seabus_medium::serial::framing::{ChecksumPolicy, Framer, Framing, nmea_sentence};
-use seabus_medium::serial::{FrameTopics, SerialConfig};
+use seabus_medium::framing::{ChecksumPolicy, Framer, Framing, nmea_sentence};
 use seabus_medium::url::MediumUrl;
-use seabus_medium::{Medium, Node, Payload};
+use seabus_medium::{Node, Payload};
+use seabus_medium_serial::{FrameTopics, SerialConfig};
 use seabus_modules::{Catalogue, Params};
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -108,13 +108,16 @@ fn latency() {
         let _ = std::fs::create_dir_all(&dir);
         let path = dir.join("line").display().to_string();
         let node = Node::new("bench");
-        let far = Medium::open("far", &format!("pty://{path}"), &node).expect("pty");
-        let line = Medium::open(
-            "line",
-            &format!("serial://{path}?baud=115200&reopen=20ms"),
-            &node,
-        )
-        .expect("serial");
+        let far = seabus_medium_serial::schemes()
+            .open("far", &format!("pty://{path}"), &node)
+            .expect("pty");
+        let line = seabus_medium_serial::schemes()
+            .open(
+                "line",
+                &format!("serial://{path}?baud=115200&reopen=20ms"),
+                &node,
+            )
+            .expect("serial");
         let mut link = line.watch_link();
         let _ = tokio::time::timeout(
             Duration::from_secs(5),

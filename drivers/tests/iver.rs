@@ -8,7 +8,8 @@ use std::time::Duration;
 use tokio::time::{Instant, timeout};
 
 fn registry() -> seabus_modules::Registry {
-    let mut reg = seabus_modules::registry();
+    let mut reg = seabus_modules::Registry::new();
+    reg.set_schemes(seabus_medium_serial::schemes());
     seabus_drivers::register(&mut reg);
     reg
 }
@@ -257,12 +258,13 @@ async fn course_commands_keep_the_frontseat_alive_and_stop_when_they_stop() {
 fn mute_frontseat(path: &str) -> (Medium, tokio::sync::mpsc::Receiver<String>) {
     use seabus_drivers::iver::protocol::{Compass, Osi};
     use seabus_medium::{Node, Payload};
-    let line = Medium::open(
-        "mute",
-        &format!("pty://{path}?framing=lines"),
-        &Node::new("mute"),
-    )
-    .unwrap_or_else(|e| panic!("{e}"));
+    let line = seabus_medium_serial::schemes()
+        .open(
+            "mute",
+            &format!("pty://{path}?framing=lines"),
+            &Node::new("mute"),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
     let mut port = line.attach("frontseat").subscribed("**").unwrap();
     let (heard, hear) = tokio::sync::mpsc::channel(256);
     let osi = Osi {

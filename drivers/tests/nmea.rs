@@ -2,7 +2,7 @@
 //! line, their sentences turned into standard datasets; garbage on the line changes nothing.
 
 use seabus_drivers::nmea::sentence::build;
-use seabus_medium::serial::framing::nmea_sentence;
+use seabus_medium::framing::nmea_sentence;
 use seabus_medium::{Message, Payload};
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
 use std::collections::BTreeMap;
@@ -24,7 +24,8 @@ async fn sensor_sentences_become_standard_datasets() {
 </seabus>"#
     );
     let spec = SystemSpec::parse("usv.xml", &text).unwrap();
-    let mut reg = seabus_modules::registry();
+    let mut reg = seabus_modules::Registry::new();
+    reg.set_schemes(seabus_medium_serial::schemes());
     seabus_drivers::register(&mut reg);
     let rt = Runtime::start(&spec, &reg, Catalogue::built_in())
         .await

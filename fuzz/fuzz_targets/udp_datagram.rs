@@ -6,7 +6,7 @@
 use libfuzzer_sys::fuzz_target;
 
 #[allow(dead_code)]
-#[path = "../properties/medium.rs"]
+#[path = "../properties/udp.rs"]
 mod properties;
 
 fuzz_target!(|data: &[u8]| {

@@ -3,7 +3,7 @@
 
 use seabus_drivers::iver::protocol::{DepthUnits, FromFront, parse_command, parse_front};
 use seabus_drivers::nmea::sentence::parse;
-use seabus_medium::serial::framing::{self, ChecksumPolicy, check_nmea};
+use seabus_medium::framing::{self, ChecksumPolicy, check_nmea};
 
 /// `text` (without a leading `$` or, when `bang` is set, `!`) written as a `$` sentence with its
 /// checksum, when it is not already a whole sentence with a correct checksum and can be a sentence

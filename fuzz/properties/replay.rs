@@ -6,8 +6,12 @@ use std::path::{Path, PathBuf};
 
 /// The seed files of fuzz target `target`, sorted by name; fails when there are none.
 pub fn seeds(target: &str) -> Vec<(PathBuf, Vec<u8>)> {
+    // the crate is somewhere below the repository's root, which holds fuzz/corpus
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fuzz/corpus")
+        .ancestors()
+        .map(|a| a.join("fuzz/corpus"))
+        .find(|c| c.is_dir())
+        .unwrap_or_else(|| panic!("no fuzz/corpus above {}", env!("CARGO_MANIFEST_DIR")))
         .join(target);
     let entries =
         std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("cannot read {}: {e}", dir.display()));

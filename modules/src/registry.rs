@@ -1,4 +1,4 @@
-//! The registry of module types and bridge types, by name.
+//! The registry of module, bridge and service types, by name, with the program's medium schemes.
 //!
 //! Each crate that provides modules registers its types (`seabus-modules` the supporting modules,
 //! `seabus-drivers` the drivers and simulators, `seabus-bridges` the bridges, `seabus-ui` the
@@ -9,8 +9,9 @@
 use crate::datasets::Catalogue;
 use crate::module::{Declaration, Module, ModuleKind};
 use crate::params::Params;
-use crate::system::BridgeSpec;
-use seabus_medium::xml::{FileError, Pos};
+use crate::system::{BridgeSpec, SystemSpec};
+use seabus_medium::xml::{Element, FileError, Pos};
+use seabus_medium::{BoxFuture, Capabilities, Medium, Node, Schemes};
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -42,8 +43,9 @@ pub struct Built {
 /// How a module type builds modules.
 pub type BuildModule = fn(&ModuleConfig, &Catalogue) -> Result<Built, FileError>;
 
-/// How a bridge type builds bridges.
-pub type BuildBridge = fn(&BridgeSpec, &Catalogue) -> Result<Built, FileError>;
+/// How a bridge type builds bridges: from the bridge's system-file form and what its two media can
+/// do, in the order of [`BridgeSpec::media`].
+pub type BuildBridge = fn(&BridgeSpec, &[Capabilities; 2], &Catalogue) -> Result<Built, FileError>;
 
 /// A module type.
 #[derive(Clone)]
@@ -69,18 +71,61 @@ pub struct BridgeType {
     pub build: BuildBridge,
 }
 
-/// Module and bridge types by name.
+/// How a service starts: from its element, on the system's opened media, as `node`.
+pub type StartService =
+    fn(&Element, &BTreeMap<String, Medium>, &Node) -> Result<Box<dyn Service>, FileError>;
+
+/// A service a crate runs beside a system's modules, from a top-level element of the system file
+/// it reads (the DSAAV crate's `<log>`).
+#[derive(Clone, Copy)]
+pub struct ServiceType {
+    /// The element's name.
+    pub tag: &'static str,
+    /// Checks one such element against the system, without starting anything.
+    pub check: fn(&Element, &SystemSpec, &Registry) -> Result<(), FileError>,
+    /// Starts it on the system's opened media, before any module starts.
+    pub start: StartService,
+}
+
+/// A running service: it is finished when the system shuts down, after the modules have stopped
+/// and before the media close.
+pub trait Service: Send + Sync {
+    /// Finishes within `within` (what it still holds goes out).
+    fn finish(self: Box<Self>, within: Duration) -> BoxFuture<'static, ()>;
+}
+
+/// Module, bridge and service types by name, and the medium schemes of the program.
 #[derive(Clone, Default)]
 pub struct Registry {
     modules: BTreeMap<&'static str, ModuleType>,
     bridges: BTreeMap<&'static str, BridgeType>,
+    services: BTreeMap<&'static str, ServiceType>,
     sections: Vec<&'static str>,
+    schemes: Schemes,
 }
 
 impl Registry {
     /// An empty registry.
     pub fn new() -> Registry {
         Registry::default()
+    }
+
+    /// The medium schemes systems may use.
+    pub fn schemes(&self) -> &Schemes {
+        &self.schemes
+    }
+
+    /// Sets the medium schemes systems may use (by default the in-process medium only).
+    pub fn set_schemes(&mut self, schemes: Schemes) -> &mut Self {
+        self.schemes = schemes;
+        self
+    }
+
+    /// What the medium at `url` can do, or the URL's error placed at `pos`.
+    pub fn capabilities(&self, url: &str, pos: &Pos) -> Result<Capabilities, FileError> {
+        self.schemes
+            .check(url)
+            .map_err(|e| pos.error(e.to_string()))
     }
 
     /// Adds a module type (replacing one of the same name).
@@ -93,6 +138,18 @@ impl Registry {
     pub fn add_bridge(&mut self, t: BridgeType) -> &mut Self {
         self.bridges.insert(t.name, t);
         self
+    }
+
+    /// Adds a service type; its element becomes a known section.
+    pub fn add_service(&mut self, t: ServiceType) -> &mut Self {
+        self.add_section(t.tag);
+        self.services.insert(t.tag, t);
+        self
+    }
+
+    /// The service that reads top-level elements called `tag`.
+    pub fn service(&self, tag: &str) -> Option<&ServiceType> {
+        self.services.get(tag)
     }
 
     /// Declares a top-level system-file element (such as `console`) that a registered crate reads.
@@ -171,7 +228,11 @@ impl Registry {
         catalogue: &Catalogue,
     ) -> Result<Built, FileError> {
         let t = self.bridge_for(spec)?;
-        let built = (t.build)(spec, catalogue)?;
+        let caps = [
+            self.capabilities(&spec.urls[0], &spec.pos)?,
+            self.capabilities(&spec.urls[1], &spec.pos)?,
+        ];
+        let built = (t.build)(spec, &caps, catalogue)?;
         spec.params.finish(t.name)?;
         Ok(built)
     }

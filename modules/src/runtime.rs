@@ -8,9 +8,8 @@
 //! builds a fresh instance with fresh ports.
 
 use crate::datasets::Catalogue;
-use crate::dsaav::central::Forwarder;
 use crate::module::{Context, Event, Module, ModuleError, TICK};
-use crate::registry::{Built, Registry};
+use crate::registry::{Built, Registry, Service};
 use crate::system::{SystemSpec, check};
 use seabus_medium::xml::{FileError, Pos};
 use seabus_medium::{DataMap, Interface, Kind, Medium, Node};
@@ -29,6 +28,9 @@ pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 pub const MAX_BACKOFF: Duration = Duration::from_secs(30);
 /// Running this long without failing resets the back-off.
 pub const STABLE: Duration = Duration::from_secs(60);
+/// The name of the span the runtime runs each module in; its field `name` is the module's name
+/// (log layers name the module an event came from by it).
+pub const MODULE_SPAN: &str = "module";
 
 /// A module's state as the runtime sees it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -127,8 +129,8 @@ pub struct Runtime {
     order: Vec<String>,
     supervisors: Vec<(String, JoinHandle<()>)>,
     shutdown: watch::Sender<bool>,
-    /// Sends every module's log records to the central log, when the system has a `<log>`.
-    forwarder: Option<Forwarder>,
+    /// The services the system's sections started, in order.
+    services: Vec<Box<dyn Service>>,
 }
 
 fn open_error(pos: &Pos, e: impl std::fmt::Display) -> FileError {
@@ -150,7 +152,10 @@ impl Runtime {
         let node = spec.node.as_deref().map_or_else(Node::local, Node::new);
         let mut media = BTreeMap::new();
         for m in &spec.media {
-            let medium = Medium::open(&m.name, &m.url, &node).map_err(|e| open_error(&m.pos, e))?;
+            let medium = registry
+                .schemes()
+                .open(&m.name, &m.url, &node)
+                .map_err(|e| open_error(&m.pos, e))?;
             media.insert(m.name.clone(), medium);
         }
         let mut units = Vec::new();
@@ -174,14 +179,16 @@ impl Runtime {
                 build: Arc::new(move || reg.build_bridge(&bs, &cat)),
             });
         }
-        // attached before any module starts, so that none of their records is missed
-        let forwarder = spec.log.as_ref().and_then(|l| {
-            media
-                .get(&l.medium)
-                .map(|m| Forwarder::attach(m, l.port, &node.name))
-        });
+        // started before any module, so that a service that follows them (the central log)
+        // misses nothing
+        let mut services = Vec::new();
+        for el in &spec.sections {
+            if let Some(t) = registry.service(&el.name) {
+                services.push((t.start)(el, &media, &node)?);
+            }
+        }
         let mut runtime = Runtime::with_units(node, media, spec.default_medium(), units, catalogue);
-        runtime.forwarder = forwarder;
+        runtime.services = services;
         Ok(runtime)
     }
 
@@ -218,7 +225,7 @@ impl Runtime {
             order,
             supervisors,
             shutdown,
-            forwarder: None,
+            services: Vec::new(),
         }
     }
 
@@ -257,9 +264,9 @@ impl Runtime {
                 task.abort();
             }
         }
-        // the modules' last records reach the log before the media close
-        if let Some(f) = self.forwarder {
-            f.finish(SHUTDOWN_GRACE).await;
+        // what services still hold (the modules' last log records) goes out before the media close
+        for s in self.services {
+            s.finish(SHUTDOWN_GRACE).await;
         }
         for m in self.shared.media.values() {
             m.close();
@@ -280,7 +287,7 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
         // anywhere in them is a failure like any other
         let task = tokio::spawn({
             let (unit, shared, shutdown) = (unit.clone(), shared.clone(), shutdown.clone());
-            let span = tracing::info_span!(crate::dsaav::central::MODULE_SPAN, name = %unit.name);
+            let span = tracing::info_span!(MODULE_SPAN, name = %unit.name);
             tracing::Instrument::instrument(
                 async move {
                     let (module, ctx) = instance(&unit, &shared)?;
@@ -327,8 +334,8 @@ async fn supervise(unit: Unit, shared: Arc<Shared>, mut shutdown: watch::Receive
     shared.report(&unit, State::Stopped, restarts, None).await;
 }
 
-/// Aborts a task when dropped.
-pub(crate) struct AbortOnDrop(pub(crate) tokio::task::AbortHandle);
+/// Aborts a task when dropped (a module's helper task goes with the module).
+pub struct AbortOnDrop(pub tokio::task::AbortHandle);
 
 impl Drop for AbortOnDrop {
     fn drop(&mut self) {

@@ -21,7 +21,7 @@ use crate::params::{Param, Params};
 use crate::registry::{ModuleConfig, Registry};
 use seabus_medium::parse::parse_rate;
 use seabus_medium::xml::{self, Element, FileError, Pos};
-use seabus_medium::{Format, Kind, Medium, Pattern};
+use seabus_medium::{Format, Kind, Pattern};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -117,8 +117,6 @@ pub struct SystemSpec {
     pub modules: Vec<ModuleConfig>,
     /// Bridges in order.
     pub bridges: Vec<BridgeSpec>,
-    /// Where every module's log records go (`<log>`), when the system says.
-    pub log: Option<LogSpec>,
     /// Other top-level elements, for the services other crates provide (console, health, …);
     /// [`check`] refuses those no registered crate reads.
     pub sections: Vec<Element>,
@@ -126,22 +124,7 @@ pub struct SystemSpec {
     pub pos: Pos,
 }
 
-const TOP_TAGS: [&str; 4] = ["medium", "module", "bridge", "log"];
-
-/// `<log medium="n1" port="100"/>`: every module of the system logs through the DSAAV logging
-/// service reached on a DSAAV medium (see [`crate::dsaav::central`]).
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct LogSpec {
-    /// The DSAAV medium the records are sent on.
-    pub medium: String,
-    /// The port they are sent from on that medium's node.
-    pub port: u16,
-    /// Where it is written.
-    pub pos: Pos,
-}
-
-/// The port records are sent from when `<log>` gives none.
-pub const DEFAULT_LOG_PORT: u16 = 100;
+const TOP_TAGS: [&str; 3] = ["medium", "module", "bridge"];
 
 /// A path a file at `pos` gives, relative to that file's directory.
 pub fn beside(pos: &Pos, relative: &str) -> std::path::PathBuf {
@@ -160,11 +143,7 @@ fn check_name(attr: &xml::Attr) -> Result<String, FileError> {
 
 /// Checks the name an attribute gives (a `what` name: letters, digits, `_` and `-`, at most
 /// [`MAX_NAME`] bytes); `why` ends the message when it is not one.
-pub(crate) fn check_name_of<'a>(
-    attr: &'a xml::Attr,
-    what: &str,
-    why: &str,
-) -> Result<&'a str, FileError> {
+pub fn check_name_of<'a>(attr: &'a xml::Attr, what: &str, why: &str) -> Result<&'a str, FileError> {
     let v = attr.value.trim();
     let what = if what.is_empty() {
         String::new()
@@ -225,7 +204,6 @@ impl SystemSpec {
             media: Vec::new(),
             modules: Vec::new(),
             bridges: Vec::new(),
-            log: None,
             sections: Vec::new(),
             pos: root.pos.clone(),
         };
@@ -264,23 +242,6 @@ impl SystemSpec {
                 "bridge" => spec.bridges.push(bridge_spec(el, &mut |a| {
                     claim(a, "a module or bridge", &mut unit_names)
                 })?),
-                "log" => {
-                    el.only_attrs(&["medium", "port"])?;
-                    el.only_children(&[])?;
-                    if let Some(prev) = &spec.log {
-                        return Err(el.error(format!(
-                            "a system has one <log>; the first is at line {}",
-                            prev.pos.line
-                        )));
-                    }
-                    spec.log = Some(LogSpec {
-                        medium: el.required("medium")?.value.trim().to_string(),
-                        port: el
-                            .parsed("port", "a port 0–65535")?
-                            .unwrap_or(DEFAULT_LOG_PORT),
-                        pos: el.pos.clone(),
-                    });
-                }
                 _ => spec.sections.push(el.clone()),
             }
         }
@@ -295,6 +256,21 @@ impl SystemSpec {
             }
         }
         Ok(spec)
+    }
+
+    /// The medium called `name` that an element at `pos` names, or an error there listing the
+    /// media there are.
+    pub fn medium_at(&self, name: &str, pos: &Pos) -> Result<&MediumSpec, FileError> {
+        self.medium(name).ok_or_else(|| {
+            pos.error(format!(
+                "no medium called `{name}`; media: {}",
+                self.media
+                    .iter()
+                    .map(|m| m.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ))
+        })
     }
 
     /// The medium called `name`.
@@ -672,42 +648,22 @@ pub fn check(
         )));
     }
     for m in &spec.media {
-        Medium::check_url(&m.url).map_err(|e| m.pos.error(e.to_string()))?;
+        registry.capabilities(&m.url, &m.pos)?;
     }
-    let medium_exists = |name: &str, pos: &Pos| -> Result<(), FileError> {
-        if spec.medium(name).is_none() {
-            return Err(pos.error(format!(
-                "no medium called `{name}`; media: {}",
-                spec.media
-                    .iter()
-                    .map(|m| m.name.as_str())
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )));
-        }
-        Ok(())
-    };
-    if let Some(log) = &spec.log {
-        medium_exists(&log.medium, &log.pos)?;
-        if spec
-            .medium(&log.medium)
-            .is_some_and(|m| !m.url.starts_with("dsaav+"))
-        {
-            return Err(log.pos.error(format!(
-                "<log> sends to the DSAAV logging service: `{}` is not a DSAAV medium (dsaav+eth, dsaav+udp or dsaav+inproc)",
-                log.medium
-            )));
+    for el in &spec.sections {
+        if let Some(t) = registry.service(&el.name) {
+            (t.check)(el, spec, registry)?;
         }
     }
     for m in &spec.modules {
         for name in &m.media {
-            medium_exists(name, &m.pos)?;
+            spec.medium_at(name, &m.pos)?;
         }
         registry.build_module(m, catalogue)?;
     }
     for b in &spec.bridges {
         for name in &b.media {
-            medium_exists(name, &b.pos)?;
+            spec.medium_at(name, &b.pos)?;
         }
         registry.build_bridge(b, catalogue)?;
     }
@@ -833,58 +789,8 @@ mod tests {
         let e = check(&s, &Registry::new(), &Catalogue::default()).unwrap_err();
         assert_eq!(
             e.to_string(),
-            "sys.xml:1:45: unexpected element <gizmo> inside <seabus>; expected <medium>, <module>, <bridge>, <log>"
+            "sys.xml:1:45: unexpected element <gizmo> inside <seabus>; expected <medium>, <module>, <bridge>"
         );
-    }
-
-    #[test]
-    fn the_log_element_names_a_dsaav_medium() {
-        let s = parse(
-            r#"<seabus><medium name="bus" url="inproc://"/><medium name="n1" url="dsaav+inproc://v?node=1"/>
-<log medium="n1" port="7"/></seabus>"#,
-        )
-        .unwrap();
-        let log = s.log.clone().unwrap();
-        assert_eq!((log.medium.as_str(), log.port), ("n1", 7));
-        check(&s, &Registry::new(), &Catalogue::default()).unwrap();
-        let default_port = parse(
-            r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log medium="n1"/></seabus>"#,
-        )
-        .unwrap();
-        assert_eq!(default_port.log.map(|l| l.port), Some(DEFAULT_LOG_PORT));
-
-        let errors = [
-            (
-                r#"<seabus><medium name="bus" url="inproc://"/><log medium="bus"/></seabus>"#,
-                "sys.xml:1:45: <log> sends to the DSAAV logging service: `bus` is not a DSAAV medium (dsaav+eth, dsaav+udp or dsaav+inproc)",
-            ),
-            (
-                r#"<seabus><medium name="bus" url="inproc://"/><log medium="n7"/></seabus>"#,
-                "sys.xml:1:45: no medium called `n7`; media: bus",
-            ),
-        ];
-        for (text, want) in errors {
-            let s = parse(text).unwrap();
-            let e = check(&s, &Registry::new(), &Catalogue::default()).unwrap_err();
-            assert_eq!(e.to_string(), want);
-        }
-        let parse_errors = [
-            (
-                r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log medium="n1" port="x"/></seabus>"#,
-                "sys.xml:1:75: attribute `port`: `x` is not a port 0–65535",
-            ),
-            (
-                r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log medium="n1"/><log medium="n1"/></seabus>"#,
-                "sys.xml:1:76: a system has one <log>; the first is at line 1",
-            ),
-            (
-                r#"<seabus><medium name="n1" url="dsaav+inproc://v?node=1"/><log/></seabus>"#,
-                "sys.xml:1:58: <log> is missing attribute `medium`",
-            ),
-        ];
-        for (text, want) in parse_errors {
-            assert_eq!(parse(text).unwrap_err().to_string(), want);
-        }
     }
 
     fn cycles_of(text: &str) -> Vec<Cycle> {

@@ -1,7 +1,6 @@
-//! Replays the seeds of the fuzz corpus for the readers of this crate (`fuzz/corpus/system_file/`,
-//! `fuzz/corpus/dsaav_config/`, `fuzz/corpus/health_rules/`,
-//! `fuzz/corpus/conversions/`) through the same properties as the
-//! fuzz targets, so that every seed runs with the ordinary tests, without libFuzzer.
+//! Replays the seeds of the fuzz corpus for system files (`fuzz/corpus/system_file/`) through the
+//! same property as the fuzz target, so that every seed runs with the ordinary tests, without
+//! libFuzzer.
 
 #[path = "../../fuzz/properties/modules.rs"]
 mod properties;
@@ -13,13 +12,4 @@ seed_tests! {
     /// Every system-file seed is read or refused without a panic, and at least one is a valid
     /// system.
     system_file_seeds => system_file,
-    /// Every DSAAV configuration seed is read or refused with a place inside it, and those that
-    /// read write back to text that reads the same.
-    dsaav_config_seeds => dsaav_config,
-    /// Every health-rules seed is read or refused with a place inside it, and a monitor following
-    /// the rules that read keeps the severity rules.
-    health_rules_seeds => health_rules,
-    /// Every conversion seed is read or refused with a reason, and the transforms that read keep
-    /// their properties.
-    conversions_seeds => conversions,
 }

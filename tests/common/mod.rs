@@ -5,6 +5,18 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+/// Every medium family's schemes, as the program has them in its default build.
+pub fn schemes() -> seabus_medium::Schemes {
+    seabus_medium::Schemes::with(&[
+        seabus_medium_udp::register,
+        seabus_medium_serial::register,
+        seabus_medium_can::register,
+        seabus_medium_lcm::register,
+        seabus_medium_dsaav::register,
+        seabus_medium_moos::register,
+    ])
+}
+
 /// The `seabus` program under test.
 pub fn seabus() -> Command {
     let mut c = Command::new(env!("CARGO_BIN_EXE_seabus"));

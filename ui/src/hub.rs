@@ -721,7 +721,7 @@ impl Hub {
             ];
             let line = cells
                 .iter()
-                .map(|c| seabus_modules::support::logger::cell(&Value::from(c.as_str())))
+                .map(|c| seabus_medium::csv::cell(&Value::from(c.as_str())))
                 .collect::<Vec<_>>()
                 .join(",");
             let written = std::fs::OpenOptions::new()
@@ -979,11 +979,7 @@ impl Hub {
         let io = |e: std::io::Error| json!({"message": format!("{file}: {e}")});
         let bak = PathBuf::from(format!("{file}.bak"));
         std::fs::copy(path, &bak).map_err(io)?;
-        static SAVES: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
-        let n = SAVES.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let tmp = PathBuf::from(format!("{file}.{}.{n}.tmp", std::process::id()));
-        std::fs::write(&tmp, xml).map_err(io)?;
-        std::fs::rename(&tmp, path).map_err(io)?;
+        seabus_medium::fs::atomic_write(path, xml.as_bytes()).map_err(io)?;
         tracing::info!(component = "console", user = %session.user, "saved layout {name} to {file}");
         Ok(())
     }

@@ -2517,7 +2517,7 @@ mod tests {
 </seabus>"#,
         )
         .unwrap();
-        let registry = seabus_modules::registry();
+        let registry = seabus_support::registry();
         let catalogue = Catalogue::built_in();
         let l = parse(&with(
             "<column><readout bind=\"nav.depth.value\"/><readout bind=\"remote.x.y\"/><readout bind=\"nav.velocity.speed\"/></column>",

@@ -229,9 +229,7 @@ pub fn add_user(path: &Path, name: &str, roles: &[String], password: &str) -> Re
         Some(u) => *u = user,
         None => users.users.push(user),
     }
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, users.to_xml())
-        .and_then(|()| std::fs::rename(&tmp, path))
+    seabus_medium::fs::atomic_write_private(path, users.to_xml().as_bytes())
         .map_err(|e| format!("{}: {e}", path.display()))
 }
 

@@ -20,10 +20,10 @@
 
 use super::dbc::{Database, MessageDef};
 use async_trait::async_trait;
-use seabus_medium::can::frame::{CanFrame, FrameKind};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Format, Kind, Message, Topic, Value};
+use seabus_medium_can::frame::{CanFrame, FrameKind};
 use seabus_modules::datasets::Catalogue;
 use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TopicDecl};
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};

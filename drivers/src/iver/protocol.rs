@@ -10,7 +10,7 @@
 use crate::nmea::sentence::{self, Sentence, num, num_field};
 pub use crate::nmea::sentence::{address, fields};
 use crate::units::FOOT;
-use seabus_medium::serial::framing::nmea_sentence;
+use seabus_medium::framing::nmea_sentence;
 use seabus_modules::geo::wrap360;
 use std::fmt;
 use thiserror::Error;

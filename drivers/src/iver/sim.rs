@@ -24,7 +24,7 @@ use crate::nmea::sentence::build;
 use crate::sim::kinematics::{Limits, Setpoint, Vehicle};
 use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
-use seabus_medium::serial::framing::{ChecksumPolicy, check_nmea};
+use seabus_medium::framing::{ChecksumPolicy, check_nmea};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{Format, Kind, Message, Payload, Stamp};
@@ -630,7 +630,7 @@ impl Module for Sim {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use seabus_medium::serial::framing::nmea_sentence;
+    use seabus_medium::framing::nmea_sentence;
     use seabus_modules::Params;
 
     fn sim() -> Sim {

@@ -1,6 +1,6 @@
 //! NMEA 0183: sentence parsing and building ([`sentence`]) and the sensor drivers that turn
 //! sentences into standard datasets ([`sensors`]). Framing (bytes → sentences, checksums) is the
-//! serial medium's (`seabus_medium::serial::framing`).
+//! serial medium's (`seabus_medium::framing`).
 
 pub mod sensors;
 pub mod sentence;

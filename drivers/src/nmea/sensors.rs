@@ -512,7 +512,7 @@ impl Module for Sensor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use seabus_medium::serial::framing::nmea_sentence;
+    use seabus_medium::framing::nmea_sentence;
     use seabus_modules::Params;
 
     fn sensor(role: Role, pairs: &[(&str, &str)]) -> Sensor {

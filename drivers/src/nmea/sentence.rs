@@ -5,7 +5,7 @@
 //! it out: the checksum is not checked again here. Parsing never panics; a sentence it does not
 //! know is [`Sentence::Other`].
 
-use seabus_medium::serial::framing::{nmea_address, nmea_sentence};
+use seabus_medium::framing::{nmea_address, nmea_sentence};
 use seabus_modules::geo::wrap360;
 use std::fmt;
 use thiserror::Error;

@@ -1,0 +1,68 @@
+//! seabus-medium: the core every other seabus crate stands on — the message model, its payload
+//! formats, media and their interfaces, the transport contract with its capabilities, and the
+//! scheme registry through which medium crates plug in.
+//!
+//! How the parts fit:
+//!
+//! - [`message`] — a [`Message`] has a [`Topic`], a [`Kind`] (data or command), a [`Provenance`]
+//!   (origin node and medium, per-origin sequence number, hop count), a [`Stamp`] and a [`Payload`].
+//! - [`payload`] — a payload is bytes, a named [`DataMap`] ([`datamap`]) or XML text; receivers state the
+//!   [`Format`] they accept and get it converted, losslessly, through the compact binary form
+//!   ([`binary`]), the XML form ([`xmlform`]) and JSON ([`json`]).
+//! - [`medium`] — a [`Medium`] fans messages out to the [`Interface`]s attached to it (the module
+//!   polls and pushes; the runtime of `seabus-modules` drives modules' handlers from them, the
+//!   active mode) and to its [`Transport`], if any, for the wire. Every interface has bounded
+//!   queues ([`queue`]: data drops oldest, commands hold the sender back) and drops duplicates by
+//!   provenance ([`dedup`]). Any medium can carry a fault stage ([`fault`]).
+//! - [`caps`] — what a transport declares it can do ([`Capabilities`]); code asks these, never a
+//!   URL's scheme.
+//! - [`schemes`] — the registry of URL schemes ([`Schemes`]): each medium crate adds its own with
+//!   `register(&mut Schemes)`; the in-process medium (`inproc://`) is built in.
+//! - Shared machinery of the medium crates: [`link`] (one reconnect loop with back-off and link
+//!   state), [`wire`] (one error type for input a wire delivered), [`net`] (UDP endpoints and
+//!   socket options), [`framing`] (NMEA, line, COBS and SLIP framing of byte streams), [`url`]
+//!   (medium URLs), [`tally`] (rate-limited counting of rejected input).
+//! - Files: [`csv`] (table cells), [`xml`] (a small positioned XML tree for the files users write: every error names file,
+//!   line and column), [`fs`] (atomic writes), [`eventlog`] (LCM event logs, seabus's recording
+//!   format), [`parse`] (durations, rates, field lists).
+//!
+//! Who may depend on it: every seabus crate. It depends on no other seabus crate.
+
+pub mod binary;
+pub mod caps;
+pub mod csv;
+pub mod datamap;
+pub mod dedup;
+pub mod eventlog;
+pub mod fault;
+pub mod framing;
+pub mod fs;
+pub mod json;
+pub mod link;
+pub mod medium;
+pub mod message;
+pub mod net;
+pub mod parse;
+pub mod payload;
+pub mod queue;
+pub mod schemes;
+pub mod tally;
+pub mod topic;
+pub mod url;
+pub mod wire;
+pub mod xml;
+pub mod xmlform;
+
+pub use caps::{Capabilities, Carries};
+pub use datamap::{DataMap, Key, Text, Value};
+pub use fault::FaultConfig;
+pub use link::{Backoff, Encode, LinkQueue, LinkSender, Linked, link_queue, spawn_link};
+pub use medium::{
+    BoxFuture, Ingress, Interface, InterfaceStats, IntoTopic, LinkState, Medium, MediumStats, Node,
+    OpenError, Opening, SendError, Transport, TryRecvError,
+};
+pub use message::{Kind, Message, Origin, Provenance, Stamp};
+pub use payload::{ConvertError, Format, Payload};
+pub use schemes::{Opened, Scheme, Schemes};
+pub use topic::{ChannelRegex, Pattern, Topic, TopicError};
+pub use wire::WireError;

@@ -1,0 +1,369 @@
+//! Sockets for media that use IP: UDP endpoints as URLs name them ([`UdpEndpoint`]: unicast to
+//! listed peers, broadcast, or a multicast group), the host's interface addresses, and socket
+//! options the standard library has no call for.
+
+use crate::url::{MediumUrl, UrlError};
+use socket2::{Domain, Protocol, Socket, Type};
+use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
+
+/// The largest UDP payload over IPv4.
+pub const MAX_DATAGRAM: usize = 65_507;
+/// Default socket receive buffer.
+pub const DEFAULT_RECV_BUF: usize = 4 << 20;
+
+/// How a UDP endpoint reaches its peers.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Mode {
+    /// A multicast group.
+    Multicast {
+        /// The group address.
+        group: Ipv4Addr,
+        /// The interface address the group is joined on.
+        iface: Ipv4Addr,
+        /// Hop limit.
+        ttl: u32,
+    },
+    /// Broadcast to an address.
+    Broadcast(Ipv4Addr),
+    /// Unicast to listed peers, as `(host, port)`; host names are resolved when the medium opens.
+    Unicast(Vec<(String, u16)>),
+}
+
+/// A UDP endpoint's settings, read from a URL: a medium's own datagrams (`udp://`) or another
+/// medium's frames over UDP (`dsaav+udp://`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UdpEndpoint {
+    /// How peers are reached.
+    pub mode: Mode,
+    /// Local address to bind.
+    pub bind: SocketAddrV4,
+    /// Port datagrams are sent to (multicast and broadcast).
+    pub port: u16,
+    /// Multicast loopback.
+    pub multicast_loop: bool,
+    /// Requested receive buffer size.
+    pub recv_buf: usize,
+}
+
+impl UdpEndpoint {
+    /// The URL options an endpoint takes.
+    pub const OPTIONS: [&'static str; 7] = [
+        "ttl",
+        "iface",
+        "peer",
+        "bind",
+        "broadcast",
+        "loop",
+        "recv_buf",
+    ];
+
+    /// Reads the settings from a `SCHEME://HOST:PORT` URL, taking the options in
+    /// [`UdpEndpoint::OPTIONS`] and leaving the rest for the caller to take and finish.
+    pub fn from_url(url: &mut MediumUrl) -> Result<UdpEndpoint, UrlError> {
+        let port = url
+            .port
+            .ok_or_else(|| url.error("needs a port (udp://HOST:PORT)"))?;
+        let host: Ipv4Addr = if url.host.is_empty() {
+            Ipv4Addr::UNSPECIFIED
+        } else {
+            url.host
+                .parse()
+                .map_err(|_| url.error(format!("`{}` is not an IPv4 address", url.host)))?
+        };
+        let ttl: Option<u32> = url.take_parsed("ttl", "a hop count 0–255")?;
+        if ttl.is_some_and(|t| t > 255) {
+            return Err(url.error("option `ttl`: expected a hop count 0–255"));
+        }
+        let iface = match url.take("iface") {
+            None => None,
+            Some(name) => Some(
+                name.parse::<Ipv4Addr>()
+                    .ok()
+                    .or_else(|| interface_address(&name))
+                    .ok_or_else(|| {
+                        url.error(format!(
+                            "option `iface={name}`: no such interface or IPv4 address"
+                        ))
+                    })?,
+            ),
+        };
+        let mut peers = Vec::new();
+        for p in url.take_all("peer") {
+            let bad = || url.error(format!("option `peer={p}`: expected HOST:PORT"));
+            let (host, port) = p.rsplit_once(':').ok_or_else(bad)?;
+            let port: u16 = port.parse().map_err(|_| bad())?;
+            let name_like = !host.is_empty()
+                && host
+                    .chars()
+                    .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '.');
+            if host.parse::<Ipv4Addr>().is_err() && !name_like {
+                return Err(bad());
+            }
+            peers.push((host.to_string(), port));
+        }
+        let bind_override: Option<Ipv4Addr> = url.take_parsed("bind", "an IPv4 address")?;
+        let broadcast = url.take_flag("broadcast")?.unwrap_or(false);
+        let multicast_loop = url.take_flag("loop")?.unwrap_or(true);
+        let recv_buf = url
+            .take_parsed("recv_buf", "a size in bytes")?
+            .unwrap_or(DEFAULT_RECV_BUF);
+
+        let (mode, bind_ip) = if host.is_multicast() {
+            let ttl = ttl.unwrap_or(0);
+            // with ttl 0 nothing can leave this host: the loopback interface is the honest choice,
+            // and it works on a machine with no network at all
+            let iface = iface.unwrap_or(if ttl == 0 {
+                Ipv4Addr::LOCALHOST
+            } else {
+                Ipv4Addr::UNSPECIFIED
+            });
+            (
+                Mode::Multicast {
+                    group: host,
+                    iface,
+                    ttl,
+                },
+                host,
+            )
+        } else if broadcast || host == Ipv4Addr::BROADCAST {
+            (Mode::Broadcast(host), Ipv4Addr::UNSPECIFIED)
+        } else {
+            (Mode::Unicast(peers.clone()), host)
+        };
+        if !matches!(mode, Mode::Unicast(_)) && !peers.is_empty() {
+            return Err(url.error(
+                "option `peer` is for unicast URLs; multicast and broadcast reach every listener",
+            ));
+        }
+        Ok(UdpEndpoint {
+            mode,
+            bind: SocketAddrV4::new(bind_override.unwrap_or(bind_ip), port),
+            port,
+            multicast_loop,
+            recv_buf,
+        })
+    }
+
+    /// Where datagrams go, resolving peer host names.
+    pub fn destinations(&self) -> std::io::Result<Vec<SocketAddr>> {
+        Ok(match &self.mode {
+            Mode::Multicast { group, .. } => {
+                vec![SocketAddr::V4(SocketAddrV4::new(*group, self.port))]
+            }
+            Mode::Broadcast(addr) => vec![SocketAddr::V4(SocketAddrV4::new(*addr, self.port))],
+            Mode::Unicast(peers) => {
+                let mut out = Vec::with_capacity(peers.len());
+                for (host, port) in peers {
+                    let addr = std::net::ToSocketAddrs::to_socket_addrs(&(host.as_str(), *port))?
+                        .find(SocketAddr::is_ipv4)
+                        .ok_or_else(|| {
+                            std::io::Error::new(
+                                std::io::ErrorKind::NotFound,
+                                format!("{host} has no IPv4 address"),
+                            )
+                        })?;
+                    out.push(addr);
+                }
+                out
+            }
+        })
+    }
+}
+
+/// The first IPv4 address of a network interface.
+pub fn interface_address(name: &str) -> Option<Ipv4Addr> {
+    interface_addresses()
+        .into_iter()
+        .find(|(n, _)| n == name)
+        .map(|(_, a)| a)
+}
+
+/// Every IPv4 address of this host's network interfaces, with the interface's name.
+pub fn interface_addresses() -> Vec<(String, Ipv4Addr)> {
+    let mut addrs: *mut libc::ifaddrs = std::ptr::null_mut();
+    // SAFETY: getifaddrs fills `addrs` with a list we free below with freeifaddrs
+    if unsafe { libc::getifaddrs(&mut addrs) } != 0 {
+        return Vec::new();
+    }
+    let mut found = Vec::new();
+    let mut cur = addrs;
+    while !cur.is_null() {
+        // SAFETY: `cur` is a node of the list getifaddrs returned, alive until freeifaddrs
+        let ifa = unsafe { &*cur };
+        if !ifa.ifa_addr.is_null() && !ifa.ifa_name.is_null() {
+            // SAFETY: ifa_name is a NUL-terminated string owned by the list
+            let ifname = unsafe { std::ffi::CStr::from_ptr(ifa.ifa_name) };
+            // SAFETY: ifa_addr is non-null and points to a sockaddr of the family it states
+            let family = unsafe { (*ifa.ifa_addr).sa_family };
+            if i32::from(family) == libc::AF_INET {
+                // SAFETY: the family is AF_INET, so the address is a sockaddr_in
+                let sin = unsafe { &*(ifa.ifa_addr as *const libc::sockaddr_in) };
+                found.push((
+                    ifname.to_string_lossy().into_owned(),
+                    Ipv4Addr::from(u32::from_be(sin.sin_addr.s_addr)),
+                ));
+            }
+        }
+        cur = ifa.ifa_next;
+    }
+    // SAFETY: `addrs` came from getifaddrs and is freed once
+    unsafe { libc::freeifaddrs(addrs) };
+    found
+}
+
+/// Sets an integer socket option that socket2 has no call for.
+pub fn set_int_option(
+    s: &impl std::os::fd::AsRawFd,
+    level: libc::c_int,
+    name: libc::c_int,
+    value: libc::c_int,
+) -> std::io::Result<()> {
+    // SAFETY: setsockopt reads an int from a valid pointer of the stated length
+    let r = unsafe {
+        libc::setsockopt(
+            s.as_raw_fd(),
+            level,
+            name,
+            (&value as *const libc::c_int).cast(),
+            std::mem::size_of::<libc::c_int>() as libc::socklen_t,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+/// Sets a socket's receive buffer to `bytes`, beyond the system's limit when the process may
+/// (`SO_RCVBUFFORCE`, for root); returns the size the kernel granted.
+pub fn set_recv_buffer(s: &Socket, bytes: usize) -> usize {
+    let _ = s.set_recv_buffer_size(bytes);
+    if s.recv_buffer_size().unwrap_or(0) < bytes {
+        let size = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
+        // a refusal (not root) leaves the buffer as it was
+        let _ = set_int_option(s, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, size);
+    }
+    // Linux reports double what was asked for (its bookkeeping overhead)
+    s.recv_buffer_size().unwrap_or(0) / 2
+}
+
+/// A socket set up for an endpoint (a shared port for multicast and broadcast, the group joined, the
+/// receive buffer sized), non-blocking, and the receive buffer the kernel granted.
+pub fn socket(cfg: &UdpEndpoint) -> std::io::Result<(std::net::UdpSocket, usize)> {
+    let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))?;
+    let shared = !matches!(cfg.mode, Mode::Unicast(_));
+    if shared {
+        // several listeners on one host share a multicast or broadcast port
+        s.set_reuse_address(true)?;
+    }
+    let got = set_recv_buffer(&s, cfg.recv_buf);
+    match &cfg.mode {
+        Mode::Multicast { iface, ttl, .. } => {
+            s.set_multicast_ttl_v4(*ttl)?;
+            s.set_multicast_loop_v4(cfg.multicast_loop)?;
+            if !iface.is_unspecified() {
+                s.set_multicast_if_v4(iface)?;
+            }
+        }
+        Mode::Broadcast(_) => s.set_broadcast(true)?,
+        Mode::Unicast(_) => {}
+    }
+    s.bind(&SocketAddr::V4(cfg.bind).into())?;
+    if let Mode::Multicast { group, iface, .. } = &cfg.mode
+        && let Err(e) = s.join_multicast_v4(group, iface)
+    {
+        if !iface.is_unspecified() {
+            return Err(e);
+        }
+        // no route for multicast (a machine with no network): fall back to loopback
+        tracing::info!("joining {group} on the default interface failed ({e}); using loopback");
+        s.join_multicast_v4(group, &Ipv4Addr::LOCALHOST)?;
+        s.set_multicast_if_v4(&Ipv4Addr::LOCALHOST)?;
+    }
+    s.set_nonblocking(true)?;
+    Ok((s.into(), got))
+}
+
+/// A socket set up for an endpoint, and the addresses its datagrams go to.
+pub fn bind(cfg: &UdpEndpoint) -> std::io::Result<(std::net::UdpSocket, Vec<SocketAddr>)> {
+    Ok((socket(cfg)?.0, cfg.destinations()?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cfg(url: &str) -> Result<UdpEndpoint, UrlError> {
+        let mut url = MediumUrl::parse(url).unwrap();
+        let ep = UdpEndpoint::from_url(&mut url)?;
+        url.finish(&UdpEndpoint::OPTIONS)?;
+        Ok(ep)
+    }
+
+    #[test]
+    fn modes_follow_the_address() {
+        let c = cfg("udp://239.255.42.1:47800").unwrap();
+        assert_eq!(
+            c.mode,
+            Mode::Multicast {
+                group: Ipv4Addr::new(239, 255, 42, 1),
+                iface: Ipv4Addr::LOCALHOST,
+                ttl: 0
+            }
+        );
+        let c = cfg("udp://239.255.42.1:47800?ttl=1").unwrap();
+        assert!(matches!(c.mode, Mode::Multicast { iface, ttl: 1, .. } if iface.is_unspecified()));
+        let c = cfg("udp://255.255.255.255:5000").unwrap();
+        assert_eq!(c.mode, Mode::Broadcast(Ipv4Addr::BROADCAST));
+        assert_eq!(c.bind, SocketAddrV4::new(Ipv4Addr::UNSPECIFIED, 5000));
+        let c = cfg("udp://127.0.0.1:5000?peer=127.0.0.1:5001,127.0.0.1:5002").unwrap();
+        assert_eq!(c.destinations().unwrap().len(), 2);
+        let c = cfg("udp://239.255.42.1:47800?iface=lo").unwrap();
+        assert!(matches!(c.mode, Mode::Multicast { iface, .. } if iface == Ipv4Addr::LOCALHOST));
+    }
+
+    #[test]
+    fn bad_urls_say_why() {
+        assert!(
+            cfg("udp://239.255.42.1")
+                .unwrap_err()
+                .reason
+                .contains("needs a port")
+        );
+        assert!(
+            cfg("udp://example:1")
+                .unwrap_err()
+                .reason
+                .contains("not an IPv4 address")
+        );
+        assert!(
+            cfg("udp://239.1.1.1:1?ttl=300")
+                .unwrap_err()
+                .reason
+                .contains("hop count")
+        );
+        assert!(
+            cfg("udp://239.1.1.1:1?iface=nosuch0")
+                .unwrap_err()
+                .reason
+                .contains("no such interface")
+        );
+        assert!(
+            cfg("udp://239.1.1.1:1?peer=1.2.3.4:5")
+                .unwrap_err()
+                .reason
+                .contains("for unicast")
+        );
+        assert!(
+            cfg("udp://1.2.3.4:1?peer=nonsense")
+                .unwrap_err()
+                .reason
+                .contains("HOST:PORT")
+        );
+        assert!(
+            cfg("udp://1.2.3.4:1?max=10").is_err(),
+            "not an endpoint's option"
+        );
+    }
+}

@@ -1,0 +1,333 @@
+//! liblcm (the C library, through the `lcm` crate) and seabus's LCM medium side by side, on
+//! loopback multicast with ttl 0, in the same run: one sender and one receiver each.
+//!
+//! - 64-byte messages unpaced: delivered rate and loss;
+//! - seabus paced at 300k msg/s: loss;
+//! - 100 kB messages unpaced: delivered MB/s;
+//! - 64-byte messages paced at 2 kHz: one-way latency p50 / p99.
+//!
+//! Run: `cargo bench -p seabus-medium --bench lcm`
+
+#[path = "../../core/benches/common.rs"]
+mod common;
+#[path = "../tests/support/liblcm.rs"]
+mod liblcm;
+
+use seabus_medium::{Node, Payload, Stamp, Topic};
+use seabus_medium_lcm::wire;
+use std::cell::RefCell;
+use std::rc::Rc;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+const QUIET: Duration = Duration::from_millis(300);
+const ROUNDS: usize = 3;
+
+fn url() -> String {
+    format!(
+        "udpm://239.255.{}.{}:{}?ttl=0",
+        fastrand::u8(1..250),
+        fastrand::u8(1..250),
+        fastrand::u16(20_000..60_000)
+    )
+}
+
+/// What a receiver saw: count, bytes, time from first to last, one-way latencies.
+#[derive(Default)]
+struct Seen {
+    count: usize,
+    bytes: usize,
+    first: Option<Instant>,
+    last: Option<Instant>,
+    latencies: Vec<Duration>,
+    /// Messages per second the sender put out.
+    offered: f64,
+}
+
+impl Seen {
+    fn take(&mut self, data: &[u8]) {
+        let now = Instant::now();
+        self.first.get_or_insert(now);
+        self.last = Some(now);
+        self.count += 1;
+        self.bytes += data.len();
+        if let Some(sent) = data.get(..8) {
+            let sent = i64::from_le_bytes(sent.try_into().unwrap_or_default());
+            self.latencies
+                .push(Duration::from_nanos((Stamp::now().0 - sent).max(0) as u64));
+        }
+    }
+
+    fn span(&self) -> f64 {
+        match (self.first, self.last) {
+            (Some(f), Some(l)) => (l - f).as_secs_f64().max(1e-9),
+            _ => 1e-9,
+        }
+    }
+
+    fn rate(&self) -> f64 {
+        self.count as f64 / self.span()
+    }
+
+    fn mb_per_s(&self) -> f64 {
+        self.bytes as f64 / self.span() / 1e6
+    }
+}
+
+fn stamped(size: usize) -> Vec<u8> {
+    let mut p = vec![0u8; size];
+    p[..8].copy_from_slice(&Stamp::now().0.to_le_bytes());
+    p
+}
+
+/// liblcm sender and receiver (each its own instance and thread), with liblcm's defaults.
+fn c_lcm(size: usize, n: usize, rate: Option<f64>) -> Seen {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let receiver = std::thread::spawn(move || {
+        let mut lc = liblcm::create();
+        let seen = Rc::new(RefCell::new(Seen::default()));
+        let s = seen.clone();
+        lc.subscribe("BENCH", move |m: liblcm::Raw| s.borrow_mut().take(&m.0));
+        let _ = ready_tx.send(());
+        let mut quiet_since = Instant::now();
+        while seen.borrow().count < n && quiet_since.elapsed() < QUIET {
+            if lc.handle_timeout(QUIET / 3).is_ok() {
+                quiet_since = Instant::now();
+            }
+        }
+        seen.take()
+    });
+    let _ = ready_rx.recv();
+    let mut lc = liblcm::create();
+    let start = Instant::now();
+    for i in 0..n {
+        if let Some(r) = rate {
+            common::pace(start + Duration::from_secs_f64(i as f64 / r));
+        }
+        let _ = lc.publish("BENCH", &liblcm::Raw(stamped(size)));
+    }
+    let offered = n as f64 / start.elapsed().as_secs_f64();
+    let mut seen = receiver.join().expect("receiver");
+    seen.offered = offered;
+    seen
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+/// A seabus LCM medium on its own thread, taking up to `n` messages until the bus goes quiet;
+/// returns once it listens.
+fn seabus_receiver(url: &str, n: usize) -> std::thread::JoinHandle<Seen> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let url = url.to_string();
+    let receiver = std::thread::spawn(move || {
+        runtime().block_on(async move {
+            let m = seabus_medium_lcm::schemes()
+                .open("lcm", &url, &Node::new("rx"))
+                .expect("opens");
+            let mut port = m
+                .attach_with("rx", n, 16)
+                .subscribed("**")
+                .expect("pattern");
+            let _ = ready_tx.send(());
+            let mut seen = Seen::default();
+            while let Ok(Some(msg)) = tokio::time::timeout(QUIET, port.recv()).await {
+                seen.take(msg.payload.as_bytes().map_or(&[][..], |b| &b[..]));
+                if seen.count == n {
+                    break;
+                }
+            }
+            seen
+        })
+    });
+    let _ = ready_rx.recv();
+    receiver
+}
+
+/// Two seabus LCM media, sender and receiver, each on its own thread.
+fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
+    let receiver = seabus_receiver(url, n);
+    let offered = runtime().block_on(async move {
+        let m = seabus_medium_lcm::schemes()
+            .open("lcm", url, &Node::new("tx"))
+            .expect("opens");
+        let port = m.attach("tx");
+        let topic = Topic::new("BENCH").expect("topic");
+        let start = Instant::now();
+        for i in 0..n {
+            if let Some(r) = rate {
+                common::pace(start + Duration::from_secs_f64(i as f64 / r));
+            }
+            let _ = port.send(&topic, Payload::from(stamped(size))).await;
+        }
+        n as f64 / start.elapsed().as_secs_f64()
+    });
+    let mut seen = receiver.join().expect("receiver");
+    seen.offered = offered;
+    seen
+}
+
+/// Datagrams a plain sender hands the kernel in one call.
+const BATCH: usize = 32;
+
+/// Sends `batch` on the connected `sock` with as few sendmmsg(2) calls as the kernel allows.
+fn send_batch(sock: &std::net::UdpSocket, batch: &[Vec<u8>]) {
+    use std::os::fd::AsRawFd;
+    let mut iovs: Vec<libc::iovec> = batch
+        .iter()
+        .map(|d| libc::iovec {
+            iov_base: d.as_ptr() as *mut libc::c_void,
+            iov_len: d.len(),
+        })
+        .collect();
+    // SAFETY: mmsghdr is plain data; the zeroed fields mean no address, control data or flags
+    let mut msgs: Vec<libc::mmsghdr> = iovs
+        .iter_mut()
+        .map(|iov| {
+            let mut m: libc::mmsghdr = unsafe { std::mem::zeroed() };
+            m.msg_hdr.msg_iov = iov;
+            m.msg_hdr.msg_iovlen = 1;
+            m
+        })
+        .collect();
+    let mut sent = 0;
+    while sent < msgs.len() {
+        // SAFETY: the headers point at iovecs and datagrams that outlive the call
+        let n = unsafe {
+            libc::sendmmsg(
+                sock.as_raw_fd(),
+                msgs[sent..].as_mut_ptr(),
+                (msgs.len() - sent) as libc::c_uint,
+                0,
+            )
+        };
+        if n <= 0 {
+            return;
+        }
+        sent += n as usize;
+    }
+}
+
+/// A seabus LCM medium receiving what plain sockets send (`senders` threads sharing `rate`): LC02
+/// datagrams made beforehand, so that the offered rate is the kernel's, not a sender library's.
+fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) -> Seen {
+    let receiver = seabus_receiver(url, n);
+    let rest = url.trim_start_matches("udpm://");
+    let group_port = rest.split('?').next().unwrap_or(rest);
+    let start = Instant::now();
+    let per = n / senders;
+    let threads: Vec<_> = (0..senders)
+        .map(|_| {
+            let group_port = group_port.to_string();
+            std::thread::spawn(move || {
+                let sock = std::net::UdpSocket::bind("0.0.0.0:0").expect("bind");
+                sock.set_multicast_ttl_v4(0).expect("ttl");
+                sock.connect(group_port).expect("connect");
+                let datagrams: Vec<Vec<u8>> = (0..per)
+                    .map(|i| {
+                        let mut d =
+                            wire::encode(i as u32, "BENCH", &vec![0u8; size]).expect("encodes");
+                        d.swap_remove(0)
+                    })
+                    .collect();
+                let start = Instant::now();
+                let each = rate / senders as f64;
+                // in batches of BATCH datagrams, one sendmmsg(2) each, each batch on time
+                for (b, batch) in datagrams.chunks(BATCH).enumerate() {
+                    common::pace(start + Duration::from_secs_f64((b * BATCH) as f64 / each));
+                    send_batch(&sock, batch);
+                }
+            })
+        })
+        .collect();
+    for t in threads {
+        let _ = t.join();
+    }
+    let offered = (per * senders) as f64 / start.elapsed().as_secs_f64();
+    let mut seen = receiver.join().expect("receiver");
+    seen.offered = offered;
+    seen
+}
+
+fn main() {
+    let c_url = url();
+    liblcm::use_url(&c_url);
+    let sb_url = format!("{}&recv_buf_size=8388608", url());
+    println!("LCM on loopback multicast, ttl 0: liblcm (C, its defaults) vs seabus's LCM medium");
+
+    let n = 300_000;
+    let (mut c_rates, mut s_rates, mut c_got, mut s_got) = (Vec::new(), Vec::new(), 0, 0);
+    let (mut c_sent, mut s_sent) = (Vec::new(), Vec::new());
+    for _ in 0..ROUNDS {
+        let c = c_lcm(64, n, None);
+        c_got += c.count;
+        c_rates.push(c.rate());
+        c_sent.push(c.offered);
+        let s = seabus(&sb_url, 64, n, None);
+        s_got += s.count;
+        s_rates.push(s.rate());
+        s_sent.push(s.offered);
+    }
+    println!(
+        "  64 B unpaced, senders' rates: liblcm {}   seabus {}",
+        common::rate(common::median(c_sent)),
+        common::rate(common::median(s_sent))
+    );
+    let (c, s) = (common::median(c_rates), common::median(s_rates));
+    let total = (n * ROUNDS) as f64;
+    println!(
+        "  64 B unpaced, {n} sent per run, median of {ROUNDS}: liblcm delivers {} ({:.0}% received)   seabus {} ({:.0}% received)   ratio {:.2} (target: at least 3)",
+        common::rate(c),
+        100.0 * c_got as f64 / total,
+        common::rate(s),
+        100.0 * s_got as f64 / total,
+        s / c
+    );
+    let paced = seabus(&sb_url, 64, n, Some(300_000.0));
+    println!(
+        "  64 B paced at 300k msg/s from a seabus sender (it reached {}): seabus delivered {} of {n}, lost {}",
+        common::rate(paced.offered),
+        paced.count,
+        n - paced.count
+    );
+    for senders in [1, 2, 3] {
+        let raw = seabus_from_raw(&sb_url, 64, n, 300_000.0, senders);
+        println!(
+            "  64 B paced at 300k msg/s from {senders} plain socket(s) (they reached {}): seabus delivered {} of {n}, lost {} (target: none)",
+            common::rate(raw.offered),
+            raw.count,
+            n - raw.count
+        );
+    }
+
+    let n = 20_000;
+    let (mut c_mb, mut s_mb) = (Vec::new(), Vec::new());
+    for _ in 0..ROUNDS {
+        let c = c_lcm(100_000, n, None);
+        c_mb.push(c.mb_per_s());
+        let s = seabus(&sb_url, 100_000, n, None);
+        s_mb.push(s.mb_per_s());
+    }
+    let (c, s) = (common::median(c_mb), common::median(s_mb));
+    println!(
+        "  100 kB unpaced, {n} sent per run, median of {ROUNDS}: liblcm {c:.0} MB/s   seabus {s:.0} MB/s   ratio {:.2} (target: at least 1)",
+        s / c
+    );
+
+    let n = 10_000;
+    let mut c_lat = c_lcm(64, n, Some(2_000.0)).latencies;
+    let mut s_lat = seabus(&sb_url, 64, n, Some(2_000.0)).latencies;
+    c_lat.sort();
+    s_lat.sort();
+    println!(
+        "  64 B paced at 2 kHz, one-way latency: liblcm p50 {:.1} us p99 {:.1} us   seabus p50 {:.1} us p99 {:.1} us",
+        common::quantile_us(&c_lat, 0.5),
+        common::quantile_us(&c_lat, 0.99),
+        common::quantile_us(&s_lat, 0.5),
+        common::quantile_us(&s_lat, 0.99)
+    );
+}

@@ -1,0 +1,441 @@
+//! The MOOS medium: an asynchronous V10 client of a MOOSDB (`moos://HOST:9000?name=seabus`).
+//!
+//! It connects, sends the handshake and its name, and on the welcome takes the clock skew the DB
+//! measured; then it registers for what its URL's `register` lists (variable names, or patterns
+//! with `*` and `?` registered by wildcard; each may end `:SECONDS`, the minimum interval between
+//! notifications). Every second it sends a timing message, which keeps the connection alive and
+//! refines the skew (new = 0.9 old + 0.1 measured). When the DB goes away the link goes down, sends
+//! fail at once, and the medium connects again (after `reopen`, doubling up to `reopen_max`; see
+//! [`Backoff`]) and registers again.
+//!
+//! A MOOS variable is a topic of the same name. Values become payloads as [`super`] describes;
+//! notifications the medium itself published (the DB sends back what a client registered for) are
+//! not delivered again.
+
+use super::wire::{self, MoosMsg, Packet, Read, data, kind};
+use super::{from_moos, to_moos};
+use bytes::Bytes;
+use seabus_medium::caps::{Capabilities, Carries, Framing};
+use seabus_medium::link::{Backoff, Encode, LinkQueue, LinkSender, Linked, link_queue, spawn_link};
+use seabus_medium::medium::{Ingress, LinkState, OpenError, Opening, SendError};
+use seabus_medium::message::Message;
+use seabus_medium::topic::Topic;
+use seabus_medium::url::{MediumUrl, UrlError};
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::TcpStream;
+
+/// Messages waiting to be sent; a sender waits when the connection is this far behind.
+const WRITE_QUEUE: usize = 4096;
+/// How often a timing message goes to the DB.
+const TIMING_EVERY: Duration = Duration::from_secs(1);
+
+/// One registration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Registration {
+    /// A variable name, or a pattern with `*` and `?`.
+    pub pattern: String,
+    /// The minimum interval between notifications, seconds.
+    pub interval: f64,
+}
+
+/// A MOOS medium's settings, read from its URL.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MoosConfig {
+    /// The DB's address.
+    pub host: String,
+    /// The DB's port.
+    pub port: u16,
+    /// This client's name (unique among the DB's clients).
+    pub name: String,
+    /// What it registers for.
+    pub register: Vec<Registration>,
+    /// Waits between attempts to connect.
+    pub reopen: Backoff,
+}
+
+impl MoosConfig {
+    /// Reads the settings of a `moos://HOST:PORT` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<MoosConfig, UrlError> {
+        if url.host.is_empty() {
+            return Err(url.error("expected moos://HOST:PORT (the MOOSDB, port 9000 by default)"));
+        }
+        let name = url.take("name").unwrap_or_else(|| "seabus".to_string());
+        if name.is_empty() || name.contains(char::is_whitespace) {
+            return Err(url.error(format!(
+                "option `name={name}`: a client name without blanks"
+            )));
+        }
+        let register = match url.take("register") {
+            None => vec![Registration {
+                pattern: "*".into(),
+                interval: 0.0,
+            }],
+            Some(list) => list
+                .split(',')
+                .map(str::trim)
+                .filter(|s| !s.is_empty())
+                .map(|item| {
+                    let (pattern, interval) = match item.rsplit_once(':') {
+                        Some((p, i)) => {
+                            let i: f64 = i.parse().ok().filter(|i: &f64| *i >= 0.0).ok_or_else(|| {
+                                url.error(format!(
+                                    "option `register`: `{item}`: the interval is seconds, 0 or more"
+                                ))
+                            })?;
+                            (p, i)
+                        }
+                        None => (item, 0.0),
+                    };
+                    Ok(Registration {
+                        pattern: pattern.to_string(),
+                        interval,
+                    })
+                })
+                .collect::<Result<Vec<_>, UrlError>>()?,
+        };
+        let cfg = MoosConfig {
+            host: url.host.clone(),
+            port: url.port.unwrap_or(9000),
+            name,
+            register,
+            reopen: Backoff::from_url(url)?,
+        };
+        url.finish(&[])?;
+        Ok(cfg)
+    }
+
+    /// What a MOOS medium can do: MOOS variables (doubles, strings of `key=value` pairs, binary
+    /// strings: datamaps and bytes) carried on a TCP stream to the DB, without seabus's
+    /// provenance; the DB's echo of this client's own writes is not delivered; the connection
+    /// comes and goes.
+    pub fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            provenance: false,
+            framing: Framing::Stream,
+            max_frame: Some(wire::MAX_PACKET - wire::PACKET_HEADER),
+            hears_own: false,
+            carries: Carries::DataMap,
+            link_state: true,
+            native: None,
+        }
+    }
+}
+
+/// The clock skew (MOOS time − local time) as f64 bits, shared with the connection task.
+#[derive(Default)]
+struct Skew(AtomicU64);
+
+impl Skew {
+    fn get(&self) -> f64 {
+        f64::from_bits(self.0.load(Ordering::Relaxed))
+    }
+    fn set(&self, s: f64) {
+        self.0.store(s.to_bits(), Ordering::Relaxed);
+    }
+}
+
+fn local_now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// What `moos://` does with messages: notifications in the MOOS wire format, from this client,
+/// stamped with the DB's time.
+pub struct MoosEncoder {
+    cfg: MoosConfig,
+    client: Arc<str>,
+    skew: Arc<Skew>,
+}
+
+impl Encode for MoosEncoder {
+    type Frame = Bytes;
+
+    fn capabilities(&self) -> Capabilities {
+        self.cfg.capabilities()
+    }
+
+    fn encode(&self, msg: &Message, link: &LinkSender<Bytes>) -> Result<Bytes, SendError> {
+        let (data_type, value, string) = to_moos(&msg.payload).map_err(|e| link.error(e))?;
+        let m = MoosMsg {
+            id: 0,
+            kind: kind::NOTIFY,
+            data_type,
+            source: self.client.as_bytes().to_vec(),
+            key: msg.topic.as_str().as_bytes().to_vec(),
+            time: local_now() + self.skew.get(),
+            value,
+            string,
+            ..MoosMsg::default()
+        };
+        if m.encoded_len() + wire::PACKET_HEADER > wire::MAX_PACKET {
+            return Err(SendError::TooLarge {
+                medium: link.medium().to_string(),
+                size: m.encoded_len(),
+                max: wire::MAX_PACKET - wire::PACKET_HEADER,
+            });
+        }
+        let mut out = Vec::with_capacity(m.encoded_len());
+        m.encode_into(&mut out);
+        Ok(Bytes::from(out))
+    }
+}
+
+/// The transport of `moos://`.
+pub type MoosTransport = Linked<MoosEncoder>;
+
+/// Opens a `moos://` medium: a task keeps the connection to the DB.
+pub(crate) fn open(mut o: Opening) -> Result<Arc<MoosTransport>, OpenError> {
+    let cfg = MoosConfig::from_url(&mut o.url)?;
+    let skew = Arc::new(Skew::default());
+    let db = format!("{}:{}", cfg.host, cfg.port);
+    let (link, queue) = link_queue(&o.name, format!("the MOOSDB at {db}"), WRITE_QUEUE);
+    o.ingress.init_link(LinkState::Down(format!(
+        "not connected to the MOOSDB at {db} yet"
+    )));
+    let (connecting, running) = ((cfg.clone(), skew.clone()), (cfg.clone(), skew.clone()));
+    let ingress = o.ingress.clone();
+    spawn_link(
+        &o.ingress,
+        cfg.reopen,
+        queue,
+        move || {
+            let (cfg, skew) = connecting.clone();
+            Box::pin(async move {
+                let db = format!("{}:{}", cfg.host, cfg.port);
+                connect(&cfg, &skew)
+                    .await
+                    .map_err(|reason| format!("MOOSDB at {db}: {reason}"))
+            })
+        },
+        move |(sock, buf), queue| {
+            let ((cfg, skew), ingress) = (running.clone(), ingress.clone());
+            Box::pin(async move {
+                let db = format!("{}:{}", cfg.host, cfg.port);
+                let reason = session(sock, buf, &cfg, &skew, queue, &ingress).await;
+                format!("MOOSDB at {db}: {reason}")
+            })
+        },
+    );
+    Ok(Arc::new(Linked::new(
+        MoosEncoder {
+            client: Arc::from(cfg.name.as_str()),
+            cfg,
+            skew,
+        },
+        link,
+    )))
+}
+
+/// Connects, shakes hands and registers; returns the connection and what it read beyond.
+async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), String> {
+    let mut sock = tokio::time::timeout(
+        Duration::from_secs(5),
+        TcpStream::connect((cfg.host.as_str(), cfg.port)),
+    )
+    .await
+    .map_err(|_| "no connection within 5 s".to_string())?
+    .map_err(|e| format!("cannot connect: {e}"))?;
+    let _ = sock.set_nodelay(true);
+    sock.write_all(&wire::hello(&cfg.name, local_now()))
+        .await
+        .map_err(|e| format!("handshake: {e}"))?;
+    let mut buf = Vec::new();
+    let answer = wire::next_packet(&mut sock, &mut buf, Duration::from_secs(5)).await?;
+    let Some(first) = answer.messages.first() else {
+        return Err("an empty answer to the handshake".into());
+    };
+    match first.kind {
+        kind::WELCOME => skew.set(first.value),
+        kind::POISON => {
+            return Err(format!(
+                "refused: {}",
+                String::from_utf8_lossy(&first.string)
+            ));
+        }
+        k => {
+            return Err(format!(
+                "answered the handshake with a `{}` message",
+                k as char
+            ));
+        }
+    }
+    let mut registrations = Vec::new();
+    for r in &cfg.register {
+        registrations.push(if r.pattern.contains(['*', '?']) {
+            MoosMsg {
+                kind: kind::WILDCARD_REGISTER,
+                data_type: data::STRING,
+                // a MOOSDB subscribes the client the source names
+                source: cfg.name.as_bytes().to_vec(),
+                key: cfg.name.as_bytes().to_vec(),
+                string: format!(
+                    "AppPattern=*,VarPattern={},Interval={}",
+                    r.pattern, r.interval
+                )
+                .into_bytes(),
+                time: local_now() + skew.get(),
+                ..MoosMsg::default()
+            }
+        } else {
+            MoosMsg {
+                kind: kind::REGISTER,
+                data_type: data::DOUBLE,
+                source: cfg.name.as_bytes().to_vec(),
+                key: r.pattern.as_bytes().to_vec(),
+                value: r.interval,
+                time: local_now() + skew.get(),
+                ..MoosMsg::default()
+            }
+        });
+    }
+    sock.write_all(
+        &Packet {
+            messages: registrations,
+        }
+        .encode(),
+    )
+    .await
+    .map_err(|e| format!("registering: {e}"))?;
+    Ok((sock, buf))
+}
+
+/// Carries messages both ways until the connection fails; returns why.
+async fn session(
+    mut sock: TcpStream,
+    mut buf: Vec<u8>,
+    cfg: &MoosConfig,
+    skew: &Skew,
+    queue: &mut LinkQueue<Bytes>,
+    ingress: &Ingress,
+) -> String {
+    let (mut reader, mut writer) = sock.split();
+    let mut timing = tokio::time::interval(TIMING_EVERY);
+    let mut topics: HashMap<Vec<u8>, Option<Topic>> = HashMap::new();
+    let mut chunk = vec![0u8; 65_536];
+    // a timing request is waiting for its answer
+    let mut asked = false;
+    loop {
+        loop {
+            match wire::read_packet(&buf) {
+                Ok(Read::Packet(p, n)) => {
+                    buf.drain(..n);
+                    for m in p.messages {
+                        match m.kind {
+                            kind::NOTIFY => deliver(&m, cfg, &mut topics, ingress),
+                            // the DB sends back the timing message with its own
+                            // time as the value; the time is still the request's
+                            kind::TIMING if std::mem::take(&mut asked) => {
+                                skew.set(refined_skew(skew.get(), m.time, m.value, local_now()));
+                            }
+                            _ => {}
+                        }
+                    }
+                }
+                Ok(Read::Incomplete(_)) => break,
+                Err(e) => {
+                    ingress.reject(e.kind(), format_args!("from the MOOSDB: {e}"));
+                    return format!("malformed packet: {e}");
+                }
+            }
+        }
+        tokio::select! {
+            read = reader.read(&mut chunk) => match read {
+                Ok(0) => return "the connection closed".into(),
+                Ok(n) => buf.extend_from_slice(&chunk[..n]),
+                Err(e) => return e.to_string(),
+            },
+            first = queue.recv() => {
+                let Some(first) = first else { return "closed".into() };
+                // what waits goes in one packet
+                let mut body = first.to_vec();
+                let mut count = 1i32;
+                while body.len() < 1 << 20 && let Some(m) = queue.try_recv() {
+                    body.extend_from_slice(&m);
+                    count += 1;
+                }
+                let mut packet = Vec::with_capacity(body.len() + wire::PACKET_HEADER);
+                packet.extend_from_slice(&((body.len() + wire::PACKET_HEADER) as i32).to_le_bytes());
+                packet.extend_from_slice(&count.to_le_bytes());
+                packet.push(0);
+                packet.extend_from_slice(&body);
+                let sent = writer.write_all(&packet).await;
+                queue.written(u64::try_from(count).unwrap_or(0));
+                if let Err(e) = sent {
+                    return e.to_string();
+                }
+            }
+            _ = timing.tick() => {
+                let now = local_now();
+                asked = true;
+                let t = MoosMsg {
+                    kind: kind::TIMING,
+                    data_type: data::DOUBLE,
+                    key: b"_async_timing".to_vec(),
+                    time: now,
+                    ..MoosMsg::default()
+                };
+                if let Err(e) = writer.write_all(&Packet { messages: vec![t] }.encode()).await {
+                    return e.to_string();
+                }
+            }
+        }
+    }
+}
+
+/// The skew after a timing reply: `rq` when the request left (local time), `tx` when the DB
+/// answered (its time), `rx` when the answer came (local time). As a MOOS client does: the measured
+/// skew is 0.5·((tx − rx) + (tx − rq)), and the new skew 0.9·old + 0.1·measured. A reply whose
+/// times are not finite leaves the skew as it was.
+pub(crate) fn refined_skew(old: f64, rq: f64, tx: f64, rx: f64) -> f64 {
+    let measured = 0.5 * ((tx - rx) + (tx - rq));
+    if measured.is_finite() {
+        0.9 * old + 0.1 * measured
+    } else {
+        old
+    }
+}
+
+/// Delivers a notification as a message on the variable's topic.
+fn deliver(
+    m: &MoosMsg,
+    cfg: &MoosConfig,
+    topics: &mut HashMap<Vec<u8>, Option<Topic>>,
+    ingress: &Ingress,
+) {
+    // the DB sends back what this client published when it registered for it
+    if m.source == cfg.name.as_bytes() {
+        return;
+    }
+    if topics.len() > 65_536 {
+        topics.clear();
+    }
+    let topic = topics
+        .entry(m.key.clone())
+        .or_insert_with(|| {
+            std::str::from_utf8(&m.key)
+                .ok()
+                .and_then(|k| Topic::new(k).ok())
+        })
+        .clone();
+    let Some(topic) = topic else {
+        ingress.reject(
+            "moos-bad-key",
+            format_args!("variable `{}` is not a topic name", m.key_str()),
+        );
+        return;
+    };
+    match from_moos(m) {
+        Ok(payload) => {
+            ingress.originate(topic, payload);
+        }
+        Err(e) => ingress.reject(
+            "moos-bad-value",
+            format_args!("variable `{}`: {e}", m.key_str()),
+        ),
+    }
+}

@@ -1,0 +1,559 @@
+//! The MOOS medium against a MOOSDB: the handshake, register and notify, wildcard registration,
+//! interval throttling, structured values as key=value strings, the keep-alive, a name already
+//! taken, the DB restarting (clients reconnect and register again), and a DB that sends garbage.
+
+use seabus_medium::{DataMap, Interface, LinkState, Medium, Message, Node};
+use seabus_medium_moos::db::MoosDb;
+use seabus_medium_moos::wire::{self, MoosMsg, Packet, Read, data, kind};
+use std::net::SocketAddr;
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+
+fn any_port() -> SocketAddr {
+    "127.0.0.1:0".parse().unwrap()
+}
+
+fn client(db: SocketAddr, name: &str, register: &str) -> Medium {
+    seabus_medium_moos::schemes()
+        .open(
+            name,
+            &format!(
+                "moos://127.0.0.1:{}?name={name}&register={register}&reopen=100ms",
+                db.port()
+            ),
+            &Node::new("t"),
+        )
+        .expect("the MOOS medium opens")
+}
+
+async fn up(m: &Medium) {
+    let mut link = m.watch_link();
+    tokio::time::timeout(
+        Duration::from_secs(5),
+        link.wait_for(|s| *s == LinkState::Up),
+    )
+    .await
+    .expect("connected within 5 s")
+    .expect("the medium is open");
+}
+
+/// Waits (at most 5 s) for the link to go down with a reason containing `why`; returns the state.
+async fn down(m: &Medium, why: &str) -> LinkState {
+    let mut link = m.watch_link();
+    tokio::time::timeout(
+        Duration::from_secs(5),
+        link.wait_for(|s| matches!(s, LinkState::Down(r) if r.contains(why))),
+    )
+    .await
+    .unwrap_or_else(|_| panic!("the link down ({why}) within 5 s"))
+    .expect("the medium is open")
+    .clone()
+}
+
+/// The next message, at most `within` away.
+async fn next(i: &mut Interface, within: Duration) -> Option<Message> {
+    tokio::time::timeout(within, i.recv()).await.ok().flatten()
+}
+
+fn value(m: &Message) -> Option<f64> {
+    m.payload.as_map().and_then(|p| p.get_f64("value"))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn clients_register_notify_and_filter_by_pattern_and_interval() {
+    let db = MoosDb::start(any_port()).await.unwrap();
+    let a = client(db.addr(), "pA", "*");
+    let b = client(db.addr(), "pB", "NAV_*,THROTTLED:0.5");
+    up(&a).await;
+    up(&b).await;
+    let mut on_a = a.attach("a");
+    on_a.subscribe("**").unwrap();
+    let mut on_b = b.attach("b");
+    on_b.subscribe("**").unwrap();
+    let send_a = a.attach("send");
+    // registrations arrive after the welcome: the first notification shows they took effect
+    let mut got = None;
+    for _ in 0..50 {
+        send_a
+            .send("NAV_DEPTH", DataMap::new().with("value", 12.5))
+            .await
+            .unwrap();
+        if let Some(m) = next(&mut on_b, Duration::from_millis(100)).await {
+            got = Some(m);
+            break;
+        }
+    }
+    let m = got.expect("B gets NAV_DEPTH");
+    assert_eq!((m.topic.as_str(), value(&m)), ("NAV_DEPTH", Some(12.5)));
+    assert_eq!(db.clients(), ["pA", "pB"]);
+
+    // not registered for it: B never sees it; A, registered for everything, sees B's
+    send_a
+        .send("DESIRED_HEADING", DataMap::new().with("value", 90.0))
+        .await
+        .unwrap();
+    b.attach("send")
+        .send(
+            "NODE_REPORT",
+            DataMap::new()
+                .with("NAME", "auv1")
+                .with("X", 10.5)
+                .with("MODE", "A,B=C"),
+        )
+        .await
+        .unwrap();
+    // A's interface also sees what A's other interface sent (local delivery): look for B's
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut report = None;
+    while Instant::now() < deadline && report.is_none() {
+        if let Some(m) = next(&mut on_a, Duration::from_millis(100)).await
+            && m.topic.as_str() == "NODE_REPORT"
+        {
+            report = Some(m);
+        }
+    }
+    let report = report.expect("A gets B's report");
+    assert_eq!(
+        report.payload.as_map().cloned(),
+        Some(
+            DataMap::new()
+                .with("NAME", "auv1")
+                .with("X", 10.5)
+                .with("MODE", "A,B=C")
+        )
+    );
+    // from the DB A took only B's report: its own writes, which the DB sends back to it, are not
+    // delivered again
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(a.stats().received, 1, "{:?}", a.stats());
+    while next(&mut on_b, Duration::from_millis(300)).await.is_some() {}
+
+    // 20 writes over a second: B, registered with a 0.5 s interval, gets two or three of them
+    for i in 0..20 {
+        send_a
+            .send("THROTTLED", DataMap::new().with("value", f64::from(i)))
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let mut throttled = Vec::new();
+    while let Some(m) = next(&mut on_b, Duration::from_millis(600)).await {
+        if m.topic.as_str() == "THROTTLED" {
+            throttled.push(value(&m).unwrap());
+        }
+    }
+    assert!(
+        (2..=3).contains(&throttled.len()),
+        "a 0.5 s interval over 1 s of writes: {throttled:?}"
+    );
+    assert_eq!(throttled[0], 0.0, "the first write goes at once");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn keep_alive_names_taken_and_a_restarting_db() {
+    let db = MoosDb::start(any_port()).await.unwrap();
+    let addr = db.addr();
+    let quiet = client(addr, "pQuiet", "NAV_X");
+    up(&quiet).await;
+    // silent but for its timing messages: still connected after the DB's 5 s limit
+    tokio::time::sleep(Duration::from_secs(6)).await;
+    assert_eq!(db.clients(), ["pQuiet"]);
+    assert_eq!(quiet.link_state(), LinkState::Up);
+
+    // a second client with the same name is refused, saying why
+    let twin = client(addr, "pQuiet", "*");
+    let refused = down(&twin, "refused").await;
+    assert!(
+        matches!(&refused, LinkState::Down(r) if r.contains("a client called `pQuiet` is already connected")),
+        "{refused:?}"
+    );
+    twin.close();
+
+    // the DB goes away: the link goes down; it comes back on the same port: the client connects
+    // and registers again
+    drop(db);
+    down(&quiet, "").await;
+    let db = {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        loop {
+            match MoosDb::start(addr).await {
+                Ok(db) => break db,
+                Err(e) if Instant::now() < deadline => {
+                    let _ = e;
+                    tokio::time::sleep(Duration::from_millis(50)).await;
+                }
+                Err(e) => panic!("cannot listen on {addr} again: {e}"),
+            }
+        }
+    };
+    up(&quiet).await;
+    let mut on_quiet = quiet.attach("q");
+    on_quiet.subscribe("**").unwrap();
+    let writer = client(addr, "pW", "NONE");
+    up(&writer).await;
+    let tx = writer.attach("w");
+    let mut got = None;
+    for _ in 0..50 {
+        tx.send("NAV_X", DataMap::new().with("value", 3.0))
+            .await
+            .unwrap();
+        if let Some(m) = next(&mut on_quiet, Duration::from_millis(100)).await {
+            got = Some(m);
+            break;
+        }
+    }
+    let m = got.expect("registered again after the restart");
+    assert_eq!((m.topic.as_str(), value(&m)), ("NAV_X", Some(3.0)));
+    drop(db);
+}
+
+/// A DB that welcomes with a clock skew of 100 s, takes one notification, then sends garbage.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_skew_is_taken_and_garbage_from_the_db_is_refused() {
+    let listener = tokio::net::TcpListener::bind(any_port()).await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let server = tokio::spawn(async move {
+        let (mut sock, _) = listener.accept().await.unwrap();
+        let mut hello = [0u8; 32];
+        sock.read_exact(&mut hello).await.unwrap();
+        assert_eq!(hello, wire::handshake());
+        let mut buf = Vec::new();
+        let mut chunk = [0u8; 4096];
+        let mut packets = Vec::new();
+        // the introduction, the registrations, then a notification
+        while packets
+            .iter()
+            .flat_map(|p: &Packet| p.messages.iter())
+            .all(|m| m.kind != kind::NOTIFY)
+        {
+            let n = sock.read(&mut chunk).await.unwrap();
+            assert!(n > 0, "the client went away");
+            buf.extend_from_slice(&chunk[..n]);
+            while let Ok(Read::Packet(p, used)) = wire::read_packet(&buf) {
+                buf.drain(..used);
+                if p.messages.first().is_some_and(|m| m.kind == kind::DATA) {
+                    let welcome = MoosMsg {
+                        kind: kind::WELCOME,
+                        data_type: data::DOUBLE,
+                        value: 100.0,
+                        string: b"asynchronous".to_vec(),
+                        ..MoosMsg::default()
+                    };
+                    sock.write_all(
+                        &Packet {
+                            messages: vec![welcome],
+                        }
+                        .encode(),
+                    )
+                    .await
+                    .unwrap();
+                }
+                packets.push(p);
+            }
+        }
+        // a packet claiming a negative length
+        sock.write_all(&[0xFB, 0xFF, 0xFF, 0xFF, 1, 0, 0, 0, 0])
+            .await
+            .unwrap();
+        let intro = &packets[0].messages[0];
+        let notify = packets
+            .iter()
+            .flat_map(|p| p.messages.iter())
+            .find(|m| m.kind == kind::NOTIFY)
+            .unwrap()
+            .clone();
+        (intro.clone(), notify)
+    });
+    let m = client(addr, "pSkew", "NAV_*");
+    up(&m).await;
+    m.attach("w")
+        .send("NAV_Y", DataMap::new().with("value", 1.0))
+        .await
+        .unwrap();
+    let (intro, notify) = tokio::time::timeout(Duration::from_secs(5), server)
+        .await
+        .expect("the server finishes")
+        .unwrap();
+    assert_eq!(
+        (
+            intro.key.as_slice(),
+            intro.string.as_slice(),
+            intro.data_type
+        ),
+        (&b"asynchronous"[..], &b"pSkew"[..], data::STRING)
+    );
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert!(
+        (notify.time - (now + 100.0)).abs() < 2.0,
+        "MOOS time = local + skew: {} vs {}",
+        notify.time,
+        now + 100.0
+    );
+    assert_eq!(notify.source, b"pSkew");
+    let gone = down(&m, "malformed").await;
+    assert!(
+        matches!(&gone, LinkState::Down(r) if r.contains("a packet length of -5")),
+        "{gone:?}"
+    );
+    assert_eq!(m.stats().rejected.get("moos-bad-length"), Some(&1));
+}
+
+/// A DB that answers as a MOOSDB does: its clock 100 s ahead, a timing message sent back with
+/// the request's time still in it and the DB's time as the value. The medium's registrations name
+/// it as their source (a MOOSDB subscribes the client the source names), and the skew stays near
+/// 100 s through the timing replies.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn registrations_name_the_client_and_timing_replies_keep_the_skew() {
+    let listener = tokio::net::TcpListener::bind(any_port()).await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (answered_tx, answered) = tokio::sync::oneshot::channel();
+    let server = tokio::spawn(async move {
+        let db_now = || {
+            std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .unwrap()
+                .as_secs_f64()
+                + 100.0
+        };
+        let (mut sock, _) = listener.accept().await.unwrap();
+        let mut hello = [0u8; 32];
+        sock.read_exact(&mut hello).await.unwrap();
+        let mut buf = Vec::new();
+        let mut chunk = [0u8; 4096];
+        let (mut registrations, mut timings) = (Vec::new(), 0);
+        let mut answered_tx = Some(answered_tx);
+        // bounded: the test gives up after 10 s
+        loop {
+            let n = sock.read(&mut chunk).await.unwrap();
+            assert!(n > 0, "the client went away");
+            buf.extend_from_slice(&chunk[..n]);
+            while let Ok(Read::Packet(p, used)) = wire::read_packet(&buf) {
+                buf.drain(..used);
+                let Some(first) = p.messages.first() else {
+                    continue;
+                };
+                let reply = match first.kind {
+                    kind::DATA => MoosMsg {
+                        id: -1,
+                        kind: kind::WELCOME,
+                        data_type: data::DOUBLE,
+                        community: b"#1".to_vec(),
+                        value: db_now() - first.time,
+                        string: b"asynchronous".to_vec(),
+                        ..MoosMsg::default()
+                    },
+                    kind::TIMING => {
+                        timings += 1;
+                        MoosMsg {
+                            value: db_now(),
+                            value2: 0.0,
+                            ..first.clone()
+                        }
+                    }
+                    _ => {
+                        for m in &p.messages {
+                            match m.kind {
+                                kind::REGISTER | kind::WILDCARD_REGISTER => {
+                                    registrations.push(m.clone())
+                                }
+                                kind::NOTIFY => return (registrations, m.clone()),
+                                _ => {}
+                            }
+                        }
+                        continue;
+                    }
+                };
+                sock.write_all(
+                    &Packet {
+                        messages: vec![reply],
+                    }
+                    .encode(),
+                )
+                .await
+                .unwrap();
+                if timings == 3
+                    && let Some(tx) = answered_tx.take()
+                {
+                    let _ = tx.send(());
+                }
+            }
+        }
+    });
+    let m = client(addr, "pTimed", "NAV_X,NAV_*:0.5");
+    up(&m).await;
+    tokio::time::timeout(Duration::from_secs(10), answered)
+        .await
+        .expect("three timing replies within 10 s")
+        .unwrap();
+    m.attach("w")
+        .send("NAV_Y", DataMap::new().with("value", 1.0))
+        .await
+        .unwrap();
+    let (registrations, notify) = tokio::time::timeout(Duration::from_secs(5), server)
+        .await
+        .expect("the server finishes")
+        .unwrap();
+    assert_eq!(
+        registrations
+            .iter()
+            .map(|r| (r.kind, r.source.as_slice(), r.key.as_slice()))
+            .collect::<Vec<_>>(),
+        [
+            (kind::REGISTER, &b"pTimed"[..], &b"NAV_X"[..]),
+            (kind::WILDCARD_REGISTER, &b"pTimed"[..], &b"pTimed"[..]),
+        ]
+    );
+    assert_eq!(
+        registrations[1].string,
+        b"AppPattern=*,VarPattern=NAV_*,Interval=0.5"
+    );
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert!(
+        (notify.time - (now + 100.0)).abs() < 2.0,
+        "MOOS time after three timing replies = local + 100 s: {} vs {}",
+        notify.time,
+        now + 100.0
+    );
+}
+
+/// A raw client of the test MoosDb, for what the medium does not send.
+struct Raw {
+    sock: tokio::net::TcpStream,
+    buf: Vec<u8>,
+}
+
+impl Raw {
+    async fn connect(db: SocketAddr, name: &str) -> Raw {
+        let mut sock = tokio::net::TcpStream::connect(db).await.unwrap();
+        sock.write_all(&wire::hello(name, 0.0)).await.unwrap();
+        let mut raw = Raw {
+            sock,
+            buf: Vec::new(),
+        };
+        let welcome = raw.packet(Duration::from_secs(5)).await.unwrap();
+        assert_eq!(welcome.messages[0].kind, kind::WELCOME);
+        raw
+    }
+
+    async fn send(&mut self, messages: Vec<MoosMsg>) {
+        self.sock
+            .write_all(&Packet { messages }.encode())
+            .await
+            .unwrap();
+    }
+
+    async fn packet(&mut self, within: Duration) -> Option<Packet> {
+        wire::next_packet(&mut self.sock, &mut self.buf, within)
+            .await
+            .ok()
+    }
+
+    /// The keys and values of the notifications that come within 300 ms.
+    async fn notified(&mut self) -> Vec<(String, f64)> {
+        let mut got = Vec::new();
+        while let Some(p) = self.packet(Duration::from_millis(300)).await {
+            got.extend(
+                p.messages
+                    .iter()
+                    .filter(|m| m.kind == kind::NOTIFY)
+                    .map(|m| (m.key_str(), m.value)),
+            );
+        }
+        got
+    }
+}
+
+fn raw_msg(kind: u8, source: &str, key: &str, value: f64, string: &str) -> MoosMsg {
+    MoosMsg {
+        kind,
+        data_type: if string.is_empty() {
+            data::DOUBLE
+        } else {
+            data::STRING
+        },
+        source: source.as_bytes().to_vec(),
+        key: key.as_bytes().to_vec(),
+        value,
+        string: string.as_bytes().to_vec(),
+        ..MoosMsg::default()
+    }
+}
+
+/// The test MoosDb does what core-moos's MOOSDB was seen to do: registrations count for the client
+/// their source names, a timing message comes back with the request's time and the DB's time as
+/// the value, and unregistering by pattern stops the variables written so far while the pattern
+/// still takes new ones.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_test_db_registers_times_and_unregisters_as_a_moosdb() {
+    let db = MoosDb::start(any_port()).await.unwrap();
+    let mut sub = Raw::connect(db.addr(), "rSub").await;
+    let mut publisher = Raw::connect(db.addr(), "rPub").await;
+
+    // a registration without a source subscribes no one
+    sub.send(vec![raw_msg(kind::REGISTER, "", "U0", 0.0, "")])
+        .await;
+    sub.send(vec![
+        raw_msg(kind::REGISTER, "rSub", "U1", 0.0, ""),
+        raw_msg(
+            kind::WILDCARD_REGISTER,
+            "rSub",
+            "rSub",
+            0.0,
+            "AppPattern=*,VarPattern=W*,Interval=0",
+        ),
+    ])
+    .await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    let write = |v: f64, keys: &[&str]| -> Vec<MoosMsg> {
+        keys.iter()
+            .map(|k| raw_msg(kind::NOTIFY, "rPub", k, v, ""))
+            .collect()
+    };
+    publisher.send(write(1.0, &["U0", "U1", "W1"])).await;
+    assert_eq!(
+        sub.notified().await,
+        [("U1".to_string(), 1.0), ("W1".to_string(), 1.0)]
+    );
+
+    sub.send(vec![
+        raw_msg(kind::UNREGISTER, "rSub", "U1", 0.0, ""),
+        raw_msg(
+            kind::WILDCARD_UNREGISTER,
+            "rSub",
+            "rSub",
+            0.0,
+            "AppPattern=*,VarPattern=W*",
+        ),
+    ])
+    .await;
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    publisher.send(write(2.0, &["U1", "W1", "W2"])).await;
+    assert_eq!(sub.notified().await, [("W2".to_string(), 2.0)]);
+
+    let asked = MoosMsg {
+        id: 7,
+        kind: kind::TIMING,
+        data_type: data::DOUBLE,
+        key: b"_async_timing".to_vec(),
+        time: 1234.5,
+        ..MoosMsg::default()
+    };
+    sub.send(vec![asked.clone()]).await;
+    let reply = sub.packet(Duration::from_secs(5)).await.unwrap();
+    let t = &reply.messages[0];
+    let now = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    assert_eq!(
+        (t.kind, t.id, t.time, t.key.as_slice()),
+        (kind::TIMING, 7, 1234.5, &b"_async_timing"[..])
+    );
+    assert!((t.value - now).abs() < 2.0, "the DB's time: {}", t.value);
+}

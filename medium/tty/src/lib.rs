@@ -1,0 +1,153 @@
+//! seabus-tty: serial devices and pseudo-terminals, for the media that run over a serial line (the
+//! serial medium, slcan CAN adapters).
+//!
+//! - [`device_path`] reads the device of a `SCHEME:///path/to/device` URL.
+//! - [`open_device`] opens a device for a link kept by [`seabus_medium::link`] (which reopens it
+//!   when it goes away).
+//! - [`run_pty`] makes a pseudo-terminal whose other end is linked at a path of the user's choice,
+//!   for any program to open as if it were a device, and runs a session on it; [`PtyLink`] removes
+//!   that link when the medium closes.
+//!
+//! Who may depend on it: medium crates whose wire is a serial line. It depends on the core only.
+
+use seabus_medium::link::LinkQueue;
+use seabus_medium::url::{MediumUrl, UrlError};
+use seabus_medium::{BoxFuture, LinkState, OpenError, Opening};
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+pub use tokio_serial::SerialStream;
+
+/// The device path of a `SCHEME:///path` URL.
+pub fn device_path(url: &MediumUrl) -> Result<PathBuf, UrlError> {
+    if !url.host.is_empty() || url.path.len() < 2 {
+        return Err(url.error(format!(
+            "expected {}:///path/to/device (three slashes, an absolute path)",
+            url.scheme
+        )));
+    }
+    Ok(PathBuf::from(&url.path))
+}
+
+/// Opens the device at `path` at `baud`, with the other settings `configure` makes; the error
+/// names the device.
+pub fn open_device(
+    path: &Path,
+    baud: u32,
+    configure: impl FnOnce(tokio_serial::SerialPortBuilder) -> tokio_serial::SerialPortBuilder,
+) -> Result<SerialStream, String> {
+    let name = path.to_string_lossy();
+    let builder = configure(tokio_serial::new(name.as_ref(), baud));
+    tokio_serial::SerialPortBuilderExt::open_native_async(builder)
+        .map_err(|e| format!("cannot open {name}: {e}"))
+}
+
+/// The link at which a pseudo-terminal's other end is found, removed when the medium closes.
+pub struct PtyLink(Mutex<Option<PathBuf>>);
+
+impl PtyLink {
+    /// Removes the link (once).
+    pub fn remove(&self) {
+        if let Some(link) = self.0.lock().unwrap_or_else(|p| p.into_inner()).take() {
+            let _ = std::fs::remove_file(link);
+        }
+    }
+}
+
+impl Drop for PtyLink {
+    fn drop(&mut self) {
+        self.remove();
+    }
+}
+
+/// Makes a pseudo-terminal linked at `at` and runs `session` on its master side until it fails:
+/// the link is up meanwhile, down with the reason after (a pseudo-terminal is not reopened).
+pub fn run_pty<F: Send + 'static>(
+    o: &Opening,
+    at: &Path,
+    mut queue: LinkQueue<F>,
+    session: impl for<'q> FnOnce(SerialStream, &'q mut LinkQueue<F>) -> BoxFuture<'q, String>
+    + Send
+    + 'static,
+) -> Result<PtyLink, OpenError> {
+    let (master, held) = new_pty(o, at)?;
+    let ingress = o.ingress.clone();
+    queue.set_up(true);
+    let task = tokio::spawn(async move {
+        let _held = held;
+        let reason = session(master, &mut queue).await;
+        queue.set_up(false);
+        ingress.set_link(LinkState::Down(reason));
+        queue.drop_waiting();
+    });
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    Ok(PtyLink(Mutex::new(Some(at.to_path_buf()))))
+}
+
+/// A new pseudo-terminal whose other end is linked at `at`: its master side, and the other end
+/// held open (by a plain file, without the lock a serial port takes, so that any program can open
+/// it) so that the terminal lives while nobody has it open.
+fn new_pty(o: &Opening, at: &Path) -> Result<(SerialStream, std::fs::File), OpenError> {
+    let (master, slave) = SerialStream::pair()
+        .map_err(|e| std::io::Error::other(e.to_string()))
+        .map_err(o.io_error("creating a pseudo-terminal"))?;
+    let slave_path = tokio_serial::SerialPort::name(&slave)
+        .ok_or_else(|| std::io::Error::other("the pseudo-terminal has no name"))
+        .map_err(o.io_error("naming the pseudo-terminal"))?;
+    let held = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .open(&slave_path)
+        .map_err(o.io_error(format!("opening {slave_path}")))?;
+    drop(slave);
+    link(at, Path::new(&slave_path)).map_err(o.io_error(format!("linking {}", at.display())))?;
+    Ok((master, held))
+}
+
+/// Links `at` to `target`, replacing an earlier link but never a file or directory.
+fn link(at: &Path, target: &Path) -> std::io::Result<()> {
+    match std::fs::symlink_metadata(at) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::remove_file(at)?,
+        Ok(_) => {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                "something other than a link is there; seabus only replaces its own links",
+            ));
+        }
+        Err(_) => {}
+    }
+    std::os::unix::fs::symlink(target, at)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn device_urls_need_an_absolute_path() {
+        let p = |u: &str| device_path(&MediumUrl::parse(u).unwrap());
+        assert_eq!(
+            p("serial:///dev/ttyUSB0").unwrap(),
+            PathBuf::from("/dev/ttyUSB0")
+        );
+        assert!(
+            p("serial://dev/ttyUSB0")
+                .unwrap_err()
+                .reason
+                .contains("three slashes")
+        );
+    }
+
+    #[test]
+    fn a_link_never_replaces_a_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let at = dir.path().join("gps");
+        std::fs::write(&at, "data").unwrap();
+        let e = link(&at, Path::new("/dev/null")).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::AlreadyExists);
+        std::fs::remove_file(&at).unwrap();
+        link(&at, Path::new("/dev/null")).unwrap();
+        link(&at, Path::new("/dev/zero")).unwrap();
+        assert_eq!(std::fs::read_link(&at).unwrap(), PathBuf::from("/dev/zero"));
+    }
+}

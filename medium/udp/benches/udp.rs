@@ -1,0 +1,202 @@
+//! The UDP medium on loopback against a raw `std::net::UdpSocket` sender/receiver pair, in the same
+//! run, with 64-byte and 1 kB payloads: unpaced delivered rate, loss when paced at half the raw
+//! rate, and one-way latency p50/p99 at a moderate paced rate.
+//!
+//! Run: `cargo bench -p seabus-medium --bench udp`
+
+#[path = "../../core/benches/common.rs"]
+mod common;
+
+use seabus_medium::{Node, Payload, Stamp, Topic};
+use std::net::UdpSocket;
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+const N: usize = 200_000;
+const ROUNDS: usize = 3;
+const QUIET: Duration = Duration::from_millis(300);
+
+fn free_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .expect("an ephemeral port")
+}
+
+/// What a receiver saw: count, time from first to last, one-way latencies.
+struct Seen {
+    count: usize,
+    span: Duration,
+    latencies: Vec<Duration>,
+}
+
+impl Seen {
+    fn rate(&self) -> f64 {
+        self.count as f64 / self.span.as_secs_f64().max(1e-9)
+    }
+}
+
+fn now_nanos() -> i64 {
+    Stamp::now().0
+}
+
+/// Raw pair: `n` datagrams of `size` bytes, paced at `rate` per second (unpaced when `None`).
+fn raw(size: usize, n: usize, rate: Option<f64>) -> Seen {
+    let rx = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let _ = socket2::SockRef::from(&rx).set_recv_buffer_size(4 << 20);
+    rx.set_read_timeout(Some(QUIET)).expect("timeout");
+    let dest = rx.local_addr().expect("addr");
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let receiver = std::thread::spawn(move || {
+        let mut buf = vec![0u8; 65536];
+        let mut seen = Seen {
+            count: 0,
+            span: Duration::ZERO,
+            latencies: Vec::with_capacity(n),
+        };
+        let _ = ready_tx.send(());
+        let mut first = None;
+        let mut last = Instant::now();
+        while let Ok(len) = rx.recv(&mut buf) {
+            last = Instant::now();
+            first.get_or_insert(last);
+            seen.count += 1;
+            if len >= 8 {
+                let sent = i64::from_le_bytes(buf[..8].try_into().expect("8 bytes"));
+                seen.latencies
+                    .push(Duration::from_nanos((now_nanos() - sent).max(0) as u64));
+            }
+            if seen.count == n {
+                break;
+            }
+        }
+        seen.span = first.map_or(Duration::ZERO, |f| last - f);
+        seen
+    });
+    let _ = ready_rx.recv();
+    let tx = UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let mut payload = vec![0u8; size];
+    let start = Instant::now();
+    for i in 0..n {
+        if let Some(r) = rate {
+            common::pace(start + Duration::from_secs_f64(i as f64 / r));
+        }
+        payload[..8].copy_from_slice(&now_nanos().to_le_bytes());
+        let _ = tx.send_to(&payload, dest);
+    }
+    receiver.join().expect("receiver")
+}
+
+/// The same through two seabus UDP media (unicast), each on its own thread.
+fn seabus(size: usize, n: usize, rate: Option<f64>) -> Seen {
+    let (rx_port, tx_port) = (free_port(), free_port());
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let receiver = std::thread::spawn(move || {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .expect("runtime");
+        rt.block_on(async move {
+            let m = seabus_medium_udp::schemes()
+                .open(
+                    "net",
+                    &format!("udp://127.0.0.1:{rx_port}"),
+                    &Node::new("rx"),
+                )
+                .expect("opens");
+            let mut port = m
+                .attach_with("rx", n, 16)
+                .subscribed("**")
+                .expect("pattern");
+            let _ = ready_tx.send(());
+            let mut seen = Seen {
+                count: 0,
+                span: Duration::ZERO,
+                latencies: Vec::with_capacity(n),
+            };
+            let mut first = None;
+            let mut last = Instant::now();
+            while let Ok(Some(msg)) = tokio::time::timeout(QUIET, port.recv()).await {
+                last = Instant::now();
+                first.get_or_insert(last);
+                seen.count += 1;
+                seen.latencies.push(Duration::from_nanos(
+                    (now_nanos() - msg.stamp.0).max(0) as u64
+                ));
+                if seen.count == n {
+                    break;
+                }
+            }
+            seen.span = first.map_or(Duration::ZERO, |f| last - f);
+            seen
+        })
+    });
+    let _ = ready_rx.recv();
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime");
+    rt.block_on(async move {
+        let url = format!("udp://127.0.0.1:{tx_port}?peer=127.0.0.1:{rx_port}");
+        let m = seabus_medium_udp::schemes()
+            .open("net", &url, &Node::new("tx"))
+            .expect("opens");
+        let port = m.attach("tx");
+        let topic = Topic::new("bench.udp").expect("topic");
+        let payload = Payload::from(vec![0u8; size]);
+        let start = Instant::now();
+        for i in 0..n {
+            if let Some(r) = rate {
+                common::pace(start + Duration::from_secs_f64(i as f64 / r));
+            }
+            let _ = port.send(&topic, payload.clone()).await;
+        }
+    });
+    receiver.join().expect("receiver")
+}
+
+fn main() {
+    println!(
+        "UDP on loopback, {N} messages per run, unpaced rates the median of {ROUNDS} (raw std::net::UdpSocket pair vs seabus UDP medium):"
+    );
+    for size in [64usize, 1024] {
+        // raw and seabus alternate, three rounds each; the medians are compared
+        let (mut raw_rates, mut sb_rates, mut raw_lost, mut sb_lost) =
+            (Vec::new(), Vec::new(), 0, 0);
+        for _ in 0..ROUNDS {
+            let r = raw(size, N, None);
+            raw_lost += N - r.count;
+            raw_rates.push(r.rate());
+            let s = seabus(size, N, None);
+            sb_lost += N - s.count;
+            sb_rates.push(s.rate());
+        }
+        let (r, s) = (common::median(raw_rates), common::median(sb_rates));
+        println!(
+            "  {size:>5} B unpaced: raw {:>12} ({raw_lost} lost)   seabus {:>12} ({sb_lost} lost)   ratio {:.2} (target: at least 0.70)",
+            common::rate(r),
+            common::rate(s),
+            s / r
+        );
+        let half = r / 2.0;
+        let paced = seabus(size, N, Some(half));
+        println!(
+            "  {size:>5} B paced at half the raw rate ({}): seabus delivered {} of {N}, lost {}",
+            common::rate(half),
+            paced.count,
+            N - paced.count
+        );
+        let lat_n = 10_000;
+        let mut raw_lat = raw(size, lat_n, Some(2_000.0)).latencies;
+        let mut sb_lat = seabus(size, lat_n, Some(2_000.0)).latencies;
+        raw_lat.sort();
+        sb_lat.sort();
+        println!(
+            "  {size:>5} B one-way latency at 2 kHz: raw p50 {:.1} us p99 {:.1} us   seabus p50 {:.1} us p99 {:.1} us",
+            common::quantile_us(&raw_lat, 0.5),
+            common::quantile_us(&raw_lat, 0.99),
+            common::quantile_us(&sb_lat, 0.5),
+            common::quantile_us(&sb_lat, 0.99)
+        );
+    }
+}

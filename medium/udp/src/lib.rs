@@ -1,0 +1,239 @@
+//! The UDP medium: seabus's own datagram format over unicast, broadcast or multicast.
+//!
+//! ```text
+//! udp://239.255.42.1:47800?ttl=0            multicast group (joined on loopback when ttl is 0)
+//! udp://239.255.42.1:47800?ttl=1&iface=eth0 multicast on a chosen interface
+//! udp://255.255.255.255:47800               broadcast (or any address with ?broadcast)
+//! udp://0.0.0.0:47801?peer=10.0.0.2:47801   unicast to listed peers, listening on the bound port
+//! ```
+//! Options: `ttl` (multicast hop limit, default 0), `iface` (interface name or IPv4 address),
+//! `peer` (repeatable, or comma-separated), `bind` (address to bind instead of the default),
+//! `broadcast`, `loop` (multicast loopback, default on), `recv_buf` (socket receive buffer in bytes,
+//! default 4 MiB), `max` (largest datagram, default 65507). A message that encodes larger than `max`
+//! is refused at send. A datagram that does not decode is counted by reason and dropped. A node
+//! never receives its own datagrams back (multicast loopback): each carries its sender's id.
+
+pub mod wire;
+
+use bytes::{Bytes, BytesMut};
+use seabus_medium::caps::{Capabilities, Carries, Framing};
+use seabus_medium::net::{self, MAX_DATAGRAM, UdpEndpoint};
+use seabus_medium::url::{MediumUrl, UrlError};
+use seabus_medium::{
+    BoxFuture, Ingress, LinkState, Message, OpenError, Opened, Opening, Scheme, Schemes, SendError,
+    Transport,
+};
+use std::net::SocketAddr;
+use std::sync::Arc;
+use tokio::net::UdpSocket;
+
+/// A UDP medium's settings, read from its URL: the endpoint and the largest datagram sent.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct UdpConfig {
+    /// Where it listens and whom it reaches.
+    pub endpoint: UdpEndpoint,
+    /// Largest datagram sent.
+    pub max: usize,
+}
+
+impl UdpConfig {
+    /// Reads the settings from a `udp://` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<UdpConfig, UrlError> {
+        let endpoint = UdpEndpoint::from_url(url)?;
+        let max = url
+            .take_parsed("max", "a size in bytes")?
+            .unwrap_or(MAX_DATAGRAM);
+        if !(wire::FIXED + 3..=MAX_DATAGRAM).contains(&max) {
+            return Err(url.error(format!(
+                "option `max={max}`: expected {}–{MAX_DATAGRAM}",
+                wire::FIXED + 3
+            )));
+        }
+        let mut options = UdpEndpoint::OPTIONS.to_vec();
+        options.push("max");
+        url.finish(&options)?;
+        Ok(UdpConfig { endpoint, max })
+    }
+
+    /// What a UDP medium can do: whole seabus messages with provenance in datagrams of at most
+    /// `max` bytes; its own datagrams never come back to it.
+    pub fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            provenance: true,
+            framing: Framing::Datagram,
+            max_frame: Some(self.max),
+            hears_own: false,
+            carries: Carries::Any,
+            link_state: false,
+            native: None,
+        }
+    }
+}
+
+/// Adds `udp://`.
+pub fn register(schemes: &mut Schemes) {
+    schemes.add(Scheme {
+        name: "udp",
+        family: "udp",
+        summary: "seabus datagrams over UDP unicast, broadcast or multicast",
+        check: |url| Ok(UdpConfig::from_url(url)?.capabilities()),
+        open: |o| Ok(Opened::from(open(o)?)),
+    });
+}
+
+/// A registry with `udp://` and the in-process medium, for a program or test that uses only these.
+pub fn schemes() -> Schemes {
+    Schemes::with(&[register])
+}
+
+/// The UDP transport.
+pub struct UdpTransport {
+    name: Arc<str>,
+    /// `None` once the medium is closed
+    socket: std::sync::Mutex<Option<Arc<UdpSocket>>>,
+    sender: u64,
+    dests: Vec<SocketAddr>,
+    max: usize,
+    caps: Capabilities,
+}
+
+/// Opens a UDP medium.
+fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
+    let cfg = UdpConfig::from_url(&mut o.url)?;
+    let ep = &cfg.endpoint;
+    let (std_socket, recv_buf) =
+        net::socket(ep).map_err(o.io_error(format!("binding {}", ep.bind)))?;
+    let socket =
+        Arc::new(UdpSocket::from_std(std_socket).map_err(o.io_error("registering the socket"))?);
+    if recv_buf < ep.recv_buf {
+        tracing::debug!(medium = %o.name, "receive buffer is {recv_buf} bytes (asked for {})", ep.recv_buf);
+    }
+    let sender = fastrand::u64(1..);
+    let transport = Arc::new(UdpTransport {
+        name: o.name.clone(),
+        socket: std::sync::Mutex::new(Some(socket.clone())),
+        sender,
+        caps: cfg.capabilities(),
+        dests: ep
+            .destinations()
+            .map_err(o.io_error("resolving the peers"))?,
+        max: cfg.max,
+    });
+    let task = tokio::spawn(receive(socket, sender, o.ingress.clone()));
+    o.ingress.own_task(task.abort_handle());
+    o.ingress.set_link(LinkState::Up);
+    tracing::debug!(medium = %o.name, mode = ?ep.mode, bind = %ep.bind, "udp medium open");
+    Ok(transport)
+}
+
+impl UdpTransport {
+    fn socket(&self) -> Option<Arc<UdpSocket>> {
+        self.socket
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+}
+
+impl Transport for UdpTransport {
+    type Frame = Bytes;
+
+    fn capabilities(&self) -> Capabilities {
+        self.caps
+    }
+
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
+        let frame = wire::encode(msg, self.sender).map_err(|reason| SendError::Io {
+            medium: self.name.to_string(),
+            reason: reason.to_string(),
+        })?;
+        if frame.len() > self.max {
+            return Err(SendError::TooLarge {
+                medium: self.name.to_string(),
+                size: frame.len(),
+                max: self.max,
+            });
+        }
+        Ok(frame)
+    }
+
+    fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            let socket = self
+                .socket()
+                .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
+            for dest in &self.dests {
+                socket
+                    .send_to(&frame, dest)
+                    .await
+                    .map_err(|e| SendError::Io {
+                        medium: self.name.to_string(),
+                        reason: format!("sending to {dest}: {e}"),
+                    })?;
+            }
+            Ok(())
+        })
+    }
+
+    fn close(&self) {
+        // the receive task, which holds the other reference, is stopped by the medium
+        self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
+    }
+}
+
+const RECV_CHUNK: usize = 1 << 20;
+
+async fn receive(socket: Arc<UdpSocket>, me: u64, ingress: Ingress) {
+    let mut buf = BytesMut::with_capacity(RECV_CHUNK);
+    let mut origins = wire::Origins::default();
+    loop {
+        if buf.capacity() - buf.len() < MAX_DATAGRAM + 1 {
+            buf = BytesMut::with_capacity(RECV_CHUNK);
+        }
+        let from = match socket.recv_buf_from(&mut buf).await {
+            Ok((_, from)) => from,
+            Err(e) => {
+                tracing::debug!("udp receive: {e}");
+                tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+                continue;
+            }
+        };
+        let datagram = buf.split().freeze();
+        match wire::decode(&datagram, &mut origins) {
+            Ok((sender, _)) if sender == me => {}
+            Ok((_, msg)) => {
+                if !ingress.deliver(msg) {
+                    return;
+                }
+            }
+            Err(e) => ingress.reject(e.kind(), format_args!("datagram from {from}: {e}")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_largest_datagram_is_checked() {
+        let cfg = |u: &str| UdpConfig::from_url(&mut MediumUrl::parse(u).unwrap());
+        assert_eq!(cfg("udp://1.2.3.4:1?max=100").unwrap().max, 100);
+        assert!(
+            cfg("udp://1.2.3.4:1?max=10")
+                .unwrap_err()
+                .reason
+                .contains("max=10")
+        );
+        assert!(
+            cfg("udp://1.2.3.4:1?maxi=10")
+                .unwrap_err()
+                .reason
+                .contains("unknown option")
+        );
+        assert_eq!(
+            cfg("udp://1.2.3.4:1").unwrap().capabilities().max_frame,
+            Some(MAX_DATAGRAM)
+        );
+    }
+}

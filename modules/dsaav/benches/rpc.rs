@@ -1,0 +1,342 @@
+//! Reliable DSAAV RPC round trips against a plain socket ping-pong of the same size, in one run:
+//! over UDP on loopback, and over raw Ethernet between two network namespaces joined by a veth
+//! pair (made here; needs root and `ip`, else that part says it was skipped); then sentuator
+//! notifications from one server to four listeners, in-process and over UDP.
+//!
+//! Run: `cargo bench -p seabus-modules --bench rpc`
+
+use seabus_dsaav::rpc::{self, CallOptions, RpcClient};
+use seabus_dsaav::sentuator;
+use seabus_medium::{DataMap, Node};
+use seabus_medium_dsaav::wire::Address;
+use std::process::Command;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+const CALLS: usize = 5_000;
+const SERVER: Address = Address { node: 2, port: 1 };
+
+fn quantile_us(sorted: &[Duration], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize].as_secs_f64() * 1e6
+}
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("runtime")
+}
+
+/// Moves the calling thread into network namespace `ns` (sockets it makes afterwards live there).
+fn enter(ns: &str) -> std::io::Result<()> {
+    use std::os::fd::AsRawFd;
+    let f = std::fs::File::open(format!("/var/run/netns/{ns}"))?;
+    // SAFETY: setns(2) on a namespace file we hold open
+    if unsafe { libc::setns(f.as_raw_fd(), libc::CLONE_NEWNET) } != 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok(())
+}
+
+/// Round trips of reliable calls from node 1 to a server on node 2, each on its own thread (in
+/// its own namespace when given).
+fn rpc_round_trips(
+    server_url: String,
+    client_url: String,
+    ns: Option<(String, String)>,
+) -> Vec<Duration> {
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let server_ns = ns.as_ref().map(|n| n.1.clone());
+    std::thread::spawn(move || {
+        if let Some(ns) = server_ns {
+            enter(&ns).expect("enter the server's namespace");
+        }
+        runtime().block_on(async move {
+            let m = seabus_medium_dsaav::schemes()
+                .open("dsaav", &server_url, &Node::new("server"))
+                .expect("opens");
+            let _ = ready_tx.send(());
+            rpc::serve(&m, SERVER.port, &[1], |call| Ok(call.params)).await;
+        });
+    });
+    let _ = ready_rx.recv();
+    let client_ns = ns.map(|n| n.0);
+    std::thread::spawn(move || {
+        if let Some(ns) = client_ns {
+            enter(&ns).expect("enter the client's namespace");
+        }
+        runtime().block_on(async move {
+            let m = seabus_medium_dsaav::schemes()
+                .open("dsaav", &client_url, &Node::new("client"))
+                .expect("opens");
+            let client = RpcClient::new(&m, 9);
+            let opts = CallOptions::default();
+            let params = DataMap::new().with("depth", 12.5f64).with("count", 1i64);
+            // the first calls also teach the raw Ethernet medium the server's hardware address
+            for _ in 0..100 {
+                let _ = client.call(SERVER, 1, &params, opts).await;
+            }
+            let mut out = Vec::with_capacity(CALLS);
+            for _ in 0..CALLS {
+                let t = Instant::now();
+                if client.call(SERVER, 1, &params, opts).await.is_ok() {
+                    out.push(t.elapsed());
+                }
+            }
+            out.sort();
+            out
+        })
+    })
+    .join()
+    .expect("client")
+}
+
+/// A plain UDP ping-pong of `size` bytes between two sockets on loopback.
+fn udp_ping_pong(size: usize) -> Vec<Duration> {
+    let a = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let b = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+    let (a_addr, b_addr) = (a.local_addr().expect("addr"), b.local_addr().expect("addr"));
+    b.set_read_timeout(Some(Duration::from_secs(1)))
+        .expect("timeout");
+    a.set_read_timeout(Some(Duration::from_secs(1)))
+        .expect("timeout");
+    std::thread::spawn(move || {
+        let mut buf = [0u8; 2048];
+        while let Ok((n, from)) = b.recv_from(&mut buf) {
+            let _ = b.send_to(&buf[..n], from);
+        }
+    });
+    let msg = vec![0u8; size];
+    let mut buf = [0u8; 2048];
+    let mut out = Vec::with_capacity(CALLS);
+    for _ in 0..CALLS {
+        let t = Instant::now();
+        let _ = a.send_to(&msg, b_addr);
+        if a.recv(&mut buf).is_ok() {
+            out.push(t.elapsed());
+        }
+    }
+    let _ = a_addr;
+    out.sort();
+    out
+}
+
+/// A plain raw Ethernet ping-pong between the namespaces (EtherType 0x88B6, broadcast).
+fn ethernet_ping_pong(
+    ns: &(String, String),
+    devs: &(String, String),
+    size: usize,
+) -> Vec<Duration> {
+    use seabus_medium_dsaav::eth::RawSocket;
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let (b_ns, b_dev) = (ns.1.clone(), devs.1.clone());
+    std::thread::spawn(move || {
+        enter(&b_ns).expect("enter");
+        runtime().block_on(async move {
+            let s = RawSocket::open(&b_dev, 0x88B6).expect("raw socket");
+            let _ = ready_tx.send(());
+            let mut buf = vec![0u8; 2048];
+            while let Ok(Ok(got)) =
+                tokio::time::timeout(Duration::from_secs(1), s.recv(&mut buf)).await
+            {
+                // the socket also sees the frames it sends itself
+                if let Some((_, n)) = got.filter(|(from, _)| *from != s.mac()) {
+                    let _ = s.send(None, &buf[..n]).await;
+                }
+            }
+        });
+    });
+    let _ = ready_rx.recv();
+    let (a_ns, a_dev) = (ns.0.clone(), devs.0.clone());
+    std::thread::spawn(move || {
+        enter(&a_ns).expect("enter");
+        runtime().block_on(async move {
+            let s = RawSocket::open(&a_dev, 0x88B6).expect("raw socket");
+            let msg = vec![1u8; size];
+            let mut buf = vec![0u8; 2048];
+            let mut out = Vec::with_capacity(CALLS);
+            for _ in 0..CALLS {
+                let t = Instant::now();
+                let _ = s.send(None, &msg).await;
+                // the answer, not the copy of what was just sent
+                let deadline = tokio::time::Instant::now() + Duration::from_secs(1);
+                while let Ok(Ok(got)) = tokio::time::timeout_at(deadline, s.recv(&mut buf)).await {
+                    if got.is_some_and(|(from, _)| from != s.mac()) {
+                        out.push(t.elapsed());
+                        break;
+                    }
+                }
+            }
+            out.sort();
+            out
+        })
+    })
+    .join()
+    .expect("pinger")
+}
+
+fn ip(args: &[&str]) -> Result<(), String> {
+    let out = Command::new("ip")
+        .args(args)
+        .output()
+        .map_err(|e| format!("ip: {e}"))?;
+    if out.status.success() {
+        Ok(())
+    } else {
+        Err(String::from_utf8_lossy(&out.stderr).trim().to_string())
+    }
+}
+
+fn report(what: &str, rpc: &[Duration], plain: &[Duration]) {
+    println!(
+        "  {what}: reliable RPC p50 {:.1} us p99 {:.1} us ({} calls)   plain ping-pong p50 {:.1} us p99 {:.1} us   p50 ratio {:.2}",
+        quantile_us(rpc, 0.5),
+        quantile_us(rpc, 0.99),
+        rpc.len(),
+        quantile_us(plain, 0.5),
+        quantile_us(plain, 0.99),
+        quantile_us(rpc, 0.5) / quantile_us(plain, 0.5)
+    );
+}
+
+struct Gauge(f64);
+
+impl sentuator::Device for Gauge {
+    fn get(&mut self) -> DataMap {
+        DataMap::new()
+            .with("quantity", sentuator::quantity::DEPTH)
+            .with("depth", self.0)
+    }
+}
+
+/// One sentuator server notifying four listeners on `base` (each medium its own node): how many
+/// notifications each listener took per second.
+fn notifications(base: &str, n: usize) -> (f64, Vec<usize>) {
+    let sep = if base.contains('?') { '&' } else { '?' };
+    runtime().block_on(async move {
+        let counts: Vec<Arc<AtomicUsize>> = (0..4).map(|_| Arc::default()).collect();
+        let mut media = Vec::new();
+        let mut listeners = Vec::new();
+        for (i, count) in counts.iter().enumerate() {
+            let node = 10 + i as u16;
+            let m = seabus_medium_dsaav::schemes()
+                .open("dsaav", &format!("{base}{sep}node={node}"), &Node::new("l"))
+                .expect("opens");
+            let c = count.clone();
+            let lm = m.clone();
+            tokio::spawn(async move {
+                sentuator::listen(&lm, 0, move |_, _| {
+                    c.fetch_add(1, Ordering::Relaxed);
+                })
+                .await
+            });
+            media.push(m);
+            listeners.push(Address { node, port: 0 });
+        }
+        let m = seabus_medium_dsaav::schemes()
+            .open("dsaav", &format!("{base}{sep}node=1"), &Node::new("s"))
+            .expect("opens");
+        let server = sentuator::Sentuator::start(&m, 0, 9, Gauge(0.0), &["Depth"], listeners);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let start = Instant::now();
+        for i in 0..n {
+            server.device().lock().expect("device").0 = i as f64;
+            server.notify().await;
+            if i % 64 == 0 {
+                tokio::task::yield_now().await;
+            }
+        }
+        // let the listeners drain
+        let mut last = 0;
+        for _ in 0..100 {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            let now: usize = counts.iter().map(|c| c.load(Ordering::Relaxed)).sum();
+            if now == last {
+                break;
+            }
+            last = now;
+        }
+        let secs = start.elapsed().as_secs_f64();
+        let got: Vec<usize> = counts.iter().map(|c| c.load(Ordering::Relaxed)).collect();
+        (n as f64 / secs, got)
+    })
+}
+
+fn main() {
+    println!(
+        "DSAAV reliable RPC round trips (two parameters, about 60-byte frames), {CALLS} calls each:"
+    );
+    let group = format!(
+        "239.255.{}.{}:{}",
+        fastrand::u8(1..250),
+        fastrand::u8(1..250),
+        fastrand::u16(20_000..60_000)
+    );
+    let rpc = rpc_round_trips(
+        format!("dsaav+udp://{group}?ttl=0&node=2"),
+        format!("dsaav+udp://{group}?ttl=0&node=1"),
+        None,
+    );
+    report("UDP on loopback", &rpc, &udp_ping_pong(60));
+
+    let id = std::process::id() % 100_000;
+    let ns = (format!("sbr-a-{id}"), format!("sbr-b-{id}"));
+    let devs = (format!("sra{id}"), format!("srb{id}"));
+    let made = ip(&["netns", "add", &ns.0])
+        .and_then(|()| ip(&["netns", "add", &ns.1]))
+        .and_then(|()| {
+            ip(&[
+                "link", "add", &devs.0, "type", "veth", "peer", "name", &devs.1,
+            ])
+        })
+        .and_then(|()| ip(&["link", "set", &devs.0, "netns", &ns.0]))
+        .and_then(|()| ip(&["link", "set", &devs.1, "netns", &ns.1]))
+        .and_then(|()| ip(&["-n", &ns.0, "link", "set", &devs.0, "up"]))
+        .and_then(|()| ip(&["-n", &ns.1, "link", "set", &devs.1, "up"]));
+    match made {
+        Ok(()) => {
+            let rpc = rpc_round_trips(
+                format!("dsaav+eth://{}?node=2", devs.1),
+                format!("dsaav+eth://{}?node=1", devs.0),
+                Some(ns.clone()),
+            );
+            report(
+                "raw Ethernet between two namespaces (veth)",
+                &rpc,
+                &ethernet_ping_pong(&ns, &devs, 60),
+            );
+        }
+        Err(e) => println!("  raw Ethernet: skipped, cannot make network namespaces here ({e})"),
+    }
+    let _ = ip(&["netns", "del", &ns.0]);
+    let _ = ip(&["netns", "del", &ns.1]);
+
+    let n = 20_000;
+    println!("Sentuator notifications, one server to four listeners, {n} readings:");
+    for (what, base) in [
+        (
+            "in-process",
+            format!("dsaav+inproc://bench{}", fastrand::u32(..)),
+        ),
+        (
+            "UDP on loopback",
+            format!(
+                "dsaav+udp://239.255.{}.{}:{}?ttl=0",
+                fastrand::u8(1..250),
+                fastrand::u8(1..250),
+                fastrand::u16(20_000..60_000)
+            ),
+        ),
+    ] {
+        let (rate, got) = notifications(&base, n);
+        println!(
+            "  {what}: {rate:.0} readings/s sent ({:.0} notifications/s), each listener received {:?} of {n}",
+            rate * 4.0,
+            got
+        );
+    }
+}

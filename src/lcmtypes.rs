@@ -1,0 +1,181 @@
+//! LCM types for `seabus spy` (messages of a known type shown decoded) and `seabus pub --lcm` (an
+//! LCM message made from fields, stamped as it is sent). Without the `lcm` feature no type is
+//! known: spy shows bytes, and `--lcm` or `--lcm-types` is refused with the reason.
+
+use seabus_medium::{DataMap, Payload, Stamp};
+use std::path::PathBuf;
+
+#[cfg(feature = "lcm")]
+mod imp {
+    use super::*;
+    use seabus_medium::Value;
+    use seabus_medium_lcm::types::ResolvedTypes;
+
+    /// The LCM types known: the built-in ones and those of `--lcm-types`.
+    pub struct Types(pub ResolvedTypes);
+
+    /// The built-in types and those of the `.lcm` files or directories `paths`.
+    pub fn load(paths: &[PathBuf]) -> Result<Types, String> {
+        seabus_bridges::lcm::types_with(paths)
+            .map(Types)
+            .map_err(|e| format!("--lcm-types: {e}"))
+    }
+
+    impl Types {
+        /// The type's name and the decoded message, when `payload` is an LCM message of a known
+        /// type.
+        pub fn recognise<'t>(&'t self, payload: &Payload) -> Option<(&'t str, DataMap)> {
+            seabus_bridges::lcm::recognise(&self.0, payload)
+        }
+    }
+
+    /// An LCM message of one type, made anew from the same fields each time it is sent.
+    pub struct LcmMessage {
+        types: ResolvedTypes,
+        name: String,
+        map: DataMap,
+    }
+
+    impl LcmMessage {
+        /// The message of type `name` made from `map`, with the types of `paths` besides the
+        /// built-in ones; checked by making it once.
+        pub fn new(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<LcmMessage, String> {
+            let Types(types) = load(paths)?;
+            if types.get(name).is_none() {
+                return Err(format!(
+                    "--lcm {name}: no such LCM type; known types: {}",
+                    seabus_bridges::lcm::known_types(&types)
+                ));
+            }
+            LcmMessage::of(types, name, map)
+        }
+
+        /// The message of type `name` (one of `types`) made from `map`.
+        pub fn of(types: ResolvedTypes, name: &str, map: &DataMap) -> Result<LcmMessage, String> {
+            let m = LcmMessage {
+                types,
+                name: name.to_string(),
+                map: map.clone(),
+            };
+            m.payload(Stamp::now())?;
+            Ok(m)
+        }
+
+        /// The message sent at `stamp`: the type's single `int64_t utime`, when the fields do not
+        /// give it, is `stamp` in microseconds.
+        pub fn payload(&self, stamp: Stamp) -> Result<Payload, String> {
+            let (types, name, map) = (&self.types, &self.name, &self.map);
+            let Some(ty) = types.get(name) else {
+                return Err(format!("--lcm {name}: no such LCM type"));
+            };
+            let bytes = if seabus_bridges::lcm::has_utime(ty) && map.get("utime").is_none() {
+                let mut map = map.clone();
+                map.insert("utime", Value::Int(stamp.0 / 1_000));
+                seabus_medium_lcm::codec::encode(types, ty, &map)
+            } else {
+                seabus_medium_lcm::codec::encode(types, ty, map)
+            };
+            bytes
+                .map(Payload::from)
+                .map_err(|e| format!("--lcm {name}: {e}"))
+        }
+    }
+}
+
+#[cfg(not(feature = "lcm"))]
+mod imp {
+    use super::*;
+
+    const LEFT_OUT: &str = "LCM is not compiled into this seabus (feature `lcm`)";
+
+    /// No LCM types in this build.
+    pub struct Types;
+
+    /// Without LCM no type can be read: `--lcm-types` is refused.
+    pub fn load(paths: &[PathBuf]) -> Result<Types, String> {
+        match paths.first() {
+            None => Ok(Types),
+            Some(_) => Err(format!("--lcm-types: {LEFT_OUT}")),
+        }
+    }
+
+    impl Types {
+        /// Nothing is recognised without types.
+        pub fn recognise<'t>(&'t self, _: &Payload) -> Option<(&'t str, DataMap)> {
+            None
+        }
+    }
+
+    /// No LCM message can be made in this build.
+    pub enum LcmMessage {}
+
+    impl LcmMessage {
+        /// Refused: `--lcm` needs LCM.
+        pub fn new(name: &str, _: &[PathBuf], _: &DataMap) -> Result<LcmMessage, String> {
+            Err(format!("--lcm {name}: {LEFT_OUT}"))
+        }
+
+        /// Never called: there is no message.
+        pub fn payload(&self, _: Stamp) -> Result<Payload, String> {
+            match *self {}
+        }
+    }
+}
+
+pub use imp::*;
+
+#[cfg(all(test, feature = "lcm"))]
+mod tests {
+    use super::*;
+    use seabus_medium::Value;
+
+    #[test]
+    fn lcm_messages_are_stamped_as_sent_in_a_single_int64_utime_only() {
+        let mut set = seabus_medium_lcm::types::TypeSet::new();
+        set.add_text(
+            "t.lcm",
+            "package t;\n\
+             struct s_t { int64_t utime; double x; }\n\
+             struct d_t { double utime; }\n\
+             struct a_t { int64_t utime[2]; }\n\
+             struct str_t { string utime; }",
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
+        let types = set.resolve().unwrap_or_else(|e| panic!("{e}"));
+        let map = DataMap::new().and("x", 1.5);
+        let decoded = |out: &LcmMessage, name: &str, stamp: i64| {
+            let p = out.payload(Stamp(stamp)).unwrap_or_else(|e| panic!("{e}"));
+            let bytes = p.as_bytes().expect("bytes");
+            let ty = types.get(name).expect("type");
+            seabus_medium_lcm::codec::decode(&types, ty, bytes).unwrap_or_else(|e| panic!("{e}"))
+        };
+        // each message sent gets its own time
+        let out = LcmMessage::of(types.clone(), "t.s_t", &map).unwrap_or_else(|e| panic!("{e}"));
+        for stamp in [1_000_000_000, 2_000_000_000] {
+            let m = decoded(&out, "t.s_t", stamp);
+            assert_eq!(m.get("utime"), Some(&Value::Int(stamp / 1_000)));
+            assert_eq!(m.get("x"), Some(&Value::Float(1.5)));
+        }
+        // one given in the fields stays
+        let given = DataMap::new().and("utime", 7);
+        let out = LcmMessage::of(types.clone(), "t.s_t", &given).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(
+            decoded(&out, "t.s_t", 5_000).get("utime"),
+            Some(&Value::Int(7))
+        );
+        // a `utime` of another type is left to its default
+        let empty = DataMap::new();
+        let out = LcmMessage::of(types.clone(), "t.d_t", &empty).unwrap_or_else(|e| panic!("{e}"));
+        assert!(
+            decoded(&out, "t.d_t", 5_000)
+                .get("utime")
+                .and_then(Value::as_f64)
+                .is_some_and(f64::is_nan)
+        );
+        for name in ["t.a_t", "t.str_t"] {
+            let out = LcmMessage::of(types.clone(), name, &empty).unwrap_or_else(|e| panic!("{e}"));
+            let m = decoded(&out, name, 5_000);
+            assert_ne!(m.get("utime"), Some(&Value::Int(5)), "{name}");
+        }
+    }
+}
