@@ -1,7 +1,9 @@
 //! UDP broadcast between two hosts: two network namespaces of our own joined by a veth pair. One runs
 //! a system that broadcasts a generator's messages; `seabus spy` in the other sees them.
 //!
-//! Needs root and `ip` (iproute2); without them the test says plainly that it was skipped.
+//! Needs root and `ip` (iproute2). Without them it fails with the reason when
+//! `SEABUS_REQUIRE_PRIVILEGES` is set (as `scripts/test` does as root), and otherwise says
+//! plainly on stderr that it was skipped.
 
 mod common;
 use common::*;
@@ -10,14 +12,8 @@ use std::time::Duration;
 
 #[test]
 fn broadcast_reaches_another_host() {
-    let hosts = match Hosts::new() {
-        Ok(h) => h,
-        Err(e) => {
-            eprintln!(
-                "SKIPPED broadcast_reaches_another_host: cannot make network namespaces here ({e})"
-            );
-            return;
-        }
+    let Some(hosts) = Hosts::for_test("broadcast_reaches_another_host") else {
+        return;
     };
     let port = 40_000 + u16::from(hosts.subnet) * 7;
     let url = format!("udp://10.77.{}.255:{port}?broadcast", hosts.subnet);

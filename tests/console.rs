@@ -230,6 +230,21 @@ async fn until(c: &Client, limit: Duration, what: &str, script: &str) -> Json {
     }
 }
 
+/// Waits (at most `limit`) until `script` returns `expected`; fails with the last value otherwise.
+async fn until_eq(c: &Client, limit: Duration, what: &str, script: &str, expected: Json) {
+    let deadline = Instant::now() + limit;
+    loop {
+        let v = js(c, script).await;
+        if v == expected {
+            return;
+        }
+        if Instant::now() >= deadline {
+            assert_eq!(v, expected, "{what}: not within {limit:?}");
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
 /// Waits like [`until`] for `script` to return text; returns the text.
 async fn until_text(c: &Client, limit: Duration, what: &str, script: &str) -> String {
     until(c, limit, what, script)
@@ -419,18 +434,21 @@ async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
     )
     .await;
     assert_eq!(controls, json!(0), "an observer sees no command controls");
-    // the health table: each component and the vehicle's severity, live
-    let health = until_text(
+    // the health table: each component and the vehicle's severity, live. Both lines are up once
+    // the serial media have opened their pseudo-terminals (until then the frontseat may show
+    // OFFLINE): then both components are HEALTHY and the severity is NONE.
+    until_eq(
         &c,
-        Duration::from_secs(15),
-        "the health table",
-        "const h = document.querySelector('[data-kind=health]'); return h && /Frontseat/.test(h.innerText) && /Sensors/.test(h.innerText) && h.innerText;",
+        Duration::from_secs(20),
+        "the health table with both lines up",
+        "const h = document.querySelector('[data-kind=health]');
+         if (!h) return null;
+         const sev = h.querySelector('[data-testid=severity]');
+         const state = (n) => { const r = h.querySelector(`tr[data-component=\"${n}\"]`); return r ? r.lastElementChild.textContent : null; };
+         return {severity: sev && sev.textContent, Frontseat: state('Frontseat'), Sensors: state('Sensors')};",
+        json!({"severity": "severity NONE", "Frontseat": "HEALTHY", "Sensors": "HEALTHY"}),
     )
     .await;
-    assert!(
-        health.contains("NONE") || health.contains("HEALTHY"),
-        "{health}"
-    );
     screenshot(&c, "observer.png").await;
     // a forged command over the page's own session: refused by the server
     js(
@@ -483,14 +501,18 @@ async fn a_second_pilot_cannot_command_until_the_first_releases_control() {
         "return /pilot/.test(document.querySelector('[data-testid=lease-holder]').innerText);",
     )
     .await;
+    // a pilot may take control, so the button is shown, but disabled while someone holds it
     let blocked = js(
         &b,
         "const b = document.querySelector('[data-testid=take-control]');
          const r = document.querySelector('[data-widget-id=heading] input[type=range]');
-         return {take: b.hidden || b.disabled, slider: r.disabled};",
+         return {hidden: b.hidden, disabled: b.disabled, why: b.title, slider: r.disabled};",
     )
     .await;
-    assert_eq!(blocked, json!({"take": true, "slider": true}));
+    assert_eq!(
+        blocked,
+        json!({"hidden": false, "disabled": true, "why": "pilot holds control", "slider": true})
+    );
     // even sent anyway (as a modified page would), the server refuses
     js(
         &b,
@@ -626,22 +648,35 @@ async fn a_bad_layout_shows_its_line_and_column_and_log_ins_are_limited() {
     let err =
         String::from_utf8_lossy(&out.stderr).into_owned() + &String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(1), "{err}");
-    assert!(err.contains("bad.xml:3:"), "{err}");
+    // FILE:3:COLUMN: MESSAGE
+    let (col, message) = err
+        .lines()
+        .find_map(|l| l.strip_prefix(&format!("{}:3:", bad.display())))
+        .and_then(|rest| rest.split_once(": "))
+        .unwrap_or_else(|| panic!("an error at line 3 of {}: {err}", bad.display()));
+    let (col, message) = (col.to_string(), message.to_string());
     // … and so does the page
     let sys = start(std::slice::from_ref(&bad));
     let driver = chromedriver();
     let c = browser(&driver).await;
     log_in(&c, &sys.url, "pilot", "pilot-password").await;
-    let shown = until_text(
+    let shown = until(
         &c,
         Duration::from_secs(15),
         "the layout error",
-        "const e = document.querySelector('[data-testid=layout-error]'); return e && !e.hidden && e.innerText;",
+        "const e = document.querySelector('[data-testid=layout-error]');
+         const text = (id) => { const x = e.querySelector(`[data-testid=${id}]`); return x && x.textContent; };
+         return e && !e.hidden && {where: text('error-where'), message: text('error-message'), line: e.lastElementChild.textContent};",
     )
     .await;
-    assert!(
-        shown.contains("bad.xml:3:") || shown.contains("line 3"),
-        "{shown}"
+    // the same place and words as the check command
+    assert_eq!(
+        shown,
+        json!({
+            "where": format!("{}:3:{col}", bad.display()),
+            "message": message,
+            "line": format!("line 3, column {col}"),
+        })
     );
     screenshot(&c, "layout-error.png").await;
     // wrong passwords: after five, even the right one is refused for a while

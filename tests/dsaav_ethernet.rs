@@ -2,7 +2,9 @@
 //! veth pair. `seabus pub` on node 1 in one sends to node 2; `seabus spy` on node 2 in the other
 //! sees the message, decoded through the dictionary.
 //!
-//! Needs root and `ip` (iproute2); without them the test says plainly that it was skipped.
+//! Needs root and `ip` (iproute2). Without them it fails with the reason when
+//! `SEABUS_REQUIRE_PRIVILEGES` is set (as `scripts/test` does as root), and otherwise says
+//! plainly on stderr that it was skipped.
 
 mod common;
 use common::*;
@@ -11,15 +13,9 @@ use std::process::{Command, Stdio};
 
 #[test]
 fn an_icomms_message_crosses_raw_ethernet_to_another_host() {
-    let hosts = match Hosts::new() {
-        Ok(h) => h,
-        Err(e) => {
-            eprintln!(
-                "SKIPPED an_icomms_message_crosses_raw_ethernet_to_another_host: cannot make \
-                 network namespaces here ({e})"
-            );
-            return;
-        }
+    let Some(hosts) = Hosts::for_test("an_icomms_message_crosses_raw_ethernet_to_another_host")
+    else {
+        return;
     };
     let exe = env!("CARGO_BIN_EXE_seabus");
     let mut spy = Command::new("ip")

@@ -3,7 +3,9 @@
 //! reaching it over UDP. An allowed station finds the configuration server by broadcast and reads
 //! a setting; a station whose address is not on the allow-list gets nothing.
 //!
-//! Needs root and `ip` (iproute2); without them the test says plainly that it was skipped.
+//! Needs root and `ip` (iproute2). Without them it fails with the reason when
+//! `SEABUS_REQUIRE_PRIVILEGES` is set (as `scripts/test` does as root), and otherwise says
+//! plainly on stderr that it was skipped.
 
 mod common;
 use common::*;
@@ -45,15 +47,9 @@ fn station(ns: String, me: String, bridge: String, node: u16) -> Result<f64, Str
 
 #[test]
 fn stations_on_the_allow_list_reach_the_vehicle_over_udp() {
-    let hosts = match Hosts::new() {
-        Ok(h) => h,
-        Err(e) => {
-            eprintln!(
-                "SKIPPED stations_on_the_allow_list_reach_the_vehicle_over_udp: cannot make \
-                 network namespaces here ({e})"
-            );
-            return;
-        }
+    let Some(hosts) = Hosts::for_test("stations_on_the_allow_list_reach_the_vehicle_over_udp")
+    else {
+        return;
     };
     let s = hosts.subnet;
     // a second address on the station host, not on the allow-list

@@ -553,10 +553,11 @@ impl Module for RouteBridge {
                 .await
             {
                 self.counters.errors += 1;
-                tracing::warn!(
-                    bridge = ctx.name(),
-                    "report not published on {}: {e}",
-                    self.media[port]
+                // a medium whose link is down fails every period: counted, logged now and then
+                self.problems.record(
+                    self.report_topic.as_str(),
+                    "report",
+                    format_args!("report not published on {}: {e}", self.media[port]),
                 );
             }
         }

@@ -1,8 +1,16 @@
 //! seabus-drivers: device drivers, which marshal a device's data into standard datasets and its
 //! commands back to the device, and the simulators that stand in for devices.
 //!
-//! - [`can`] — CAN devices described by DBC files: signal decoding and encoding, the `can-device`
-//!   module.
+#![cfg_attr(
+    feature = "can",
+    doc = "- [`can`] — CAN devices described by DBC files: signal decoding and encoding, the \
+           `can-device` module (the `can` feature, on by default)."
+)]
+#![cfg_attr(
+    not(feature = "can"),
+    doc = "- `can` — CAN devices described by DBC files: signal decoding and encoding, the \
+           `can-device` module (the `can` feature, on by default, left out of this build)."
+)]
 //! - [`iver`] — the Iver2/Iver3 frontseat: Remote Helm protocol, backseat driver, simulated frontseat.
 //! - [`nmea`] — NMEA 0183 sentences and the GPS, heading and echo-sounder drivers built on them.
 //! - [`units`] — unit conversions of device protocols.
@@ -10,6 +18,7 @@
 //!   reckoning) and the `vehicle-sim` module that follows course commands and publishes navigation,
 //!   battery and state datasets.
 
+#[cfg(feature = "can")]
 pub mod can;
 pub mod iver;
 pub mod nmea;
@@ -18,13 +27,14 @@ pub mod units;
 
 use seabus_modules::Registry;
 
-/// Registers the driver and simulator module types.
+/// Registers the driver and simulator module types (`can-device` with the `can` feature only).
 pub fn register(reg: &mut Registry) {
     reg.add_module(sim::vehicle::TYPE)
         .add_module(nmea::sensors::GPS)
         .add_module(nmea::sensors::HEADING)
         .add_module(nmea::sensors::SOUNDER)
         .add_module(iver::driver::TYPE)
-        .add_module(iver::sim::TYPE)
-        .add_module(can::device::TYPE);
+        .add_module(iver::sim::TYPE);
+    #[cfg(feature = "can")]
+    reg.add_module(can::device::TYPE);
 }

@@ -381,88 +381,10 @@ fn bridge_spec(
             .required("hops")?
             .error("the hop limit must be at least 1"));
     }
-    let mut routes = Vec::new();
-    for r in el.children_named("route") {
-        r.only_children(&["field"])?;
-        r.only_attrs(&[
-            "from", "to", "topics", "rename", "rate", "format", "kind", "lcm", "keep",
-        ])?;
-        let medium_attr = |key: &str| -> Result<Option<String>, FileError> {
-            match r.attr(key) {
-                None => Ok(None),
-                Some(a) if media.contains(&a.value) => Ok(Some(a.value.clone())),
-                Some(a) => Err(a.error(format!(
-                    "`{}` is not one of this bridge's media ({} and {})",
-                    a.value, media[0], media[1]
-                ))),
-            }
-        };
-        let (from, to) = (medium_attr("from")?, medium_attr("to")?);
-        if from.is_some() && from == to {
-            return Err(r.error("a route's `from` and `to` must differ"));
-        }
-        let topics_attr = r.required("topics")?;
-        let topics = Pattern::new(topics_attr.value.trim()).map_err(|e| topics_attr.error(e))?;
-        let rename = match r.attr("rename") {
-            None => None,
-            Some(a) => {
-                let p = Pattern::new(a.value.trim()).map_err(|e| a.error(e))?;
-                if p.wildcards() != topics.wildcards() {
-                    return Err(a.error(format!(
-                        "`{}` has {} wildcards, `{}` has {}: they are filled in order and must match",
-                        p,
-                        p.wildcards(),
-                        topics,
-                        topics.wildcards()
-                    )));
-                }
-                Some(p)
-            }
-        };
-        let min_interval = match r.attr("rate") {
-            None => None,
-            Some(a) => Some(parse_rate(&a.value).ok_or_else(|| {
-                a.error(format!(
-                    "`{}`: the rate must be above 0 and at most a million per second \
-                     (5, 5Hz) or a period (200ms, 2s)",
-                    a.value
-                ))
-            })?),
-        };
-        let format = match r.attr("format") {
-            None => None,
-            Some(a) => Some(
-                Format::parse(a.value.trim())
-                    .ok_or_else(|| a.error("expected bytes, map or xml"))?,
-            ),
-        };
-        let kind = match r.get("kind") {
-            None | Some("any") => None,
-            Some("data") => Some(Kind::Data),
-            Some("command") | Some("commands") => Some(Kind::Command),
-            Some(_) => return Err(r.required("kind")?.error("expected data, command or any")),
-        };
-        let mut fields = Vec::new();
-        for f in r.children_named("field") {
-            f.only_attrs(&["name", "rename"])?;
-            let name = f.required("name")?.value.clone();
-            let rename = f.get("rename").map_or_else(|| name.clone(), str::to_string);
-            fields.push((name, rename));
-        }
-        routes.push(RouteSpec {
-            from,
-            to,
-            topics,
-            rename,
-            min_interval,
-            format,
-            kind,
-            fields,
-            keep: r.flag("keep")?.unwrap_or(true),
-            lcm: r.get("lcm").map(|t| t.trim().to_string()),
-            pos: r.pos.clone(),
-        });
-    }
+    let routes = el
+        .children_named("route")
+        .map(|r| route_spec(r, &media))
+        .collect::<Result<Vec<_>, _>>()?;
     let params: Vec<Param> = el
         .attrs
         .iter()
@@ -482,6 +404,88 @@ fn bridge_spec(
         routes,
         params: Params::new(params, el.pos.clone()),
         pos: el.pos.clone(),
+    })
+}
+
+/// A `<route>` of a bridge between `media`.
+fn route_spec(r: &Element, media: &[String; 2]) -> Result<RouteSpec, FileError> {
+    r.only_children(&["field"])?;
+    r.only_attrs(&[
+        "from", "to", "topics", "rename", "rate", "format", "kind", "lcm", "keep",
+    ])?;
+    let medium_attr = |key: &str| -> Result<Option<String>, FileError> {
+        match r.attr(key) {
+            None => Ok(None),
+            Some(a) if media.contains(&a.value) => Ok(Some(a.value.clone())),
+            Some(a) => Err(a.error(format!(
+                "`{}` is not one of this bridge's media ({} and {})",
+                a.value, media[0], media[1]
+            ))),
+        }
+    };
+    let (from, to) = (medium_attr("from")?, medium_attr("to")?);
+    if from.is_some() && from == to {
+        return Err(r.error("a route's `from` and `to` must differ"));
+    }
+    let topics_attr = r.required("topics")?;
+    let topics = Pattern::new(topics_attr.value.trim()).map_err(|e| topics_attr.error(e))?;
+    let rename = match r.attr("rename") {
+        None => None,
+        Some(a) => {
+            let p = Pattern::new(a.value.trim()).map_err(|e| a.error(e))?;
+            if p.wildcards() != topics.wildcards() {
+                return Err(a.error(format!(
+                    "`{}` has {} wildcards, `{}` has {}: they are filled in order and must match",
+                    p,
+                    p.wildcards(),
+                    topics,
+                    topics.wildcards()
+                )));
+            }
+            Some(p)
+        }
+    };
+    let min_interval = match r.attr("rate") {
+        None => None,
+        Some(a) => Some(parse_rate(&a.value).ok_or_else(|| {
+            a.error(format!(
+                "`{}`: the rate must be above 0 and at most a million per second \
+                 (5, 5Hz) or a period (200ms, 2s)",
+                a.value
+            ))
+        })?),
+    };
+    let format = match r.attr("format") {
+        None => None,
+        Some(a) => Some(
+            Format::parse(a.value.trim()).ok_or_else(|| a.error("expected bytes, map or xml"))?,
+        ),
+    };
+    let kind = match r.get("kind") {
+        None | Some("any") => None,
+        Some("data") => Some(Kind::Data),
+        Some("command") | Some("commands") => Some(Kind::Command),
+        Some(_) => return Err(r.required("kind")?.error("expected data, command or any")),
+    };
+    let mut fields = Vec::new();
+    for f in r.children_named("field") {
+        f.only_attrs(&["name", "rename"])?;
+        let name = f.required("name")?.value.clone();
+        let rename = f.get("rename").map_or_else(|| name.clone(), str::to_string);
+        fields.push((name, rename));
+    }
+    Ok(RouteSpec {
+        from,
+        to,
+        topics,
+        rename,
+        min_interval,
+        format,
+        kind,
+        fields,
+        keep: r.flag("keep")?.unwrap_or(true),
+        lcm: r.get("lcm").map(|t| t.trim().to_string()),
+        pos: r.pos.clone(),
     })
 }
 

@@ -115,6 +115,35 @@ pub fn wait_for(child: &mut Child, limit: Duration) -> Option<std::process::Exit
     None
 }
 
+/// The environment variable that makes a test fail, rather than skip, when the machine does not
+/// give it what it needs (network namespaces, veth pairs, raw sockets). `scripts/test` sets it when
+/// run as root, and so does CI.
+pub const REQUIRE_PRIVILEGES: &str = "SEABUS_REQUIRE_PRIVILEGES";
+
+/// Whether `SEABUS_REQUIRE_PRIVILEGES` is set (to anything but empty or `0`).
+pub fn privileges_required() -> bool {
+    std::env::var_os(REQUIRE_PRIVILEGES).is_some_and(|v| !v.is_empty() && v != "0")
+}
+
+/// The one decision for every test that needs privileges: `need` is what the test needs, or why
+/// this machine cannot give it. With `SEABUS_REQUIRE_PRIVILEGES` set, a reason fails `test` with
+/// it; without, `test` is skipped: this says so on stderr and returns `None`, and the test returns.
+#[track_caller]
+pub fn privileged<T>(test: &str, need: Result<T, String>) -> Option<T> {
+    match need {
+        Ok(v) => Some(v),
+        Err(reason) if privileges_required() => {
+            panic!("{test}: {reason} ({REQUIRE_PRIVILEGES} is set, so this test must run here)")
+        }
+        Err(reason) => {
+            eprintln!(
+                "SKIPPED {test}: {reason} (set {REQUIRE_PRIVILEGES}=1 to make this a failure)"
+            );
+            None
+        }
+    }
+}
+
 /// Two namespaces joined by a veth pair, removed on drop.
 pub struct Hosts {
     /// The first namespace.
@@ -174,8 +203,23 @@ impl Hosts {
     }
 }
 
+impl Hosts {
+    /// [`Hosts::new`] for `test`, through [`privileged`]: `None` when the test is skipped.
+    #[track_caller]
+    pub fn for_test(test: &str) -> Option<Hosts> {
+        privileged(
+            test,
+            Hosts::new()
+                .map_err(|e| format!("cannot make network namespaces and a veth pair ({e})")),
+        )
+    }
+}
+
 impl Drop for Hosts {
     fn drop(&mut self) {
+        // the veth pair goes with its namespaces; it is still here only when making them stopped
+        // before it was moved
+        let _ = ip(&["link", "del", &self.dev_a]);
         let _ = ip(&["netns", "del", &self.a]);
         let _ = ip(&["netns", "del", &self.b]);
     }

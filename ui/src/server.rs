@@ -302,8 +302,8 @@ async fn put(sink: &mut futures_util::stream::SplitSink<WebSocket, Message>, msg
     )
 }
 
-fn error(message: impl Into<String>) -> Json {
-    json!({"type": "error", "message": message.into()})
+fn error(message: impl std::fmt::Display) -> Json {
+    json!({"type": "error", "message": message.to_string()})
 }
 
 /// Answers one message from the page.
@@ -396,9 +396,9 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
                     json!({"type": "saved", "layout": name}),
                     hub.open(client, &name, &BTreeMap::new()),
                 ],
-                Err(e) => vec![
-                    json!({"type": "error", "message": e.get("text").or(e.get("message")).cloned().unwrap_or_default(), "error": e}),
-                ],
+                Err(e) => {
+                    vec![json!({"type": "error", "message": e.to_string(), "error": e.json()})]
+                }
             }
         }
         other => vec![error(format!("unknown message type `{other}`"))],

@@ -159,12 +159,13 @@ impl Database {
     pub fn parse(file: &str, text: &str) -> Result<Database, FileError> {
         let file: Arc<str> = Arc::from(file);
         let dbc = can_dbc::Dbc::try_from(text).map_err(|e| parse_error(&file, text, &e))?;
-        let err = |needle: &str, message: String| FileError {
-            pos: pos_in(&file, text, Some(needle)),
-            message,
+        let r = Reader {
+            dbc: &dbc,
+            file: &file,
+            text,
         };
         if let Some(x) = dbc.extended_multiplex.first() {
-            return Err(err(
+            return Err(r.err(
                 "SG_MUL_VAL_",
                 format!(
                     "extended multiplexing (SG_MUL_VAL_, signal `{}`) is not supported",
@@ -172,125 +173,11 @@ impl Database {
                 ),
             ));
         }
-        let mut messages = Vec::with_capacity(dbc.messages.len());
-        for m in &dbc.messages {
-            let (id, extended) = match m.id {
-                can_dbc::MessageId::Standard(i) => (u32::from(i), false),
-                can_dbc::MessageId::Extended(i) => (i, true),
-            };
-            let here = format!("BO_ {} {}", m.id.raw(), m.name);
-            let size = usize::try_from(m.size).unwrap_or(usize::MAX);
-            if size > 64 {
-                return Err(err(
-                    &here,
-                    format!(
-                        "message `{}` is {size} bytes; a CAN frame holds at most 64",
-                        m.name
-                    ),
-                ));
-            }
-            let mut signals = Vec::with_capacity(m.signals.len());
-            for s in &m.signals {
-                let sig_err = |what: String| {
-                    err(
-                        &format!("SG_ {}", s.name),
-                        format!("signal `{}` of `{}`: {what}", s.name, m.name),
-                    )
-                };
-                let raw_type = match dbc
-                    .signal_extended_value_type_list
-                    .iter()
-                    .find(|x| x.message_id == m.id && x.signal_name == s.name)
-                    .map(|x| x.signal_extended_value_type)
-                {
-                    Some(can_dbc::SignalExtendedValueType::IEEEfloat32Bit) => RawType::Float,
-                    Some(can_dbc::SignalExtendedValueType::IEEEdouble64bit) => RawType::Double,
-                    _ if s.value_type == ValueType::Signed => RawType::Signed,
-                    _ => RawType::Unsigned,
-                };
-                let (start, size_bits) = (s.start_bit, s.size);
-                if size_bits == 0 || size_bits > 64 {
-                    return Err(sig_err(format!("{size_bits} bits; a signal has 1 to 64")));
-                }
-                let little = s.byte_order == ByteOrder::LittleEndian;
-                if !fits(start, size_bits, little, size) {
-                    return Err(sig_err(format!(
-                        "bits from {start} for {size_bits} do not fit in {size} bytes"
-                    )));
-                }
-                let needs = match raw_type {
-                    RawType::Float => Some(32),
-                    RawType::Double => Some(64),
-                    _ => None,
-                };
-                if needs.is_some_and(|n| n != size_bits) {
-                    return Err(sig_err(format!(
-                        "a {raw_type:?} signal of {size_bits} bits"
-                    )));
-                }
-                if s.factor == 0.0 || !s.factor.is_finite() || !s.offset.is_finite() {
-                    return Err(sig_err(format!(
-                        "factor {} and offset {} do not give a value",
-                        s.factor, s.offset
-                    )));
-                }
-                let values = dbc
-                    .value_descriptions_for_signal(m.id, &s.name)
-                    .map(|v| v.iter().map(|d| (d.id, d.description.clone())).collect())
-                    .unwrap_or_default();
-                let start_value = dbc
-                    .attribute_values_signal
-                    .iter()
-                    .find(|a| {
-                        a.name == "GenSigStartValue"
-                            && a.message_id == m.id
-                            && a.signal_name == s.name
-                    })
-                    .and_then(|a| match &a.value {
-                        can_dbc::AttributeValue::Uint(u) => i64::try_from(*u).ok(),
-                        can_dbc::AttributeValue::Int(i) => Some(*i),
-                        can_dbc::AttributeValue::Double(d) => Some(*d as i64),
-                        _ => None,
-                    })
-                    .unwrap_or(0);
-                signals.push(Signal {
-                    name: s.name.clone(),
-                    start: start as u32,
-                    size: size_bits as u32,
-                    little_endian: little,
-                    raw_type,
-                    factor: s.factor,
-                    offset: s.offset,
-                    min: number(&s.min),
-                    max: number(&s.max),
-                    unit: s.unit.clone(),
-                    mux: match s.multiplexer_indicator {
-                        MultiplexIndicator::Plain => Mux::Plain,
-                        MultiplexIndicator::Multiplexor => Mux::Multiplexor,
-                        MultiplexIndicator::MultiplexedSignal(v)
-                        | MultiplexIndicator::MultiplexorAndMultiplexedSignal(v) => Mux::When(v),
-                    },
-                    values,
-                    start_value,
-                });
-            }
-            let mut senders: Vec<String> = m.transmitter.iter().cloned().collect();
-            for t in dbc
-                .message_transmitters
-                .iter()
-                .filter(|t| t.message_id == m.id)
-            {
-                senders.extend(t.transmitter.iter().cloned());
-            }
-            messages.push(MessageDef {
-                id,
-                extended,
-                name: m.name.clone(),
-                size,
-                senders,
-                signals,
-            });
-        }
+        let messages = dbc
+            .messages
+            .iter()
+            .map(|m| r.message(m))
+            .collect::<Result<Vec<_>, _>>()?;
         Ok(Database { file, messages })
     }
 
@@ -304,6 +191,167 @@ impl Database {
     /// The message called `name`.
     pub fn by_name(&self, name: &str) -> Option<&MessageDef> {
         self.messages.iter().find(|m| m.name == name)
+    }
+}
+
+/// A database read by `can-dbc`, turned into [`MessageDef`]s; errors are placed in the file's
+/// text.
+struct Reader<'a> {
+    dbc: &'a can_dbc::Dbc,
+    file: &'a Arc<str>,
+    text: &'a str,
+}
+
+impl Reader<'_> {
+    /// An error placed where `needle` first appears in the file.
+    fn err(&self, needle: &str, message: String) -> FileError {
+        FileError {
+            pos: pos_in(self.file, self.text, Some(needle)),
+            message,
+        }
+    }
+
+    /// A message: its identifier, size (at most 64 bytes), signals and senders.
+    fn message(&self, m: &can_dbc::Message) -> Result<MessageDef, FileError> {
+        let (id, extended) = match m.id {
+            can_dbc::MessageId::Standard(i) => (u32::from(i), false),
+            can_dbc::MessageId::Extended(i) => (i, true),
+        };
+        let here = format!("BO_ {} {}", m.id.raw(), m.name);
+        let size = usize::try_from(m.size).unwrap_or(usize::MAX);
+        if size > 64 {
+            return Err(self.err(
+                &here,
+                format!(
+                    "message `{}` is {size} bytes; a CAN frame holds at most 64",
+                    m.name
+                ),
+            ));
+        }
+        let signals = m
+            .signals
+            .iter()
+            .map(|s| self.signal(m, size, s))
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut senders: Vec<String> = m.transmitter.iter().cloned().collect();
+        for t in self
+            .dbc
+            .message_transmitters
+            .iter()
+            .filter(|t| t.message_id == m.id)
+        {
+            senders.extend(t.transmitter.iter().cloned());
+        }
+        Ok(MessageDef {
+            id,
+            extended,
+            name: m.name.clone(),
+            size,
+            senders,
+            signals,
+        })
+    }
+
+    /// A signal of message `m` (`size` bytes long): refused when its bits do not fit, its raw type
+    /// does not match its width, or its factor and offset give no value.
+    fn signal(
+        &self,
+        m: &can_dbc::Message,
+        size: usize,
+        s: &can_dbc::Signal,
+    ) -> Result<Signal, FileError> {
+        let sig_err = |what: String| {
+            self.err(
+                &format!("SG_ {}", s.name),
+                format!("signal `{}` of `{}`: {what}", s.name, m.name),
+            )
+        };
+        let raw_type = self.raw_type(m, s);
+        let (start, size_bits) = (s.start_bit, s.size);
+        if size_bits == 0 || size_bits > 64 {
+            return Err(sig_err(format!("{size_bits} bits; a signal has 1 to 64")));
+        }
+        let little = s.byte_order == ByteOrder::LittleEndian;
+        if !fits(start, size_bits, little, size) {
+            return Err(sig_err(format!(
+                "bits from {start} for {size_bits} do not fit in {size} bytes"
+            )));
+        }
+        let needs = match raw_type {
+            RawType::Float => Some(32),
+            RawType::Double => Some(64),
+            _ => None,
+        };
+        if needs.is_some_and(|n| n != size_bits) {
+            return Err(sig_err(format!(
+                "a {raw_type:?} signal of {size_bits} bits"
+            )));
+        }
+        if s.factor == 0.0 || !s.factor.is_finite() || !s.offset.is_finite() {
+            return Err(sig_err(format!(
+                "factor {} and offset {} do not give a value",
+                s.factor, s.offset
+            )));
+        }
+        let values = self
+            .dbc
+            .value_descriptions_for_signal(m.id, &s.name)
+            .map(|v| v.iter().map(|d| (d.id, d.description.clone())).collect())
+            .unwrap_or_default();
+        Ok(Signal {
+            name: s.name.clone(),
+            start: start as u32,
+            size: size_bits as u32,
+            little_endian: little,
+            raw_type,
+            factor: s.factor,
+            offset: s.offset,
+            min: number(&s.min),
+            max: number(&s.max),
+            unit: s.unit.clone(),
+            mux: match s.multiplexer_indicator {
+                MultiplexIndicator::Plain => Mux::Plain,
+                MultiplexIndicator::Multiplexor => Mux::Multiplexor,
+                MultiplexIndicator::MultiplexedSignal(v)
+                | MultiplexIndicator::MultiplexorAndMultiplexedSignal(v) => Mux::When(v),
+            },
+            values,
+            start_value: self.start_value(m, s),
+        })
+    }
+
+    /// How a signal's raw bits are read: a float or double as `SIG_VALTYPE_` says, else a signed
+    /// or unsigned integer.
+    fn raw_type(&self, m: &can_dbc::Message, s: &can_dbc::Signal) -> RawType {
+        match self
+            .dbc
+            .signal_extended_value_type_list
+            .iter()
+            .find(|x| x.message_id == m.id && x.signal_name == s.name)
+            .map(|x| x.signal_extended_value_type)
+        {
+            Some(can_dbc::SignalExtendedValueType::IEEEfloat32Bit) => RawType::Float,
+            Some(can_dbc::SignalExtendedValueType::IEEEdouble64bit) => RawType::Double,
+            _ if s.value_type == ValueType::Signed => RawType::Signed,
+            _ => RawType::Unsigned,
+        }
+    }
+
+    /// A signal's `GenSigStartValue` (raw), or 0.
+    fn start_value(&self, m: &can_dbc::Message, s: &can_dbc::Signal) -> i64 {
+        self.dbc
+            .attribute_values_signal
+            .iter()
+            .find(|a| {
+                a.name == "GenSigStartValue" && a.message_id == m.id && a.signal_name == s.name
+            })
+            .and_then(|a| match &a.value {
+                can_dbc::AttributeValue::Uint(u) => i64::try_from(*u).ok(),
+                can_dbc::AttributeValue::Int(i) => Some(*i),
+                can_dbc::AttributeValue::Double(d) => Some(*d as i64),
+                _ => None,
+            })
+            .unwrap_or(0)
     }
 }
 

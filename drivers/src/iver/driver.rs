@@ -36,12 +36,12 @@ use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Format, Kind, LinkState, Message, Payload, Topic, Value};
-use seabus_modules::Catalogue;
 use seabus_modules::geo::wrap360;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TICK, TimerId, TopicDecl,
 };
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
+use seabus_modules::{Catalogue, Params};
 use std::collections::VecDeque;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -166,6 +166,32 @@ fn words(s: &str) -> Vec<String> {
 fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
     let p = &cfg.params;
     let version: u32 = p.parse_or("version", 5, "a Remote Helm major version such as 5")?;
+    let request = data_request(p)?;
+    let (oms_timeout, repeat) = keep_alive(cfg)?;
+    let t = topics(p, cat)?;
+    let s = Settings {
+        units: DepthUnits::of_version(version),
+        request,
+        request_every: p.duration_or("request_every", Duration::from_millis(500))?,
+        oms_timeout,
+        repeat,
+        hold: p.duration_or("hold", Duration::from_secs(3))?,
+        max_pitch: p.positive_or("max_pitch", 20.0)?,
+        ack_timeout: p.duration_or("ack_timeout", Duration::from_secs(3))?,
+        data_timeout: p.duration_or("data_timeout", Duration::from_secs(10))?,
+        accepting: words(p.str("accepting").unwrap_or("N M m A W")),
+        in_control: words(p.str("in_control").unwrap_or("P")),
+        fin_scale: p.positive_or("fin_scale", 4.0)?,
+        motor_scale: p.positive_or("motor_scale", 1.27)?,
+    };
+    Ok(Built {
+        decl: declaration(p, &t),
+        module: Box::new(Iver::new(s, t)),
+    })
+}
+
+/// The `$OSD` data request from `request`: letters among G, C, S, P, D.
+fn data_request(p: &Params) -> Result<DataRequest, FileError> {
     let letters = words(p.str("request").unwrap_or("G C S P"));
     let mut request = DataRequest::default();
     for l in &letters {
@@ -182,6 +208,13 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             }
         }
     }
+    Ok(request)
+}
+
+/// `oms_timeout` (seconds) and `repeat`: the keep-alive each `$OMS` carries and how often a held
+/// course is sent again, which must be sooner than the keep-alive lapses.
+fn keep_alive(cfg: &ModuleConfig) -> Result<(f64, Duration), FileError> {
+    let p = &cfg.params;
     let oms_timeout = p.positive_or("oms_timeout", 5.0)?;
     if oms_timeout > MAX_TIMEOUT {
         return Err(p
@@ -199,12 +232,17 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             None => cfg.pos.error(why),
         });
     }
+    Ok((oms_timeout, repeat))
+}
+
+/// The topics it publishes on and the catalogue topics of the commands it takes.
+fn topics(p: &Params, cat: &Catalogue) -> Result<Topics, FileError> {
     let topic = |name: &str, dataset: &str, fallback: &str| {
         p.dataset_topic_or(name, cat, dataset, fallback)
     };
     // the commands it takes arrive on the catalogue's topics
     let command = |dataset: &str, fallback: &str| p.dataset_topic(cat, dataset, fallback);
-    let t = Topics {
+    Ok(Topics {
         attitude: topic("attitude_topic", "attitude", "nav.attitude")?,
         position: topic("position_topic", "position", "nav.position")?,
         velocity: topic("velocity_topic", "velocity", "nav.velocity")?,
@@ -218,22 +256,11 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         mission: command("mission-command", "cmd.mission")?,
         gps: p.topic_or("gps_topic", "nav.gps")?,
         dvl: p.topic_or("dvl_topic", "nav.dvl")?,
-    };
-    let s = Settings {
-        units: DepthUnits::of_version(version),
-        request,
-        request_every: p.duration_or("request_every", Duration::from_millis(500))?,
-        oms_timeout,
-        repeat,
-        hold: p.duration_or("hold", Duration::from_secs(3))?,
-        max_pitch: p.positive_or("max_pitch", 20.0)?,
-        ack_timeout: p.duration_or("ack_timeout", Duration::from_secs(3))?,
-        data_timeout: p.duration_or("data_timeout", Duration::from_secs(10))?,
-        accepting: words(p.str("accepting").unwrap_or("N M m A W")),
-        in_control: words(p.str("in_control").unwrap_or("P")),
-        fin_scale: p.positive_or("fin_scale", 4.0)?,
-        motor_scale: p.positive_or("motor_scale", 1.27)?,
-    };
+    })
+}
+
+/// Port 0 takes the frontseat's sentences; port 1 carries the datasets and the commands.
+fn declaration(p: &Params, t: &Topics) -> Declaration {
     let mut decl = Declaration::new(ModuleKind::Driver)
         .format(0, Some(Format::Bytes))
         .consumes(TopicDecl::topic(p.str("input").unwrap_or("**")))
@@ -253,8 +280,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
     ] {
         decl = decl.produces(TopicDecl::dataset(topic, dataset).on_port(1));
     }
-    decl = decl
-        .accepts(TopicDecl::dataset(&t.course, "course-command").on_port(1))
+    decl.accepts(TopicDecl::dataset(&t.course, "course-command").on_port(1))
         .accepts(TopicDecl::dataset(&t.actuator, "actuator-command").on_port(1))
         .accepts(TopicDecl::dataset(&t.mission, "mission-command").on_port(1))
         .accepts(
@@ -276,10 +302,18 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
                 .field("x", "m/s")
                 .field("y", "m/s")
                 .on_port(1),
-        );
-    Ok(Built {
-        decl,
-        module: Box::new(Iver {
+        )
+}
+
+/// A fin angle as an `$OMP` byte around the neutral 0x80.
+fn fin_byte(degrees: f64, scale: f64) -> u8 {
+    (128.0 + degrees * scale).round().clamp(0.0, 255.0) as u8
+}
+
+impl Iver {
+    /// A driver that has heard nothing from the frontseat yet.
+    fn new(s: Settings, t: Topics) -> Iver {
+        Iver {
             s,
             t,
             last_data: None,
@@ -296,16 +330,9 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             last_state: None,
             heading: None,
             tally: Tally::new(),
-        }),
-    })
-}
+        }
+    }
 
-/// A fin angle as an `$OMP` byte around the neutral 0x80.
-fn fin_byte(degrees: f64, scale: f64) -> u8 {
-    (128.0 + degrees * scale).round().clamp(0.0, 255.0) as u8
-}
-
-impl Iver {
     fn control_of(&self, mode: &str) -> Control {
         if self.s.in_control.iter().any(|m| m == mode) {
             Control::InControl
@@ -462,111 +489,11 @@ impl Iver {
         };
         self.last_data = Some(now);
         match parsed {
-            FromFront::Osi(o) => {
-                self.mode = o.mode.clone();
-                self.error = o.error.clone();
-                self.mission = o.mission.clone();
-                self.waypoint = o.next_waypoint;
-                if let (Some(lat), Some(lon)) = (o.lat, o.lon) {
-                    let m = DataMap::new()
-                        .with("lat", lat)
-                        .with("lon", lon)
-                        .with("source", Value::label("frontseat"));
-                    self.publish(ctx, "position", &self.t.position, m).await;
-                }
-                if let (Some(kn), Some(h)) = (o.speed_knots, o.heading) {
-                    self.heading = Some(h);
-                    let m = DataMap::new()
-                        .with("speed", kn * KNOT)
-                        .with("course", wrap360(h))
-                        .with("reference", Value::label("water"));
-                    self.publish(ctx, "velocity", &self.t.velocity, m).await;
-                }
-                if let Some(ft) = o.altimeter_feet {
-                    let m = DataMap::new()
-                        .with("altitude", (ft * FOOT).max(0.0))
-                        .with("valid", ft > 0.0);
-                    self.publish(ctx, "altitude", &self.t.altitude, m).await;
-                }
-                if !self.s.request.compass
-                    && let Some(ft) = o.depth_feet
-                {
-                    self.publish_depth(ctx, ft).await;
-                }
-                if !self.s.request.power
-                    && let Some(pc) = o.battery_percent
-                {
-                    self.publish(
-                        ctx,
-                        "battery",
-                        &self.t.battery,
-                        DataMap::new().with("percent", pc),
-                    )
-                    .await;
-                }
-                let link = ctx
-                    .port(0)
-                    .map_or(LinkState::Up, |p| p.medium().link_state());
-                self.update_control(&link, now);
-                self.publish_state(ctx).await;
-            }
-            FromFront::Compass(c) => {
-                self.heading = Some(c.heading);
-                let mut m = DataMap::new()
-                    .with("yaw", wrap360(c.heading))
-                    .with("pitch", c.pitch)
-                    .with("roll", c.roll);
-                if let Some(t) = c.temperature {
-                    m.insert("temperature", t);
-                }
-                self.publish(ctx, "attitude", &self.t.attitude, m).await;
-                if let Some(ft) = c.depth_feet {
-                    self.publish_depth(ctx, ft).await;
-                }
-            }
-            FromFront::Opi(p) => {
-                if let Some(pc) = p.percent {
-                    let mut m = DataMap::new().with("percent", pc);
-                    for (k, v) in [
-                        ("remaining", p.remaining_wh),
-                        ("power", p.power_w),
-                        ("voltage", p.volts),
-                        ("current", p.current),
-                        ("minutes", p.minutes),
-                    ] {
-                        if let Some(v) = v {
-                            m.insert(k, v);
-                        }
-                    }
-                    let state = match p.state.as_str() {
-                        "C" => "charging",
-                        "F" => "full",
-                        _ => "discharging",
-                    };
-                    m.insert("state", state);
-                    m.insert("leak", p.leak);
-                    self.publish(ctx, "battery", &self.t.battery, m).await;
-                }
-            }
+            FromFront::Osi(o) => self.on_osi(ctx, &o, now).await,
+            FromFront::Compass(c) => self.on_compass(ctx, c).await,
+            FromFront::Opi(p) => self.on_opi(ctx, p).await,
             FromFront::Ack(a) => self.on_ack(ctx, a).await,
-            FromFront::Dvl(d) => {
-                if let (Some(vx), Some(vy)) = (d.vx, d.vy) {
-                    let speed = vx.hypot(vy);
-                    let heading = self.heading.unwrap_or(0.0);
-                    // +y is port in the vehicle's frame: starboard sway is -vy
-                    let course = wrap360(heading + (-vy).atan2(vx).to_degrees());
-                    let mut m = DataMap::new()
-                        .with("speed", speed)
-                        .with("course", course)
-                        .with("surge", vx)
-                        .with("sway", -vy)
-                        .with("reference", Value::label("ground"));
-                    if let Some(vz) = d.vz {
-                        m.insert("heave", vz);
-                    }
-                    self.publish(ctx, "velocity", &self.t.dvl, m).await;
-                }
-            }
+            FromFront::Dvl(d) => self.on_dvl(ctx, d).await,
             FromFront::Rmc(r) => {
                 if let (Some(lat), Some(lon)) = (r.lat, r.lon) {
                     let m = DataMap::new()
@@ -581,6 +508,121 @@ impl Iver {
                     .record(ctx.name(), "unknown-sentence", format_args!("${addr}"));
             }
         }
+    }
+
+    /// `$OSI`: the frontseat's mode, mission and error state, its position, velocity and altitude
+    /// (and depth and battery when those are not requested on their own), and the control state.
+    async fn on_osi(&mut self, ctx: &Context, o: &protocol::Osi, now: Instant) {
+        self.mode = o.mode.clone();
+        self.error = o.error.clone();
+        self.mission = o.mission.clone();
+        self.waypoint = o.next_waypoint;
+        if let (Some(lat), Some(lon)) = (o.lat, o.lon) {
+            let m = DataMap::new()
+                .with("lat", lat)
+                .with("lon", lon)
+                .with("source", Value::label("frontseat"));
+            self.publish(ctx, "position", &self.t.position, m).await;
+        }
+        if let (Some(kn), Some(h)) = (o.speed_knots, o.heading) {
+            self.heading = Some(h);
+            let m = DataMap::new()
+                .with("speed", kn * KNOT)
+                .with("course", wrap360(h))
+                .with("reference", Value::label("water"));
+            self.publish(ctx, "velocity", &self.t.velocity, m).await;
+        }
+        if let Some(ft) = o.altimeter_feet {
+            let m = DataMap::new()
+                .with("altitude", (ft * FOOT).max(0.0))
+                .with("valid", ft > 0.0);
+            self.publish(ctx, "altitude", &self.t.altitude, m).await;
+        }
+        if !self.s.request.compass
+            && let Some(ft) = o.depth_feet
+        {
+            self.publish_depth(ctx, ft).await;
+        }
+        if !self.s.request.power
+            && let Some(pc) = o.battery_percent
+        {
+            self.publish(
+                ctx,
+                "battery",
+                &self.t.battery,
+                DataMap::new().with("percent", pc),
+            )
+            .await;
+        }
+        let link = ctx
+            .port(0)
+            .map_or(LinkState::Up, |p| p.medium().link_state());
+        self.update_control(&link, now);
+        self.publish_state(ctx).await;
+    }
+
+    /// `$C`: attitude, and depth.
+    async fn on_compass(&mut self, ctx: &Context, c: protocol::Compass) {
+        self.heading = Some(c.heading);
+        let mut m = DataMap::new()
+            .with("yaw", wrap360(c.heading))
+            .with("pitch", c.pitch)
+            .with("roll", c.roll);
+        if let Some(t) = c.temperature {
+            m.insert("temperature", t);
+        }
+        self.publish(ctx, "attitude", &self.t.attitude, m).await;
+        if let Some(ft) = c.depth_feet {
+            self.publish_depth(ctx, ft).await;
+        }
+    }
+
+    /// `$OPI`: the battery.
+    async fn on_opi(&self, ctx: &Context, p: protocol::Opi) {
+        let Some(pc) = p.percent else {
+            return;
+        };
+        let mut m = DataMap::new().with("percent", pc);
+        for (k, v) in [
+            ("remaining", p.remaining_wh),
+            ("power", p.power_w),
+            ("voltage", p.volts),
+            ("current", p.current),
+            ("minutes", p.minutes),
+        ] {
+            if let Some(v) = v {
+                m.insert(k, v);
+            }
+        }
+        let state = match p.state.as_str() {
+            "C" => "charging",
+            "F" => "full",
+            _ => "discharging",
+        };
+        m.insert("state", state);
+        m.insert("leak", p.leak);
+        self.publish(ctx, "battery", &self.t.battery, m).await;
+    }
+
+    /// `$DVL`: velocity over ground, turned from the vehicle's frame by the last heading.
+    async fn on_dvl(&self, ctx: &Context, d: protocol::Dvl) {
+        let (Some(vx), Some(vy)) = (d.vx, d.vy) else {
+            return;
+        };
+        let speed = vx.hypot(vy);
+        let heading = self.heading.unwrap_or(0.0);
+        // +y is port in the vehicle's frame: starboard sway is -vy
+        let course = wrap360(heading + (-vy).atan2(vx).to_degrees());
+        let mut m = DataMap::new()
+            .with("speed", speed)
+            .with("course", course)
+            .with("surge", vx)
+            .with("sway", -vy)
+            .with("reference", Value::label("ground"));
+        if let Some(vz) = d.vz {
+            m.insert("heave", vz);
+        }
+        self.publish(ctx, "velocity", &self.t.dvl, m).await;
     }
 
     async fn on_ack(&mut self, ctx: &Context, a: protocol::Ack) {
@@ -656,161 +698,197 @@ impl Iver {
         };
         let request = Some((msg.origin().to_string(), msg.seq()));
         let topic = msg.topic.as_str();
-        let f = |k: &str| map.get_f64(k);
         if topic == self.t.course.as_str() {
-            if let Err(e) = ctx.catalogue().validate("course-command", map) {
-                return self.refuse(ctx, "OMS", &e.to_string(), request).await;
-            }
-            if !self.control.commandable() {
-                let why = self.reason.clone();
-                self.course = None;
-                return self.refuse(ctx, "OMS", &why, request).await;
-            }
-            let (heading, depth, speed) = (
-                f("heading").unwrap_or(0.0),
-                f("depth").unwrap_or(0.0),
-                f("speed").unwrap_or(0.0),
-            );
-            let hold = f("timeout")
-                .and_then(seabus_medium::parse::secs)
-                .filter(|d| !d.is_zero())
-                .unwrap_or(self.s.hold);
-            let oms = Command::Oms {
-                heading,
-                depth,
-                max_pitch: f("max_pitch").unwrap_or(self.s.max_pitch),
-                speed_knots: speed / KNOT,
-                timeout: self.s.oms_timeout,
-            };
-            // a new course is reported; the same course again only keeps it alive
-            let same = self
-                .course
-                .as_ref()
-                .is_some_and(|c| c.heading == heading && c.depth == depth && c.speed == speed);
-            let due = self.last_oms.is_none_or(|t| t.elapsed() >= self.s.repeat);
-            self.course = Some(Course {
-                oms: oms.clone(),
-                until: Instant::now() + hold,
-                heading,
-                depth,
-                speed,
-            });
-            if !same || due {
-                self.send(ctx, &oms, !same, request).await;
-                self.last_oms = Some(Instant::now());
-            }
+            self.on_course(ctx, map, request).await;
         } else if topic == self.t.actuator.as_str() {
-            if let Err(e) = ctx.catalogue().validate("actuator-command", map) {
-                return self.refuse(ctx, "OMP", &e.to_string(), request).await;
-            }
-            if !self.control.commandable() {
-                let why = self.reason.clone();
-                return self.refuse(ctx, "OMP", &why, request).await;
-            }
-            let rudder = f("rudder").unwrap_or(0.0);
-            let elevator = f("elevator").unwrap_or(0.0);
-            let thrust = f("thrust").unwrap_or(0.0);
-            let (fs, ms) = (self.s.fin_scale, self.s.motor_scale);
-            let cmd = Command::Omp {
-                bytes: [
-                    fin_byte(rudder, fs),
-                    fin_byte(rudder, fs),
-                    fin_byte(elevator, fs),
-                    fin_byte(elevator, fs),
-                    fin_byte(thrust, ms),
-                ],
-                timeout: f("timeout").unwrap_or(3.0).clamp(0.0, MAX_TIMEOUT),
-            };
-            self.send(ctx, &cmd, true, request).await;
+            self.on_actuator(ctx, map, request).await;
         } else if topic == self.t.mission.as_str() {
-            if let Err(e) = ctx.catalogue().validate("mission-command", map) {
-                return self.refuse(ctx, "mission", &e.to_string(), request).await;
-            }
-            if self.control == Control::Offline {
-                let why = self.reason.clone();
+            self.on_mission(ctx, map, request).await;
+        } else if topic == "cmd.iver.waypoint" {
+            self.on_waypoint(ctx, map, request).await;
+        } else if topic == "cmd.iver.position" {
+            self.on_position(ctx, map, request).await;
+        } else if topic == "cmd.iver.dvl" {
+            self.on_dvl_aid(ctx, map, request).await;
+        }
+    }
+
+    /// A course command: a new course is sent as `$OMS` and reported; the same course again only
+    /// keeps it held, and is sent when a repeat is due.
+    async fn on_course(&mut self, ctx: &Context, map: &DataMap, request: Option<(String, u64)>) {
+        if let Err(e) = ctx.catalogue().validate("course-command", map) {
+            return self.refuse(ctx, "OMS", &e.to_string(), request).await;
+        }
+        if !self.control.commandable() {
+            let why = self.reason.clone();
+            self.course = None;
+            return self.refuse(ctx, "OMS", &why, request).await;
+        }
+        let f = |k: &str| map.get_f64(k);
+        let (heading, depth, speed) = (
+            f("heading").unwrap_or(0.0),
+            f("depth").unwrap_or(0.0),
+            f("speed").unwrap_or(0.0),
+        );
+        let hold = f("timeout")
+            .and_then(seabus_medium::parse::secs)
+            .filter(|d| !d.is_zero())
+            .unwrap_or(self.s.hold);
+        let oms = Command::Oms {
+            heading,
+            depth,
+            max_pitch: f("max_pitch").unwrap_or(self.s.max_pitch),
+            speed_knots: speed / KNOT,
+            timeout: self.s.oms_timeout,
+        };
+        // a new course is reported; the same course again only keeps it alive
+        let same = self
+            .course
+            .as_ref()
+            .is_some_and(|c| c.heading == heading && c.depth == depth && c.speed == speed);
+        let due = self.last_oms.is_none_or(|t| t.elapsed() >= self.s.repeat);
+        self.course = Some(Course {
+            oms: oms.clone(),
+            until: Instant::now() + hold,
+            heading,
+            depth,
+            speed,
+        });
+        if !same || due {
+            self.send(ctx, &oms, !same, request).await;
+            self.last_oms = Some(Instant::now());
+        }
+    }
+
+    /// An actuator command (thrust, rudder, elevator): `$OMP`.
+    async fn on_actuator(&mut self, ctx: &Context, map: &DataMap, request: Option<(String, u64)>) {
+        if let Err(e) = ctx.catalogue().validate("actuator-command", map) {
+            return self.refuse(ctx, "OMP", &e.to_string(), request).await;
+        }
+        if !self.control.commandable() {
+            let why = self.reason.clone();
+            return self.refuse(ctx, "OMP", &why, request).await;
+        }
+        let f = |k: &str| map.get_f64(k);
+        let rudder = f("rudder").unwrap_or(0.0);
+        let elevator = f("elevator").unwrap_or(0.0);
+        let thrust = f("thrust").unwrap_or(0.0);
+        let (fs, ms) = (self.s.fin_scale, self.s.motor_scale);
+        let cmd = Command::Omp {
+            bytes: [
+                fin_byte(rudder, fs),
+                fin_byte(rudder, fs),
+                fin_byte(elevator, fs),
+                fin_byte(elevator, fs),
+                fin_byte(thrust, ms),
+            ],
+            timeout: f("timeout").unwrap_or(3.0).clamp(0.0, MAX_TIMEOUT),
+        };
+        self.send(ctx, &cmd, true, request).await;
+    }
+
+    /// A mission command: `start` → `$OMSTART`, `stop` or `abort` → `$OMSTOP` (which drops the
+    /// course held), `goto` → `$OJW`. A mission can be started while the frontseat is idle.
+    async fn on_mission(&mut self, ctx: &Context, map: &DataMap, request: Option<(String, u64)>) {
+        if let Err(e) = ctx.catalogue().validate("mission-command", map) {
+            return self.refuse(ctx, "mission", &e.to_string(), request).await;
+        }
+        if self.control == Control::Offline {
+            let why = self.reason.clone();
+            return self.refuse(ctx, "mission", &why, request).await;
+        }
+        let cmd = match map.get_str("action").unwrap_or("") {
+            "start" => Command::OmStart {
+                ignore_gps: map.get_bool("ignore_gps").unwrap_or(false),
+                ignore_sounder: map.get_bool("ignore_sounder").unwrap_or(false),
+                ignore_pressure: map.get_bool("ignore_pressure").unwrap_or(false),
+                mission_type: 0,
+                mission: map.get_str("name").unwrap_or("").to_string(),
+            },
+            "stop" | "abort" => Command::OmStop,
+            "goto" => match map.get_i64("waypoint").filter(|w| (0..=999).contains(w)) {
+                Some(w) => Command::Ojw(w as u32),
+                None => {
+                    return self
+                        .refuse(ctx, "OJW", "goto needs a waypoint from 0 to 999", request)
+                        .await;
+                }
+            },
+            other => {
+                let why = format!(
+                    "the Iver frontseat cannot `{other}` a mission (start, stop, abort, goto)"
+                );
                 return self.refuse(ctx, "mission", &why, request).await;
             }
-            let cmd = match map.get_str("action").unwrap_or("") {
-                "start" => Command::OmStart {
-                    ignore_gps: map.get_bool("ignore_gps").unwrap_or(false),
-                    ignore_sounder: map.get_bool("ignore_sounder").unwrap_or(false),
-                    ignore_pressure: map.get_bool("ignore_pressure").unwrap_or(false),
-                    mission_type: 0,
-                    mission: map.get_str("name").unwrap_or("").to_string(),
-                },
-                "stop" | "abort" => Command::OmStop,
-                "goto" => match map.get_i64("waypoint").filter(|w| (0..=999).contains(w)) {
-                    Some(w) => Command::Ojw(w as u32),
-                    None => {
-                        return self
-                            .refuse(ctx, "OJW", "goto needs a waypoint from 0 to 999", request)
-                            .await;
-                    }
-                },
-                other => {
-                    let why = format!(
-                        "the Iver frontseat cannot `{other}` a mission (start, stop, abort, goto)"
-                    );
-                    return self.refuse(ctx, "mission", &why, request).await;
-                }
-            };
-            if matches!(cmd, Command::OmStop) {
-                self.course = None;
-            }
-            self.send(ctx, &cmd, true, request).await;
-        } else if topic == "cmd.iver.waypoint" {
-            if !self.control.commandable() {
-                let why = self.reason.clone();
-                return self.refuse(ctx, "OMW", &why, request).await;
-            }
-            let cmd = if map.get_str("action") == Some("stop") {
-                Command::Omw(None)
-            } else {
-                match (f("lat"), f("lon")) {
-                    (Some(lat), Some(lon)) => Command::Omw(Some(Waypoint {
-                        clear: map.get_bool("clear").unwrap_or(false),
-                        lat,
-                        lon,
-                        depth: f("depth").unwrap_or(0.0),
-                        speed_knots: f("speed").unwrap_or(1.0) / KNOT,
-                    })),
-                    _ => {
-                        return self
-                            .refuse(ctx, "OMW", "a waypoint needs lat and lon", request)
-                            .await;
-                    }
-                }
-            };
-            self.send(ctx, &cmd, true, request).await;
-        } else if topic == "cmd.iver.position" {
+        };
+        if matches!(cmd, Command::OmStop) {
+            self.course = None;
+        }
+        self.send(ctx, &cmd, true, request).await;
+    }
+
+    /// A waypoint (`cmd.iver.waypoint`): `$OMW`, or `$OMW,STOP` for action `stop`.
+    async fn on_waypoint(&mut self, ctx: &Context, map: &DataMap, request: Option<(String, u64)>) {
+        if !self.control.commandable() {
+            let why = self.reason.clone();
+            return self.refuse(ctx, "OMW", &why, request).await;
+        }
+        let f = |k: &str| map.get_f64(k);
+        let cmd = if map.get_str("action") == Some("stop") {
+            Command::Omw(None)
+        } else {
             match (f("lat"), f("lon")) {
-                (Some(lat), Some(lon)) => {
-                    let cmd = Command::Opos {
-                        lat,
-                        lon,
-                        speed_knots: f("speed").unwrap_or(0.0) / KNOT,
-                    };
-                    self.send(ctx, &cmd, true, request).await;
-                }
+                (Some(lat), Some(lon)) => Command::Omw(Some(Waypoint {
+                    clear: map.get_bool("clear").unwrap_or(false),
+                    lat,
+                    lon,
+                    depth: f("depth").unwrap_or(0.0),
+                    speed_knots: f("speed").unwrap_or(1.0) / KNOT,
+                })),
                 _ => {
-                    self.refuse(ctx, "OPOS", "a position needs lat and lon", request)
-                        .await
+                    return self
+                        .refuse(ctx, "OMW", "a waypoint needs lat and lon", request)
+                        .await;
                 }
             }
-        } else if topic == "cmd.iver.dvl" {
-            match (f("x"), f("y")) {
-                (Some(x), Some(y)) => {
-                    let cmd = Command::Odvl {
-                        x,
-                        y,
-                        timeout: f("timeout").unwrap_or(3.0).clamp(0.0, MAX_TIMEOUT),
-                    };
-                    self.send(ctx, &cmd, true, request).await;
-                }
-                _ => {
-                    self.refuse(ctx, "ODVL", "a velocity needs x and y", request)
-                        .await
-                }
+        };
+        self.send(ctx, &cmd, true, request).await;
+    }
+
+    /// A position fix to inject (`cmd.iver.position`): `$OPOS`.
+    async fn on_position(&mut self, ctx: &Context, map: &DataMap, request: Option<(String, u64)>) {
+        let f = |k: &str| map.get_f64(k);
+        match (f("lat"), f("lon")) {
+            (Some(lat), Some(lon)) => {
+                let cmd = Command::Opos {
+                    lat,
+                    lon,
+                    speed_knots: f("speed").unwrap_or(0.0) / KNOT,
+                };
+                self.send(ctx, &cmd, true, request).await;
+            }
+            _ => {
+                self.refuse(ctx, "OPOS", "a position needs lat and lon", request)
+                    .await
+            }
+        }
+    }
+
+    /// A velocity to inject (`cmd.iver.dvl`): `$ODVL`.
+    async fn on_dvl_aid(&mut self, ctx: &Context, map: &DataMap, request: Option<(String, u64)>) {
+        let f = |k: &str| map.get_f64(k);
+        match (f("x"), f("y")) {
+            (Some(x), Some(y)) => {
+                let cmd = Command::Odvl {
+                    x,
+                    y,
+                    timeout: f("timeout").unwrap_or(3.0).clamp(0.0, MAX_TIMEOUT),
+                };
+                self.send(ctx, &cmd, true, request).await;
+            }
+            _ => {
+                self.refuse(ctx, "ODVL", "a velocity needs x and y", request)
+                    .await
             }
         }
     }

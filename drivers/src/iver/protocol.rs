@@ -1,6 +1,14 @@
-//! The Iver2/Iver3 frontseat "Remote Helm" protocol: the sentences both sides exchange, read and
-//! written. Facts are in `shared/protocols/iver-remote-helm.md`; where sources disagree the choice
-//! made here is written beside it.
+//! The Iver2/Iver3 frontseat "Remote Helm" protocol: the NMEA-style ASCII sentences that an Iver
+//! AUV's frontseat computer (the maker's vehicle control software) and a backseat computer
+//! exchange over serial or TCP, read and written here.
+//!
+//! The protocol is defined by OceanServer's Remote Helm documentation for the vehicle, of which no
+//! public copy is available. The facts used here (sentence layouts and field order, units, the
+//! `$ACK` message-type and error numbers, the `$OSI` modes and error states that [`error_text`],
+//! [`error_state_text`] and [`mode_text`] summarise) were gathered from open software that speaks
+//! the protocol: the Iver frontseat driver of the Goby3 autonomy framework, the Iver code of the
+//! University of Sydney's acfr-lcm, and public tools of the University of Southern Mississippi.
+//! Where these sources disagree, the choice made here is written beside it.
 //!
 //! Everything here works on one whole sentence (with its checksum, as the serial medium's NMEA
 //! framing hands it out) and never panics. Depths on the wire are in feet unless the Remote Helm
@@ -645,93 +653,10 @@ pub fn parse_command(line: &str, units: DepthUnits) -> Result<Command, RhError> 
     }
     let f = fields(line);
     Ok(match address(line) {
-        "OSD" => {
-            let has = |i: usize, letter: &str| f.get(i).is_some_and(|s| s.trim() == letter);
-            for (i, s) in f.iter().enumerate() {
-                let s = s.trim();
-                let allowed = ["G", "C", "S", "P", "Y", "D", "CTD", "INS"];
-                if !s.is_empty() && !allowed.contains(&s) {
-                    return Err(rh_err(
-                        line,
-                        format!("field {} `{s}` is not a data request letter", i + 1),
-                    ));
-                }
-            }
-            Command::Osd(DataRequest {
-                gps: has(0, "G"),
-                compass: has(1, "C"),
-                state: has(2, "S"),
-                power: has(3, "P"),
-                dvl: has(5, "D"),
-            })
-        }
-        "OMS" => {
-            if f.len() != 5 {
-                return Err(rh_err(
-                    line,
-                    format!("$OMS has {} fields, 5 were expected", f.len()),
-                ));
-            }
-            Command::Oms {
-                heading: req_num(line, &f, 0, "heading")?,
-                depth: units.to_metres(req_num(line, &f, 1, "depth")?),
-                max_pitch: req_num(line, &f, 2, "max pitch")?,
-                speed_knots: req_num(line, &f, 3, "speed")?,
-                timeout: req_num(line, &f, 4, "timeout")?,
-            }
-        }
-        "OMP" => {
-            let hex = text(&f, 0);
-            if hex.len() != 10 || !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
-                return Err(rh_err(
-                    line,
-                    format!("fin/motor field `{hex}` is not 10 hex digits"),
-                ));
-            }
-            let mut bytes = [0u8; 5];
-            for (i, b) in bytes.iter_mut().enumerate() {
-                *b = u8::from_str_radix(&hex[i * 2..i * 2 + 2], 16)
-                    .map_err(|_| rh_err(line, "bad hex digits"))?;
-            }
-            Command::Omp {
-                bytes,
-                timeout: req_num(line, &f, 2, "timeout")?,
-            }
-        }
-        "OMSTART" => {
-            if f.len() < 5 {
-                return Err(rh_err(
-                    line,
-                    format!("$OMSTART has {} fields, at least 5 were expected", f.len()),
-                ));
-            }
-            let flag = |i: usize, what: &str| -> Result<bool, RhError> {
-                match f[i].trim() {
-                    "0" => Ok(false),
-                    "1" => Ok(true),
-                    s => Err(rh_err(
-                        line,
-                        format!("field {} ({what}) `{s}` is not 0 or 1", i + 1),
-                    )),
-                }
-            };
-            Command::OmStart {
-                ignore_gps: flag(0, "ignore GPS")?,
-                ignore_sounder: flag(1, "ignore sounder")?,
-                ignore_pressure: flag(2, "ignore pressure calibration")?,
-                mission_type: match f[3].trim() {
-                    "0" => 0,
-                    "1" => 1,
-                    s => {
-                        return Err(rh_err(
-                            line,
-                            format!("field 4 (mission type) `{s}` is not 0 or 1"),
-                        ));
-                    }
-                },
-                mission: f[4].trim().to_string(),
-            }
-        }
+        "OSD" => parse_osd(line, &f)?,
+        "OMS" => parse_oms(line, &f, units)?,
+        "OMP" => parse_omp(line, &f)?,
+        "OMSTART" => parse_omstart(line, &f)?,
         "OMSTOP" => Command::OmStop,
         "OJW" => {
             let wp = req_num(line, &f, 0, "waypoint")?;
@@ -740,21 +665,7 @@ pub fn parse_command(line: &str, units: DepthUnits) -> Result<Command, RhError> 
             }
             Command::Ojw(wp as u32)
         }
-        "OMW" => {
-            if f.first().is_some_and(|s| s.trim() == "STOP") {
-                Command::Omw(None)
-            } else {
-                let clear = f.first().is_some_and(|s| s.trim() == "CLEAR");
-                let o = usize::from(clear);
-                Command::Omw(Some(Waypoint {
-                    clear,
-                    lat: req_num(line, &f, o, "latitude")?,
-                    lon: req_num(line, &f, o + 1, "longitude")?,
-                    depth: units.to_metres(req_num(line, &f, o + 2, "depth")?),
-                    speed_knots: req_num(line, &f, o + 5, "speed")?,
-                }))
-            }
-        }
+        "OMW" => parse_omw(line, &f, units)?,
         "OPOS" => Command::Opos {
             lat: req_num(line, &f, 0, "latitude")?,
             lon: req_num(line, &f, 1, "longitude")?,
@@ -767,6 +678,118 @@ pub fn parse_command(line: &str, units: DepthUnits) -> Result<Command, RhError> 
         },
         other => return Err(rh_err(line, format!("`{other}` is not a backseat command"))),
     })
+}
+
+/// `$OSD,<G>,<C>,<S>,<P>,<Y>,<D>,<CTD>,<INS>`: each field its letter or empty.
+fn parse_osd(line: &str, f: &[&str]) -> Result<Command, RhError> {
+    let has = |i: usize, letter: &str| f.get(i).is_some_and(|s| s.trim() == letter);
+    for (i, s) in f.iter().enumerate() {
+        let s = s.trim();
+        let allowed = ["G", "C", "S", "P", "Y", "D", "CTD", "INS"];
+        if !s.is_empty() && !allowed.contains(&s) {
+            return Err(rh_err(
+                line,
+                format!("field {} `{s}` is not a data request letter", i + 1),
+            ));
+        }
+    }
+    Ok(Command::Osd(DataRequest {
+        gps: has(0, "G"),
+        compass: has(1, "C"),
+        state: has(2, "S"),
+        power: has(3, "P"),
+        dvl: has(5, "D"),
+    }))
+}
+
+/// `$OMS,<heading>,<depth>,<max pitch>,<speed knots>,<timeout>`, the depth in `units`.
+fn parse_oms(line: &str, f: &[&str], units: DepthUnits) -> Result<Command, RhError> {
+    if f.len() != 5 {
+        return Err(rh_err(
+            line,
+            format!("$OMS has {} fields, 5 were expected", f.len()),
+        ));
+    }
+    Ok(Command::Oms {
+        heading: req_num(line, f, 0, "heading")?,
+        depth: units.to_metres(req_num(line, f, 1, "depth")?),
+        max_pitch: req_num(line, f, 2, "max pitch")?,
+        speed_knots: req_num(line, f, 3, "speed")?,
+        timeout: req_num(line, f, 4, "timeout")?,
+    })
+}
+
+/// `$OMP,<10 hex digits>,00,<timeout>`: five fin/motor bytes.
+fn parse_omp(line: &str, f: &[&str]) -> Result<Command, RhError> {
+    let hex = text(f, 0);
+    if hex.len() != 10 || !hex.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return Err(rh_err(
+            line,
+            format!("fin/motor field `{hex}` is not 10 hex digits"),
+        ));
+    }
+    let mut bytes = [0u8; 5];
+    for (i, b) in bytes.iter_mut().enumerate() {
+        *b = u8::from_str_radix(&hex[i * 2..i * 2 + 2], 16)
+            .map_err(|_| rh_err(line, "bad hex digits"))?;
+    }
+    Ok(Command::Omp {
+        bytes,
+        timeout: req_num(line, f, 2, "timeout")?,
+    })
+}
+
+/// `$OMSTART,<ignoreGPS>,<ignoreSounder>,<ignorePressureCal>,<missionType>,<missionName>[,…]`.
+fn parse_omstart(line: &str, f: &[&str]) -> Result<Command, RhError> {
+    if f.len() < 5 {
+        return Err(rh_err(
+            line,
+            format!("$OMSTART has {} fields, at least 5 were expected", f.len()),
+        ));
+    }
+    let flag = |i: usize, what: &str| -> Result<bool, RhError> {
+        match f[i].trim() {
+            "0" => Ok(false),
+            "1" => Ok(true),
+            s => Err(rh_err(
+                line,
+                format!("field {} ({what}) `{s}` is not 0 or 1", i + 1),
+            )),
+        }
+    };
+    Ok(Command::OmStart {
+        ignore_gps: flag(0, "ignore GPS")?,
+        ignore_sounder: flag(1, "ignore sounder")?,
+        ignore_pressure: flag(2, "ignore pressure calibration")?,
+        mission_type: match f[3].trim() {
+            "0" => 0,
+            "1" => 1,
+            s => {
+                return Err(rh_err(
+                    line,
+                    format!("field 4 (mission type) `{s}` is not 0 or 1"),
+                ));
+            }
+        },
+        mission: f[4].trim().to_string(),
+    })
+}
+
+/// `$OMW,[CLEAR,]<lat>,<lon>,<depth1>,<depth2>,<maxAngle>,<speed>,…` (the depth in `units`), or
+/// `$OMW,STOP`.
+fn parse_omw(line: &str, f: &[&str], units: DepthUnits) -> Result<Command, RhError> {
+    if f.first().is_some_and(|s| s.trim() == "STOP") {
+        return Ok(Command::Omw(None));
+    }
+    let clear = f.first().is_some_and(|s| s.trim() == "CLEAR");
+    let o = usize::from(clear);
+    Ok(Command::Omw(Some(Waypoint {
+        clear,
+        lat: req_num(line, f, o, "latitude")?,
+        lon: req_num(line, f, o + 1, "longitude")?,
+        depth: units.to_metres(req_num(line, f, o + 2, "depth")?),
+        speed_knots: req_num(line, f, o + 5, "speed")?,
+    })))
 }
 
 /// The meaning of an `$ACK` error number, where known.

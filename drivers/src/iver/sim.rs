@@ -19,7 +19,9 @@
 //! `framing=lines` on the simulator's medium), `silence_every` / `silence_for` (the link goes quiet:
 //! no replies, nothing read), and `gps_rate` (NMEA GPS sentences per second on the second medium, 1).
 
-use super::protocol::{self, Ack, Command, Compass, DepthUnits, Dvl, MAX_TIMEOUT, Opi, Osi};
+use super::protocol::{
+    self, Ack, Command, Compass, DataRequest, DepthUnits, Dvl, MAX_TIMEOUT, Opi, Osi, Waypoint,
+};
 use crate::nmea::sentence::build;
 use crate::sim::kinematics::{Limits, Setpoint, Vehicle};
 use crate::units::{FOOT, KNOT};
@@ -159,6 +161,44 @@ impl Sim {
     }
 }
 
+/// The `$ACK` of a command: accepted, or refused with an error number.
+fn ack(c: &Command, taken: Result<(), u32>) -> String {
+    let (status, error) = match taken {
+        Ok(()) => (0, 0),
+        Err(n) => (1, n),
+    };
+    Ack {
+        msg_type: c.ack_code(),
+        status,
+        error,
+    }
+    .sentence()
+}
+
+/// The answer to a sentence that does not read as a command: a known command with bad fields gets
+/// its error; anything else is ignored.
+fn unreadable_command(line: &str) -> Vec<String> {
+    let addr = protocol::address(line);
+    let error = match addr {
+        "OMS" => Some(20),
+        "OMP" => Some(21),
+        "OSD" | "OJW" => Some(27),
+        "OMSTART" => Some(30),
+        _ => None,
+    };
+    match (protocol::ack_code(addr), error) {
+        (Some(msg_type), Some(error)) => vec![
+            Ack {
+                msg_type,
+                status: 1,
+                error,
+            }
+            .sentence(),
+        ],
+        _ => Vec::new(),
+    }
+}
+
 impl Sim {
     fn mode(&self) -> &str {
         match &self.drive {
@@ -202,65 +242,15 @@ impl Sim {
         let cmd = match protocol::parse_command(line, self.units) {
             Ok(c) => c,
             Err(e) => {
-                // a known command with bad fields gets its error; anything else is ignored
-                let addr = protocol::address(line);
-                let error = match addr {
-                    "OMS" => Some(20),
-                    "OMP" => Some(21),
-                    "OSD" | "OJW" => Some(27),
-                    "OMSTART" => Some(30),
-                    _ => None,
-                };
                 self.tally.record("iver2-sim", "bad-command", &e);
-                return match (protocol::ack_code(addr), error) {
-                    (Some(msg_type), Some(error)) => vec![
-                        Ack {
-                            msg_type,
-                            status: 1,
-                            error,
-                        }
-                        .sentence(),
-                    ],
-                    _ => Vec::new(),
-                };
+                return unreadable_command(line);
             }
         };
-        let ok = |c: &Command| {
-            Ack {
-                msg_type: c.ack_code(),
-                status: 0,
-                error: 0,
-            }
-            .sentence()
-        };
-        let fail = |c: &Command, n: u32| {
-            Ack {
-                msg_type: c.ack_code(),
-                status: 1,
-                error: n,
-            }
-            .sentence()
-        };
-        match &cmd {
+        let taken = match &cmd {
             Command::Osd(r) => {
-                let mut out = Vec::new();
-                if r.gps {
-                    out.push(self.rmc_line());
-                }
-                if r.compass {
-                    out.push(self.compass_line());
-                }
-                if r.state {
-                    out.push(self.osi_line());
-                }
-                if r.power {
-                    out.push(self.opi_line());
-                }
-                if r.dvl {
-                    out.push(self.dvl_line());
-                }
-                out.push(ok(&cmd));
-                out
+                let mut out = self.data_lines(r);
+                out.push(ack(&cmd, Ok(())));
+                return out;
             }
             Command::Oms {
                 heading,
@@ -268,48 +258,8 @@ impl Sim {
                 speed_knots,
                 timeout,
                 ..
-            } => {
-                let valid = (0.0..=360.0).contains(heading)
-                    && (-100.0..=100.0).contains(depth)
-                    && (0.0..=10.0).contains(speed_knots)
-                    && (0.0..=MAX_TIMEOUT).contains(timeout);
-                if !valid {
-                    return vec![fail(&cmd, 20)];
-                }
-                if !self.running() {
-                    return vec![fail(&cmd, 45)];
-                }
-                let depth = if *depth < 0.0 {
-                    (self.water_depth + depth).max(0.0)
-                } else {
-                    *depth
-                };
-                self.drive = Drive::Backseat {
-                    sp: Setpoint {
-                        heading: *heading,
-                        depth,
-                        speed: speed_knots * KNOT,
-                    },
-                    until: now + Duration::from_secs_f64(*timeout),
-                };
-                vec![ok(&cmd)]
-            }
-            Command::Omp { bytes, timeout } => {
-                if !self.running() {
-                    return vec![fail(&cmd, 45)];
-                }
-                if !(0.0..=MAX_TIMEOUT).contains(timeout) {
-                    return vec![fail(&cmd, 21)];
-                }
-                let motor = f64::from(bytes[4]) - 128.0;
-                let yaw = (f64::from(bytes[0]) + f64::from(bytes[1])) / 2.0 - 128.0;
-                self.drive = Drive::Servo {
-                    speed: (motor / 127.0).max(0.0) * self.limits.max_speed,
-                    turn: yaw / 4.0,
-                    until: now + Duration::from_secs_f64(*timeout),
-                };
-                vec![ok(&cmd)]
-            }
+            } => self.take_oms(*heading, *depth, *speed_knots, *timeout, now),
+            Command::Omp { bytes, timeout } => self.take_omp(bytes, *timeout, now),
             Command::OmStart { mission, .. } => {
                 if !mission.is_empty() {
                     self.mission = mission.clone();
@@ -318,46 +268,130 @@ impl Sim {
                 self.drive = Drive::Mission {
                     heading: self.v.heading,
                 };
-                vec![ok(&cmd)]
+                Ok(())
             }
             Command::OmStop => {
                 self.drive = Drive::Stopped;
-                vec![ok(&cmd)]
+                Ok(())
             }
-            Command::Ojw(wp) => {
-                if !self.running() {
-                    return vec![fail(&cmd, 45)];
-                }
-                self.waypoint = i64::from(*wp);
-                vec![ok(&cmd)]
-            }
-            Command::Omw(w) => {
-                if !self.running() {
-                    return vec![fail(&cmd, 45)];
-                }
-                self.drive = match w {
-                    None => Drive::Mission {
-                        heading: self.v.heading,
-                    },
-                    Some(w) => Drive::ToPoint {
-                        lat: w.lat,
-                        lon: w.lon,
-                        depth: w.depth.max(0.0),
-                        speed: w.speed_knots * KNOT,
-                    },
-                };
-                vec![ok(&cmd)]
-            }
-            Command::Opos { lat, lon, .. } => {
-                if (-90.0..=90.0).contains(lat) && (-180.0..=180.0).contains(lon) {
-                    self.v.lat = *lat;
-                    self.v.lon = *lon;
-                    vec![ok(&cmd)]
-                } else {
-                    vec![fail(&cmd, 6)]
-                }
-            }
-            Command::Odvl { .. } => vec![ok(&cmd)],
+            Command::Ojw(wp) => self.take_ojw(*wp),
+            Command::Omw(w) => self.take_omw(w.as_ref()),
+            Command::Opos { lat, lon, .. } => self.take_position(*lat, *lon),
+            Command::Odvl { .. } => Ok(()),
+        };
+        vec![ack(&cmd, taken)]
+    }
+
+    /// Error 45 unless a mission runs.
+    fn mission_running(&self) -> Result<(), u32> {
+        if self.running() { Ok(()) } else { Err(45) }
+    }
+
+    /// The sentences an `$OSD` asks for, in the order G, C, S, P, D.
+    fn data_lines(&mut self, r: &DataRequest) -> Vec<String> {
+        let mut out = Vec::new();
+        if r.gps {
+            out.push(self.rmc_line());
+        }
+        if r.compass {
+            out.push(self.compass_line());
+        }
+        if r.state {
+            out.push(self.osi_line());
+        }
+        if r.power {
+            out.push(self.opi_line());
+        }
+        if r.dvl {
+            out.push(self.dvl_line());
+        }
+        out
+    }
+
+    /// `$OMS`: the backseat drives until the timeout (a negative depth is a height above the
+    /// bottom); error 20 for values out of range, 45 when no mission runs.
+    fn take_oms(
+        &mut self,
+        heading: f64,
+        depth: f64,
+        speed_knots: f64,
+        timeout: f64,
+        now: Instant,
+    ) -> Result<(), u32> {
+        let valid = (0.0..=360.0).contains(&heading)
+            && (-100.0..=100.0).contains(&depth)
+            && (0.0..=10.0).contains(&speed_knots)
+            && (0.0..=MAX_TIMEOUT).contains(&timeout);
+        if !valid {
+            return Err(20);
+        }
+        self.mission_running()?;
+        let depth = if depth < 0.0 {
+            (self.water_depth + depth).max(0.0)
+        } else {
+            depth
+        };
+        self.drive = Drive::Backseat {
+            sp: Setpoint {
+                heading,
+                depth,
+                speed: speed_knots * KNOT,
+            },
+            until: now + Duration::from_secs_f64(timeout),
+        };
+        Ok(())
+    }
+
+    /// `$OMP`: fins and motor drive directly until the timeout; error 45 when no mission runs, 21
+    /// for a timeout out of range.
+    fn take_omp(&mut self, bytes: &[u8; 5], timeout: f64, now: Instant) -> Result<(), u32> {
+        self.mission_running()?;
+        if !(0.0..=MAX_TIMEOUT).contains(&timeout) {
+            return Err(21);
+        }
+        let motor = f64::from(bytes[4]) - 128.0;
+        let yaw = (f64::from(bytes[0]) + f64::from(bytes[1])) / 2.0 - 128.0;
+        self.drive = Drive::Servo {
+            speed: (motor / 127.0).max(0.0) * self.limits.max_speed,
+            turn: yaw / 4.0,
+            until: now + Duration::from_secs_f64(timeout),
+        };
+        Ok(())
+    }
+
+    /// `$OJW`: the next waypoint; error 45 when no mission runs.
+    fn take_ojw(&mut self, wp: u32) -> Result<(), u32> {
+        self.mission_running()?;
+        self.waypoint = i64::from(wp);
+        Ok(())
+    }
+
+    /// `$OMW`: steer to a point, or back to the mission for `$OMW,STOP`; error 45 when no mission
+    /// runs.
+    fn take_omw(&mut self, w: Option<&Waypoint>) -> Result<(), u32> {
+        self.mission_running()?;
+        self.drive = match w {
+            None => Drive::Mission {
+                heading: self.v.heading,
+            },
+            Some(w) => Drive::ToPoint {
+                lat: w.lat,
+                lon: w.lon,
+                depth: w.depth.max(0.0),
+                speed: w.speed_knots * KNOT,
+            },
+        };
+        Ok(())
+    }
+
+    /// `$OPOS`: the vehicle moves to the position; error 6 for one off the globe.
+    fn take_position(&mut self, lat: f64, lon: f64) -> Result<(), u32> {
+        if (-90.0..=90.0).contains(&lat) && (-180.0..=180.0).contains(&lon) {
+            self.v.lat = lat;
+            self.v.lon = lon;
+            Ok(())
+        } else {
+            Err(6)
         }
     }
 

@@ -291,11 +291,26 @@ impl Sensor {
 
     /// Turns a parsed sentence into readings.
     pub fn read(&mut self, parsed: &Parsed, now: Instant) -> Readings {
-        let f = parsed.formatter;
-        let fed = |i: usize| self.outputs.get(i).is_some_and(|o| o.fed_by(f));
         let mut out = Readings::default();
-        match (&parsed.sentence, self.role) {
-            (Sentence::Gga(g), Role::Gps) if fed(0) => {
+        match self.role {
+            Role::Gps => self.read_gps(parsed, &mut out),
+            Role::Heading => self.read_heading(parsed, now, &mut out),
+            Role::Sounder => self.read_sounder(parsed, &mut out),
+        }
+        out
+    }
+
+    /// Whether sentences of `formatter` feed output `i`.
+    fn fed(&self, i: usize, formatter: &str) -> bool {
+        self.outputs.get(i).is_some_and(|o| o.fed_by(formatter))
+    }
+
+    /// A GPS: positions (output 0) from GGA, GNS, GLL and RMC; velocities (output 1) from RMC and
+    /// VTG.
+    fn read_gps(&self, parsed: &Parsed, out: &mut Readings) {
+        let fed = |i: usize| self.fed(i, parsed.formatter);
+        match &parsed.sentence {
+            Sentence::Gga(g) if fed(0) => {
                 if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
                     let m = self.fix(
                         lat,
@@ -310,7 +325,7 @@ impl Sensor {
                     out.push((0, m));
                 }
             }
-            (Sentence::Gns(g), Role::Gps) if fed(0) => {
+            Sentence::Gns(g) if fed(0) => {
                 if let (Some(lat), Some(lon)) = (g.lat, g.lon) {
                     let m = self.fix(
                         lat,
@@ -323,12 +338,12 @@ impl Sensor {
                     out.push((0, m));
                 }
             }
-            (Sentence::Gll(g), Role::Gps) if fed(0) && g.valid => {
+            Sentence::Gll(g) if fed(0) && g.valid => {
                 if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
                     out.push((0, self.fix(lat, lon, [])));
                 }
             }
-            (Sentence::Rmc(r), Role::Gps) => {
+            Sentence::Rmc(r) => {
                 let valid = r.status_of_fix != nmea::sentences::rmc::RmcStatusOfFix::Invalid;
                 if valid
                     && fed(0)
@@ -343,24 +358,31 @@ impl Sensor {
                     out.push((1, velocity(f64::from(sog) * KNOT, f64::from(cog))));
                 }
             }
-            (Sentence::Vtg(v), Role::Gps) if fed(1) => {
+            Sentence::Vtg(v) if fed(1) => {
                 if let (Some(sog), Some(cog)) = (v.speed_over_ground, v.true_course) {
                     out.push((1, velocity(f64::from(sog) * KNOT, f64::from(cog))));
                 }
             }
-            (Sentence::Hdt(h), Role::Heading) if fed(0) => {
+            _ => {}
+        }
+    }
+
+    /// A compass or gyro: headings (output 0) from HDT, HDG and HDM, HDG and HDM corrected into a
+    /// true heading where the variation is known; pitch and roll from XDR, which with a fresh
+    /// true heading make an attitude (output 1).
+    fn read_heading(&mut self, parsed: &Parsed, now: Instant, out: &mut Readings) {
+        let fed = self.fed(0, parsed.formatter);
+        match &parsed.sentence {
+            Sentence::Hdt(h) if fed => {
                 if let Some(hdg) = h.heading {
                     out.push((0, heading(f64::from(hdg), false)));
                 }
             }
-            (
-                Sentence::Hdg {
-                    heading: Some(hdg),
-                    deviation,
-                    variation,
-                },
-                Role::Heading,
-            ) if fed(0) => {
+            Sentence::Hdg {
+                heading: Some(hdg),
+                deviation,
+                variation,
+            } if fed => {
                 let dev = deviation.unwrap_or(0.0);
                 match variation.or(self.variation) {
                     Some(var) => {
@@ -376,12 +398,11 @@ impl Sensor {
                     }
                 }
             }
-            (Sentence::Hdm { heading: Some(hdg) }, Role::Heading) if fed(0) => match self.variation
-            {
+            Sentence::Hdm { heading: Some(hdg) } if fed => match self.variation {
                 Some(var) => out.push((0, heading(hdg + var, false).and("variation", var))),
                 None => out.push((0, heading(*hdg, true))),
             },
-            (Sentence::Xdr(x), Role::Heading) => {
+            Sentence::Xdr(x) => {
                 let angle = |name: &str| {
                     x.iter()
                         .find(|t| t.kind == "A" && t.name.eq_ignore_ascii_case(name))
@@ -391,26 +412,10 @@ impl Sensor {
                     self.pitch_roll = Some((pitch, roll, now));
                 }
             }
-            (Sentence::Dbt { metres, feet, .. }, Role::Sounder) if fed(0) => {
-                if let Some(d) = metres.or(feet.map(|f| f * FOOT)) {
-                    out.push((0, altitude(d + self.offset)));
-                }
-            }
-            (Sentence::Dpt(d), Role::Sounder) if fed(0) => {
-                if let Some(depth) = d.water_depth {
-                    out.push((0, altitude(depth + self.offset)));
-                }
-            }
-            (Sentence::Dbk(d), Role::Sounder) if fed(0) => {
-                if let Some(depth) = d.depth_meters.or(d.depth_feet.map(|f| f * FOOT)) {
-                    out.push((0, altitude(depth + self.offset)));
-                }
-            }
             _ => {}
         }
         // a heading sensor that also gives pitch and roll is an attitude sensor
-        if self.role == Role::Heading
-            && let Some(yaw) = out.true_heading()
+        if let Some(yaw) = out.true_heading()
             && let Some((pitch, roll, at)) = self.pitch_roll
             && now.duration_since(at) <= self.fresh
         {
@@ -422,7 +427,22 @@ impl Sensor {
                     .and("roll", roll),
             ));
         }
-        out
+    }
+
+    /// An echo sounder: altitudes (output 0) from DBT, DPT and DBK, plus the offset.
+    fn read_sounder(&self, parsed: &Parsed, out: &mut Readings) {
+        if !self.fed(0, parsed.formatter) {
+            return;
+        }
+        let depth = match &parsed.sentence {
+            Sentence::Dbt { metres, feet, .. } => metres.or(feet.map(|f| f * FOOT)),
+            Sentence::Dpt(d) => d.water_depth,
+            Sentence::Dbk(d) => d.depth_meters.or(d.depth_feet.map(|f| f * FOOT)),
+            _ => None,
+        };
+        if let Some(d) = depth {
+            out.push((0, altitude(d + self.offset)));
+        }
     }
 }
 

@@ -399,53 +399,7 @@ impl<'a> Parser<'a> {
                     XmlFormErrorKind::UnknownElement(start.name().as_ref().to_string()),
                 )
             })?;
-            let mut name = None;
-            let mut base64 = false;
-            // the form seabus writes, ` name="plain text"`, is read without the attribute parser
-            let raw = start.attributes_raw();
-            if let Some(plain) = raw
-                .strip_prefix(" name=\"")
-                .and_then(|r| r.strip_suffix('"'))
-                .filter(|v| !v.contains(['"', '&', '<', '\t', '\n', '\r']))
-            {
-                name = Some(plain.to_string());
-            }
-            let mut attrs = start.attributes();
-            attrs.with_checks(false);
-            for attr in attrs.take(if name.is_some() { 0 } else { usize::MAX }) {
-                let attr =
-                    attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
-                // a value with no reference and no whitespace to normalise is used as written
-                let value = if attr.value.contains(['&', '\t', '\n', '\r']) {
-                    attr.normalized_value(quick_xml::XmlVersion::Implicit1_0)
-                        .map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?
-                } else {
-                    attr.value.clone()
-                };
-                match attr.key.as_ref() {
-                    "name" => name = Some(value.into_owned()),
-                    "name-base64" => {
-                        let raw = B64
-                            .decode(value.as_bytes())
-                            .ok()
-                            .and_then(|b| String::from_utf8(b).ok());
-                        match raw {
-                            Some(n) => name = Some(n),
-                            None => {
-                                return Err(self.err(
-                                    at,
-                                    XmlFormErrorKind::BadValue {
-                                        ty: "base64 name",
-                                        text: value.into_owned(),
-                                    },
-                                ));
-                            }
-                        }
-                    }
-                    "encoding" => base64 = value == "base64",
-                    _ => {}
-                }
-            }
+            let (name, base64) = self.value_attributes(&start, at)?;
             if parent.is_some() && name.is_none() {
                 return Err(self.err(at, XmlFormErrorKind::MissingName(tag.name().to_string())));
             }
@@ -482,6 +436,62 @@ impl<'a> Parser<'a> {
             };
             return Ok(Some((name, value)));
         }
+    }
+
+    /// The `name` (plain or `name-base64`) and whether the text is base64 (`encoding`), of a value
+    /// element starting at byte `at`.
+    fn value_attributes(
+        &self,
+        start: &quick_xml::events::BytesStart<'_>,
+        at: usize,
+    ) -> Result<(Option<String>, bool), XmlFormError> {
+        let mut name = None;
+        let mut base64 = false;
+        // the form seabus writes, ` name="plain text"`, is read without the attribute parser
+        let raw = start.attributes_raw();
+        if let Some(plain) = raw
+            .strip_prefix(" name=\"")
+            .and_then(|r| r.strip_suffix('"'))
+            .filter(|v| !v.contains(['"', '&', '<', '\t', '\n', '\r']))
+        {
+            name = Some(plain.to_string());
+        }
+        let mut attrs = start.attributes();
+        attrs.with_checks(false);
+        for attr in attrs.take(if name.is_some() { 0 } else { usize::MAX }) {
+            let attr = attr.map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?;
+            // a value with no reference and no whitespace to normalise is used as written
+            let value = if attr.value.contains(['&', '\t', '\n', '\r']) {
+                attr.normalized_value(quick_xml::XmlVersion::Implicit1_0)
+                    .map_err(|e| self.err(at, XmlFormErrorKind::Syntax(e.to_string())))?
+            } else {
+                attr.value.clone()
+            };
+            match attr.key.as_ref() {
+                "name" => name = Some(value.into_owned()),
+                "name-base64" => {
+                    let raw = B64
+                        .decode(value.as_bytes())
+                        .ok()
+                        .and_then(|b| String::from_utf8(b).ok());
+                    match raw {
+                        Some(n) => name = Some(n),
+                        None => {
+                            return Err(self.err(
+                                at,
+                                XmlFormErrorKind::BadValue {
+                                    ty: "base64 name",
+                                    text: value.into_owned(),
+                                },
+                            ));
+                        }
+                    }
+                }
+                "encoding" => base64 = value == "base64",
+                _ => {}
+            }
+        }
+        Ok((name, base64))
     }
 
     /// Collects the text of a `tag` element up to its end tag, resolving references; borrowed

@@ -274,40 +274,7 @@ impl Frame {
 
     /// Reads a frame; bytes after its stated length (Ethernet padding) are ignored.
     pub fn decode(d: &[u8]) -> Result<Frame, WireError> {
-        if d.len() < HEADER {
-            return Err(error(
-                "dsaav-short-frame",
-                d.len(),
-                format!("{} bytes, shorter than the {HEADER}-byte header", d.len()),
-            ));
-        }
-        if d[0] != MAGIC {
-            return Err(error(
-                "dsaav-bad-magic",
-                0,
-                format!("first byte {:#04x} is not {MAGIC:#04x}", d[0]),
-            ));
-        }
-        if d[1] != VERSION {
-            return Err(error(
-                "dsaav-bad-version",
-                1,
-                format!("version {} (this reads {VERSION})", d[1]),
-            ));
-        }
-        let u16_at = |at: usize| u16::from_be_bytes([d[at], d[at + 1]]);
-        let u32_at = |at: usize| u32::from_be_bytes([d[at], d[at + 1], d[at + 2], d[at + 3]]);
-        let len = usize::from(u16_at(2));
-        if len < HEADER || len > d.len() || len > MAX_FRAME {
-            return Err(error(
-                "dsaav-bad-length",
-                2,
-                format!(
-                    "stated length {len} does not fit a {}-byte datagram (header {HEADER}, at most {MAX_FRAME})",
-                    d.len()
-                ),
-            ));
-        }
+        let len = checked_length(d)?;
         let d = &d[..len];
         let flags = d[4];
         if flags & !1 != 0 || d[5] != 0 {
@@ -318,98 +285,35 @@ impl Frame {
             ));
         }
         let src = Address {
-            node: u16_at(6),
-            port: u16_at(8),
+            node: u16_at(d, 6),
+            port: u16_at(d, 8),
         };
-        if (flags & 1 != 0) != (u16_at(10) == BROADCAST_NODE) {
+        if (flags & 1 != 0) != (u16_at(d, 10) == BROADCAST_NODE) {
             return Err(error(
                 "dsaav-bad-address",
                 10,
                 format!(
                     "destination node {} with the broadcast flag {}: node {BROADCAST_NODE} goes with broadcasts only",
-                    u16_at(10),
+                    u16_at(d, 10),
                     if flags & 1 != 0 { "set" } else { "clear" }
                 ),
             ));
         }
         let dst = if flags & 1 != 0 {
-            Destination::Channel(u16_at(12))
+            Destination::Channel(u16_at(d, 12))
         } else {
             Destination::To(Address {
-                node: u16_at(10),
-                port: u16_at(12),
+                node: u16_at(d, 10),
+                port: u16_at(d, 12),
             })
         };
-        let count = usize::from(u16_at(24));
+        let count = usize::from(u16_at(d, 24));
         let mut params = Vec::with_capacity(count.min((len - HEADER) / 7));
         let mut at = HEADER;
         for i in 0..count {
-            let start = at;
-            let truncated = || {
-                error(
-                    "dsaav-truncated",
-                    start,
-                    format!("parameter {i} of {count} runs past the frame's end"),
-                )
-            };
-            if at + 3 > len {
-                return Err(truncated());
-            }
-            let key = u16_at(at);
-            let code = d[at + 2];
-            at += 3;
-            let need = match code {
-                1 | 2 => 4,
-                3 => 8,
-                4 => {
-                    if at + 2 > len {
-                        return Err(truncated());
-                    }
-                    2 + usize::from(u16_at(at))
-                }
-                c => {
-                    return Err(error(
-                        "dsaav-bad-type",
-                        start + 2,
-                        format!("key {key}: value type {c} is not 1–4"),
-                    ));
-                }
-            };
-            if at + need > len {
-                return Err(truncated());
-            }
-            let v = &d[at..at + need];
-            let value = match code {
-                1 => Param::Int(i32::from_be_bytes([v[0], v[1], v[2], v[3]])),
-                2 => Param::Float(f32::from_be_bytes([v[0], v[1], v[2], v[3]])),
-                3 => Param::Double(f64::from_be_bytes([
-                    v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7],
-                ])),
-                _ => {
-                    let bytes = &v[2..];
-                    if bytes.len() > MAX_STRING || bytes.contains(&0) {
-                        return Err(error(
-                            "dsaav-bad-string",
-                            at,
-                            format!(
-                                "key {key}: a string is at most {MAX_STRING} bytes without NUL, \
-                                 this one has {}",
-                                bytes.len()
-                            ),
-                        ));
-                    }
-                    let s = std::str::from_utf8(bytes).map_err(|e| {
-                        error(
-                            "dsaav-bad-string",
-                            at + 2 + e.valid_up_to(),
-                            format!("key {key}: string is not UTF-8"),
-                        )
-                    })?;
-                    Param::Str(s.to_string())
-                }
-            };
-            params.push((key, value));
-            at += need;
+            let (param, next) = decode_param(d, at, i, count)?;
+            params.push(param);
+            at = next;
         }
         if at != len {
             return Err(error(
@@ -421,12 +325,131 @@ impl Frame {
         Ok(Frame {
             src,
             dst,
-            id: u32_at(14),
-            kind: u16_at(18),
-            reference: u32_at(20),
+            id: u32_at(d, 14),
+            kind: u16_at(d, 18),
+            reference: u32_at(d, 20),
             params,
         })
     }
+}
+
+fn u16_at(d: &[u8], at: usize) -> u16 {
+    u16::from_be_bytes([d[at], d[at + 1]])
+}
+
+fn u32_at(d: &[u8], at: usize) -> u32 {
+    u32::from_be_bytes([d[at], d[at + 1], d[at + 2], d[at + 3]])
+}
+
+/// The length a frame states, checked against its header and the bytes there are.
+fn checked_length(d: &[u8]) -> Result<usize, WireError> {
+    if d.len() < HEADER {
+        return Err(error(
+            "dsaav-short-frame",
+            d.len(),
+            format!("{} bytes, shorter than the {HEADER}-byte header", d.len()),
+        ));
+    }
+    if d[0] != MAGIC {
+        return Err(error(
+            "dsaav-bad-magic",
+            0,
+            format!("first byte {:#04x} is not {MAGIC:#04x}", d[0]),
+        ));
+    }
+    if d[1] != VERSION {
+        return Err(error(
+            "dsaav-bad-version",
+            1,
+            format!("version {} (this reads {VERSION})", d[1]),
+        ));
+    }
+    let len = usize::from(u16_at(d, 2));
+    if len < HEADER || len > d.len() || len > MAX_FRAME {
+        return Err(error(
+            "dsaav-bad-length",
+            2,
+            format!(
+                "stated length {len} does not fit a {}-byte datagram (header {HEADER}, at most {MAX_FRAME})",
+                d.len()
+            ),
+        ));
+    }
+    Ok(len)
+}
+
+/// Reads parameter `i` of `count` at byte `at` of frame `d`; returns it and where the next starts.
+fn decode_param(
+    d: &[u8],
+    at: usize,
+    i: usize,
+    count: usize,
+) -> Result<((u16, Param), usize), WireError> {
+    let len = d.len();
+    let truncated = || {
+        error(
+            "dsaav-truncated",
+            at,
+            format!("parameter {i} of {count} runs past the frame's end"),
+        )
+    };
+    if at + 3 > len {
+        return Err(truncated());
+    }
+    let key = u16_at(d, at);
+    let code = d[at + 2];
+    let value_at = at + 3;
+    let need = match code {
+        1 | 2 => 4,
+        3 => 8,
+        4 => {
+            if value_at + 2 > len {
+                return Err(truncated());
+            }
+            2 + usize::from(u16_at(d, value_at))
+        }
+        c => {
+            return Err(error(
+                "dsaav-bad-type",
+                at + 2,
+                format!("key {key}: value type {c} is not 1–4"),
+            ));
+        }
+    };
+    if value_at + need > len {
+        return Err(truncated());
+    }
+    let v = &d[value_at..value_at + need];
+    let value = match code {
+        1 => Param::Int(i32::from_be_bytes([v[0], v[1], v[2], v[3]])),
+        2 => Param::Float(f32::from_be_bytes([v[0], v[1], v[2], v[3]])),
+        3 => Param::Double(f64::from_be_bytes([
+            v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7],
+        ])),
+        _ => Param::Str(string_param(key, &v[2..], value_at)?),
+    };
+    Ok(((key, value), value_at + need))
+}
+
+/// A string parameter's text; `at` is where its length starts.
+fn string_param(key: u16, bytes: &[u8], at: usize) -> Result<String, WireError> {
+    if bytes.len() > MAX_STRING || bytes.contains(&0) {
+        return Err(error(
+            "dsaav-bad-string",
+            at,
+            format!(
+                "key {key}: a string is at most {MAX_STRING} bytes without NUL, this one has {}",
+                bytes.len()
+            ),
+        ));
+    }
+    std::str::from_utf8(bytes).map(str::to_string).map_err(|e| {
+        error(
+            "dsaav-bad-string",
+            at + 2 + e.valid_up_to(),
+            format!("key {key}: string is not UTF-8"),
+        )
+    })
 }
 
 #[cfg(test)]

@@ -226,25 +226,31 @@ pub enum StringProblem {
 
 impl fmt::Display for CodecError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if self.is_encoding() {
+            self.fmt_encoding(f)
+        } else {
+            self.fmt_decoding(f)
+        }
+    }
+}
+
+impl CodecError {
+    /// Whether the error was met encoding a datamap (rather than decoding bytes).
+    fn is_encoding(&self) -> bool {
+        matches!(
+            self,
+            CodecError::WrongType { .. }
+                | CodecError::OutOfRange { .. }
+                | CodecError::Length { .. }
+                | CodecError::SizeMismatch { .. }
+                | CodecError::SizeOverflow { .. }
+                | CodecError::UnknownType { .. }
+        )
+    }
+
+    /// The words of an error met encoding.
+    fn fmt_encoding(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            CodecError::Fingerprint {
-                expected,
-                expected_fingerprint,
-                received_fingerprint,
-                received,
-            } => {
-                write!(
-                    f,
-                    "expected {expected} (0x{expected_fingerprint:016x}), received "
-                )?;
-                match received {
-                    Some(name) => write!(f, "{name} (0x{received_fingerprint:016x})"),
-                    None => write!(
-                        f,
-                        "an unknown type (fingerprint 0x{received_fingerprint:016x})"
-                    ),
-                }
-            }
             CodecError::WrongType {
                 path,
                 expected,
@@ -296,6 +302,35 @@ impl fmt::Display for CodecError {
                     "field `{path}` ({ty}) cannot take {len}, the length of `{from}`: "
                 )?;
                 range_text(f, *ty)
+            }
+            CodecError::UnknownType { path, name } => write!(
+                f,
+                "field `{path}` has type `{name}`, which is not among the types given"
+            ),
+            _ => self.fmt_decoding(f),
+        }
+    }
+
+    /// The words of an error met decoding.
+    fn fmt_decoding(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            CodecError::Fingerprint {
+                expected,
+                expected_fingerprint,
+                received_fingerprint,
+                received,
+            } => {
+                write!(
+                    f,
+                    "expected {expected} (0x{expected_fingerprint:016x}), received "
+                )?;
+                match received {
+                    Some(name) => write!(f, "{name} (0x{received_fingerprint:016x})"),
+                    None => write!(
+                        f,
+                        "an unknown type (fingerprint 0x{received_fingerprint:016x})"
+                    ),
+                }
             }
             CodecError::NegativeSize {
                 path,
@@ -374,10 +409,7 @@ impl fmt::Display for CodecError {
                 "field `{path}` at byte {offset}: {count} elements that may take no bytes, more \
                  than a message of {size} bytes may hold"
             ),
-            CodecError::UnknownType { path, name } => write!(
-                f,
-                "field `{path}` has type `{name}`, which is not among the types given"
-            ),
+            _ => self.fmt_encoding(f),
         }
     }
 }

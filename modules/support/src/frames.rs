@@ -277,6 +277,115 @@ pub trait Fields {
     fn number(&self, name: &str) -> Option<f64>;
 }
 
+/// The field names of a comma-separated list in transform `text`, each once.
+fn field_names(list: &str, text: &str) -> Result<Vec<String>, String> {
+    let mut out: Vec<String> = Vec::new();
+    for n in list.split(',').map(str::trim) {
+        if !is_field_name(n) {
+            return Err(format!("`{n}` in `{text}` is not a field name"));
+        }
+        if out.iter().any(|o| o == n) {
+            return Err(format!("field `{n}` twice in `{text}`"));
+        }
+        out.push(n.to_string());
+    }
+    Ok(out)
+}
+
+/// Transform `name`'s arguments `args` as numbers, when there are as many as one of `wanted`.
+fn numbers(name: &str, args: &[&str], wanted: &[usize], text: &str) -> Result<Vec<f64>, String> {
+    if !wanted.contains(&args.len()) {
+        return Err(format!(
+            "`{name}` in `{text}` takes {} arguments, not {}",
+            wanted
+                .iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(" or "),
+            args.len()
+        ));
+    }
+    args.iter()
+        .map(|a| {
+            a.parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| format!("`{a}` in `{text}` is not a number"))
+        })
+        .collect()
+}
+
+/// The local frame whose origin is latitude, longitude and (optional) height `v`.
+fn local_frame(v: Vec<f64>, text: &str) -> Result<LocalFrame, String> {
+    if !(-90.0..=90.0).contains(&v[0]) || !(-180.0..=360.0).contains(&v[1]) {
+        return Err(format!(
+            "`{text}`: the origin {}, {} is not a latitude and longitude",
+            v[0], v[1]
+        ));
+    }
+    Ok(LocalFrame::new(
+        v[0],
+        v[1],
+        v.get(2).copied().unwrap_or(0.0),
+    ))
+}
+
+/// The three angles (roll, pitch, yaw) of `rotate` or `unrotate`: degrees, or field names.
+fn rotation_angles(name: &str, args: &[&str], text: &str) -> Result<[Angle; 3], String> {
+    if args.len() != 3 {
+        return Err(format!(
+            "`{name}` in `{text}` takes 3 angles (roll, pitch, yaw), not {}",
+            args.len()
+        ));
+    }
+    let angle = |a: &str| match a.parse::<f64>() {
+        Ok(x) if x.is_finite() => Ok(Angle::Fixed(x)),
+        Ok(_) => Err(format!("`{a}` in `{text}` is not a finite angle")),
+        Err(_) if is_field_name(a) => Ok(Angle::Field(a.to_string())),
+        Err(_) => Err(format!("`{a}` in `{text}` is neither an angle nor a field")),
+    };
+    Ok([angle(args[0])?, angle(args[1])?, angle(args[2])?])
+}
+
+/// The transform called `name` with `args`, and how many fields it takes in (and out).
+fn transform_kind(
+    name: &str,
+    args: &[&str],
+    text: &str,
+) -> Result<(Kind, &'static [usize]), String> {
+    let origin = || local_frame(numbers(name, args, &[2, 3], text)?, text);
+    let none = || numbers(name, args, &[0], text).map(|_| ());
+    Ok(match name {
+        "geodetic->enu" => (Kind::FromGeodetic(origin()?, true), &[2, 3]),
+        "geodetic->ned" => (Kind::FromGeodetic(origin()?, false), &[2, 3]),
+        "enu->geodetic" => (Kind::ToGeodetic(origin()?, true), &[2, 3]),
+        "ned->geodetic" => (Kind::ToGeodetic(origin()?, false), &[2, 3]),
+        "rotate" | "unrotate" => (
+            Kind::Rotate(rotation_angles(name, args, text)?, name == "unrotate"),
+            &[2, 3],
+        ),
+        "enu->ned" | "ned->enu" => {
+            none()?;
+            (Kind::SwapEnuNed, &[2, 3])
+        }
+        "compass->yaw" => {
+            none()?;
+            (Kind::CompassToYaw, &[1])
+        }
+        "yaw->compass" => {
+            none()?;
+            (Kind::YawToCompass, &[1])
+        }
+        other => {
+            return Err(format!(
+                "unknown transform `{other}` in `{text}`; transforms: geodetic->enu, \
+                 geodetic->ned, enu->geodetic, ned->geodetic, rotate, unrotate, enu->ned, \
+                 ned->enu, compass->yaw, yaw->compass"
+            ));
+        }
+    })
+}
+
 impl Transform {
     /// Parses `KIND[(ARGS)]: IN, … -> OUT, …`. Kinds: `geodetic->enu(LAT, LON[, HEIGHT])`,
     /// `geodetic->ned(…)`, `enu->geodetic(…)`, `ned->geodetic(…)`, `rotate(ROLL, PITCH, YAW)`,
@@ -290,20 +399,7 @@ impl Transform {
         let (inputs, outputs) = body
             .split_once("->")
             .ok_or_else(|| format!("`{text}`: expected `INPUTS -> OUTPUTS` after `:`"))?;
-        let names = |list: &str| -> Result<Vec<String>, String> {
-            let mut out: Vec<String> = Vec::new();
-            for n in list.split(',').map(str::trim) {
-                if !is_field_name(n) {
-                    return Err(format!("`{n}` in `{text}` is not a field name"));
-                }
-                if out.iter().any(|o| o == n) {
-                    return Err(format!("field `{n}` twice in `{text}`"));
-                }
-                out.push(n.to_string());
-            }
-            Ok(out)
-        };
-        let (inputs, outputs) = (names(inputs)?, names(outputs)?);
+        let (inputs, outputs) = (field_names(inputs, text)?, field_names(outputs, text)?);
         let head = head.trim();
         let (name, args) = match head.split_once('(') {
             None => (head, Vec::new()),
@@ -314,84 +410,7 @@ impl Transform {
                 (name.trim(), args.split(',').map(str::trim).collect())
             }
         };
-        let numbers = |wanted: &[usize]| -> Result<Vec<f64>, String> {
-            if !wanted.contains(&args.len()) {
-                return Err(format!(
-                    "`{name}` in `{text}` takes {} arguments, not {}",
-                    wanted
-                        .iter()
-                        .map(|n| n.to_string())
-                        .collect::<Vec<_>>()
-                        .join(" or "),
-                    args.len()
-                ));
-            }
-            args.iter()
-                .map(|a| {
-                    a.parse::<f64>()
-                        .ok()
-                        .filter(|x| x.is_finite())
-                        .ok_or_else(|| format!("`{a}` in `{text}` is not a number"))
-                })
-                .collect()
-        };
-        let frame = |v: Vec<f64>| -> Result<LocalFrame, String> {
-            if !(-90.0..=90.0).contains(&v[0]) || !(-180.0..=360.0).contains(&v[1]) {
-                return Err(format!(
-                    "`{text}`: the origin {}, {} is not a latitude and longitude",
-                    v[0], v[1]
-                ));
-            }
-            Ok(LocalFrame::new(
-                v[0],
-                v[1],
-                v.get(2).copied().unwrap_or(0.0),
-            ))
-        };
-        let (kind, arity): (Kind, &[usize]) = match name {
-            "geodetic->enu" => (Kind::FromGeodetic(frame(numbers(&[2, 3])?)?, true), &[2, 3]),
-            "geodetic->ned" => (
-                Kind::FromGeodetic(frame(numbers(&[2, 3])?)?, false),
-                &[2, 3],
-            ),
-            "enu->geodetic" => (Kind::ToGeodetic(frame(numbers(&[2, 3])?)?, true), &[2, 3]),
-            "ned->geodetic" => (Kind::ToGeodetic(frame(numbers(&[2, 3])?)?, false), &[2, 3]),
-            "rotate" | "unrotate" => {
-                if args.len() != 3 {
-                    return Err(format!(
-                        "`{name}` in `{text}` takes 3 angles (roll, pitch, yaw), not {}",
-                        args.len()
-                    ));
-                }
-                let angle = |a: &str| match a.parse::<f64>() {
-                    Ok(x) if x.is_finite() => Ok(Angle::Fixed(x)),
-                    Ok(_) => Err(format!("`{a}` in `{text}` is not a finite angle")),
-                    Err(_) if is_field_name(a) => Ok(Angle::Field(a.to_string())),
-                    Err(_) => Err(format!("`{a}` in `{text}` is neither an angle nor a field")),
-                };
-                let angles = [angle(args[0])?, angle(args[1])?, angle(args[2])?];
-                (Kind::Rotate(angles, name == "unrotate"), &[2, 3])
-            }
-            "enu->ned" | "ned->enu" => {
-                numbers(&[0])?;
-                (Kind::SwapEnuNed, &[2, 3])
-            }
-            "compass->yaw" => {
-                numbers(&[0])?;
-                (Kind::CompassToYaw, &[1])
-            }
-            "yaw->compass" => {
-                numbers(&[0])?;
-                (Kind::YawToCompass, &[1])
-            }
-            other => {
-                return Err(format!(
-                    "unknown transform `{other}` in `{text}`; transforms: geodetic->enu, \
-                     geodetic->ned, enu->geodetic, ned->geodetic, rotate, unrotate, enu->ned, \
-                     ned->enu, compass->yaw, yaw->compass"
-                ));
-            }
-        };
+        let (kind, arity) = transform_kind(name, &args, text)?;
         if !arity.contains(&inputs.len()) || outputs.len() != inputs.len() {
             let takes = if arity == [1] {
                 "one field"

@@ -1,0 +1,254 @@
+//! The console's state shared by every connection, and every rule the server enforces.
+//!
+//! The hub reads the bus (the latest value of every topic, and `cmd.status` for
+//! acknowledgements), holds the control lease, arms confirmed commands, runs dead-man commands
+//! (neutral once when their re-sends stop, their connection closes or control is lost) and keeps
+//! the command history. A connection ([`Client`]) asks it for everything; the page is never
+//! trusted: commands are looked up in the layout the server itself sent that connection.
+//!
+//! The rooms: `lease` (who holds control), `commands` (arming, holding, dead-man commands,
+//! building and publishing), `history` (pending commands matched to their acknowledgements, the
+//! CSV command log), `pages` (what each page is sent: layouts, data) and `save` (the designer's
+//! saves).
+
+mod commands;
+mod history;
+mod lease;
+mod pages;
+mod save;
+
+pub use commands::{ARM_LIFETIME, ARMS_PER_CONNECTION, CommandError, DRIVE_PERIODS};
+pub use history::{HISTORY, MAX_TEXT};
+pub use lease::{CONTROL_TOPIC, LEASE_GRACE, LeaseError};
+pub use save::SaveError;
+
+use crate::auth::{Limiter, Session, Sessions};
+use crate::layout::Layout;
+use crate::users::Users;
+use commands::{Arms, Drives};
+use history::{Ack, History};
+use lease::Lease;
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Interface, Pattern, Stamp, Topic};
+use serde_json::{Value as Json, json};
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, SystemTime};
+use tokio::sync::broadcast;
+use tokio::time::Instant;
+
+/// Password checks at once (each takes ~19 MiB for tens of milliseconds).
+pub const PASSWORD_CHECKS: usize = 4;
+
+/// What a `<console>` element sets.
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Where the server listens.
+    pub listen: SocketAddr,
+    /// How long a command waits for its acknowledgement.
+    pub ack_timeout: Duration,
+    /// The role that may take control.
+    pub lease_role: String,
+    /// The role that may edit and save layouts.
+    pub designer_role: String,
+    /// The CSV file every command is appended to.
+    pub log: Option<PathBuf>,
+    /// The layout files.
+    pub layouts: Vec<PathBuf>,
+}
+
+/// The latest message of a topic.
+#[derive(Debug, Clone)]
+struct Latest {
+    stamp: f64,
+    map: DataMap,
+    version: u64,
+}
+
+/// Everything the hub's rules hold, under one lock.
+#[derive(Default)]
+struct State {
+    latest: HashMap<Topic, Latest>,
+    version: u64,
+    lease: Lease,
+    history: History,
+    arms: Arms,
+    drives: Drives,
+    next_conn: u64,
+}
+
+/// The console's shared state.
+pub struct Hub {
+    /// The console's settings.
+    pub settings: Settings,
+    /// Who may log in.
+    pub users: Users,
+    /// Live sessions.
+    pub sessions: Sessions,
+    /// Failed log-ins.
+    pub limiter: Limiter,
+    /// Password checks running at once, at most [`PASSWORD_CHECKS`].
+    pub checks: tokio::sync::Semaphore,
+    port: Interface,
+    origin: String,
+    produced: Vec<Pattern>,
+    state: Mutex<State>,
+    events: broadcast::Sender<Arc<str>>,
+    /// Layout files as last read without variables, with the time they were modified.
+    layouts: Mutex<LayoutCache>,
+}
+
+/// Layouts read, by file: when the file was modified, and what reading it gave.
+type LayoutCache = HashMap<PathBuf, (Option<SystemTime>, Result<Layout, FileError>)>;
+
+/// One connection's view: its user, the layout it opened and the values its inputs set.
+pub struct Client {
+    /// The connection's number.
+    pub conn: u64,
+    /// Who is connected.
+    pub session: Session,
+    /// The layout opened, as the server sent it.
+    pub layout: Option<Layout>,
+    /// The fields of each command as last set.
+    values: HashMap<String, DataMap>,
+    /// What the layout binds: topic patterns and the fields wanted (`None`: all).
+    interest: Vec<(Pattern, Option<Vec<String>>)>,
+    /// The data version last sent.
+    seen: u64,
+}
+
+fn now_s() -> f64 {
+    Stamp::now().as_secs_f64()
+}
+
+impl Hub {
+    /// A hub sending on `port` (whose medium's origin names its commands); `produced` are the
+    /// topics the system's modules declare.
+    pub fn new(settings: Settings, users: Users, port: Interface, produced: Vec<Pattern>) -> Hub {
+        let origin = port.medium().origin().to_string();
+        Hub {
+            settings,
+            users,
+            sessions: Sessions::default(),
+            limiter: Limiter::default(),
+            checks: tokio::sync::Semaphore::new(PASSWORD_CHECKS),
+            port,
+            origin,
+            produced,
+            state: Mutex::new(State::default()),
+            events: broadcast::channel(1024).0,
+            layouts: Mutex::new(HashMap::new()),
+        }
+    }
+
+    fn state(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Events for every connection (lease changes, commands), as JSON text.
+    pub fn events(&self) -> broadcast::Receiver<Arc<str>> {
+        self.events.subscribe()
+    }
+
+    fn broadcast(&self, v: &Json) {
+        let _ = self.events.send(Arc::from(v.to_string()));
+    }
+
+    /// Registers a new connection of `session`'s user.
+    pub fn connect(&self, session: Session) -> Client {
+        let mut st = self.state();
+        st.next_conn += 1;
+        st.lease.connected(&session.user);
+        Client {
+            conn: st.next_conn,
+            session,
+            layout: None,
+            values: HashMap::new(),
+            interest: Vec::new(),
+            seen: 0,
+        }
+    }
+
+    /// A connection closed: its dead-man commands go neutral; control waits [`LEASE_GRACE`].
+    pub async fn disconnect(&self, client: &Client) {
+        let stopped = {
+            let mut st = self.state();
+            st.lease.disconnected(&client.session.user, Instant::now());
+            st.drives.take(|k, _| k.0 == client.conn)
+        };
+        self.neutral(stopped, "the connection closed").await;
+    }
+
+    /// Drives whose re-sends stopped go neutral; commands unanswered for the acknowledgement
+    /// timeout are timed out; control whose holder has been gone [`LEASE_GRACE`] is released.
+    pub async fn watch(&self) {
+        let now = Instant::now();
+        let (stale, timed_out, lease_gone) = {
+            let mut st = self.state();
+            let stale = st.drives.stale(now);
+            let timed_out = st.history.time_out(now, self.settings.ack_timeout);
+            let released = st.lease.expire(now).map(|user| {
+                let released = st.drives.take(|_, d| d.user == user);
+                tracing::info!(component = "console", user = %user, "control released: disconnected");
+                released
+            });
+            (stale, timed_out, released)
+        };
+        self.neutral(stale, "re-sends stopped").await;
+        for e in &timed_out {
+            self.changed(e);
+        }
+        if let Some(released) = lease_gone {
+            self.lease_changed().await;
+            self.neutral(released, "control released").await;
+        }
+    }
+
+    /// Takes in a message read from the bus.
+    pub fn observe(&self, topic: &Topic, stamp: Stamp, map: &DataMap) {
+        let changed = {
+            let mut st = self.state();
+            let changed = Ack::from_status(topic, map, &self.origin)
+                .and_then(|ack| st.history.acknowledge(&ack));
+            st.version += 1;
+            let version = st.version;
+            st.latest.insert(
+                topic.clone(),
+                Latest {
+                    stamp: stamp.as_secs_f64(),
+                    map: map.clone(),
+                    version,
+                },
+            );
+            changed
+        };
+        if let Some(e) = changed {
+            self.changed(&e);
+        }
+    }
+
+    /// Reads the bus until it closes.
+    pub async fn read(&self, mut port: Interface) {
+        while let Some(msg) = port.recv().await {
+            if let Some(map) = msg.payload.as_map() {
+                self.observe(&msg.topic, msg.stamp, map);
+            }
+        }
+    }
+}
+
+/// A layout error for the page: file, line, column and message.
+pub fn error_json(e: &FileError) -> Json {
+    json!({
+        "file": &*e.pos.file,
+        "line": e.pos.line,
+        "col": e.pos.col,
+        "message": e.message,
+        "text": e.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod testing;

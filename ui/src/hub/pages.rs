@@ -1,0 +1,253 @@
+//! What each page is sent: the `hello` with the layouts its user may open, the layout it opens
+//! (with which of its topics have a producer), and the data its layout binds, as it changes.
+
+use super::{Client, Hub, State, error_json, now_s};
+use crate::auth::Session;
+use crate::layout::Layout;
+use seabus_medium::xml::FileError;
+use seabus_medium::{DataMap, Pattern, Topic};
+use serde_json::{Map, Value as Json, json};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// What a layout binds: topic patterns and the fields wanted (`None`: all).
+type Interest = Vec<(Pattern, Option<Vec<String>>)>;
+
+/// The name a layout file goes by when it does not read: its file name without `.xml`.
+fn stem(path: &Path) -> Option<String> {
+    path.file_stem().map(|s| s.to_string_lossy().into_owned())
+}
+
+impl Hub {
+    /// Layout file `path` read with `vars`; without variables it is read again only when the
+    /// file has changed since (every connection lists every layout).
+    pub(super) fn load(
+        &self,
+        path: &Path,
+        vars: &BTreeMap<String, String>,
+    ) -> Result<Layout, FileError> {
+        if !vars.is_empty() {
+            return Layout::load(path, vars);
+        }
+        let modified = std::fs::metadata(path).and_then(|m| m.modified()).ok();
+        let mut cache = self.layouts.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some((when, read)) = cache.get(path)
+            && modified.is_some()
+            && *when == modified
+        {
+            return read.clone();
+        }
+        let read = Layout::load(path, vars);
+        cache.insert(path.to_path_buf(), (modified, read.clone()));
+        read
+    }
+
+    /// The layouts `session`'s user may open: (name, title) or, for a file that does not read,
+    /// its error.
+    pub fn layouts_for(&self, session: &Session) -> Vec<Json> {
+        let mut out = Vec::new();
+        for path in &self.settings.layouts {
+            match self.load(path, &BTreeMap::new()) {
+                Ok(l) if l.visible_to(&session.roles) => {
+                    out.push(json!({"name": l.name, "title": l.title}))
+                }
+                Ok(_) => {}
+                Err(e) => out.push(json!({
+                    "name": stem(path).unwrap_or_default(),
+                    "error": error_json(&e),
+                })),
+            }
+        }
+        out
+    }
+
+    /// The `hello` message for a new connection.
+    pub fn hello(&self, client: &Client) -> Json {
+        json!({
+            "type": "hello",
+            "user": client.session.user,
+            "roles": client.session.roles,
+            "layouts": self.layouts_for(&client.session),
+            "lease": self.lease_json(),
+            "lease_role": self.settings.lease_role,
+            "designer_role": self.settings.designer_role,
+        })
+    }
+
+    /// Whether a module declares producing `topic`, or data on it has been seen.
+    fn produced(&self, topic: &str, st: &State) -> bool {
+        self.produced.iter().any(|p| p.matches(topic))
+            || Topic::new(topic).is_ok_and(|t| st.latest.contains_key(&t))
+            || Pattern::new(topic).is_ok_and(|p| st.latest.keys().any(|t| p.matches(t.as_str())))
+    }
+
+    /// What `layout` binds, and for each bound topic whether anything produces it.
+    fn interest(&self, layout: &Layout) -> (Interest, Map<String, Json>) {
+        let mut interest: Interest = Vec::new();
+        let mut producers = Map::new();
+        let st = self.state();
+        for b in layout.bindings() {
+            producers.insert(b.topic.clone(), Json::Bool(self.produced(&b.topic, &st)));
+            let Ok(p) = Pattern::new(&b.topic) else {
+                continue;
+            };
+            match interest.iter_mut().find(|(q, _)| q.as_str() == p.as_str()) {
+                Some((_, fields)) => match (fields.as_mut(), &b.field) {
+                    (Some(list), Some(f)) => list.push(f.clone()),
+                    _ => *fields = None,
+                },
+                None => interest.push((p, b.field.clone().map(|f| vec![f]))),
+            }
+        }
+        (interest, producers)
+    }
+
+    /// Opens layout `name` with `vars` for `client`: the `layout` message (with the layout, or the
+    /// error that stops it loading).
+    pub fn open(&self, client: &mut Client, name: &str, vars: &BTreeMap<String, String>) -> Json {
+        for path in &self.settings.layouts {
+            let layout = match self.load(path, vars) {
+                Ok(l) => l,
+                Err(e) if stem(path).as_deref() == Some(name) => {
+                    return json!({"type": "layout", "name": name, "error": error_json(&e)});
+                }
+                Err(_) => continue,
+            };
+            if layout.name != name {
+                continue;
+            }
+            if !layout.visible_to(&client.session.roles) {
+                break;
+            }
+            let (interest, producers) = self.interest(&layout);
+            let message = json!({
+                "type": "layout",
+                "name": name,
+                "layout": layout.to_json(),
+                "producers": producers,
+            });
+            client.values = layout
+                .commands
+                .iter()
+                .map(|(n, c)| (n.clone(), c.fields.clone()))
+                .collect();
+            client.interest = interest;
+            client.seen = 0;
+            client.layout = Some(layout);
+            return message;
+        }
+        json!({"type": "error", "message": format!("no layout `{name}` for you")})
+    }
+
+    /// The `data` message with what changed since the client's last one, if anything did.
+    pub fn data_for(&self, client: &mut Client) -> Option<Json> {
+        if client.interest.is_empty() {
+            return None;
+        }
+        let st = self.state();
+        if st.version == client.seen {
+            return None;
+        }
+        let mut topics = Map::new();
+        for (topic, latest) in &st.latest {
+            if latest.version <= client.seen {
+                continue;
+            }
+            if let Some(fields) = wanted(&client.interest, topic, &latest.map) {
+                topics.insert(
+                    topic.to_string(),
+                    json!({"stamp": latest.stamp, "fields": fields}),
+                );
+            }
+        }
+        client.seen = st.version;
+        (!topics.is_empty()).then(|| json!({"type": "data", "topics": topics, "now": now_s()}))
+    }
+}
+
+/// The fields of `map` (the latest message of `topic`) that `interest` wants, if it wants any.
+fn wanted(interest: &Interest, topic: &Topic, map: &DataMap) -> Option<DataMap> {
+    let mut wanted: Option<DataMap> = None;
+    for (p, fields) in interest {
+        if !p.matches(topic.as_str()) {
+            continue;
+        }
+        let out = wanted.get_or_insert_with(DataMap::new);
+        match fields {
+            None => {
+                *out = map.clone();
+                break;
+            }
+            Some(list) => {
+                for f in list {
+                    if let Some(v) = map.get(f) {
+                        out.insert(f.clone(), v.clone());
+                    }
+                }
+            }
+        }
+    }
+    wanted
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::Fixture;
+    use super::*;
+    use seabus_medium::Stamp;
+
+    #[test]
+    fn a_user_lists_and_opens_only_the_layouts_of_their_roles() {
+        let f = Fixture::new();
+        let ivo = f.session("ivo");
+        assert_eq!(
+            f.hub.layouts_for(&ivo),
+            [json!({"name": "pilot", "title": "Pilot"})]
+        );
+        let mut eve = f.hub.connect(f.session("eve"));
+        assert!(f.hub.layouts_for(&eve.session).is_empty());
+        let refused = f.hub.open(&mut eve, "pilot", &BTreeMap::new());
+        assert_eq!(
+            refused,
+            json!({"type": "error", "message": "no layout `pilot` for you"})
+        );
+        assert!(eve.layout.is_none());
+    }
+
+    #[test]
+    fn a_layout_file_that_does_not_read_is_listed_and_opened_with_its_error() {
+        let f = Fixture::new();
+        let path = f.dir.join("pilot.xml");
+        std::fs::write(&path, "<layout name=\"pilot\"><dial/></layout>").unwrap();
+        let listed = f.hub.layouts_for(&f.session("ana"));
+        assert_eq!(listed.len(), 1);
+        assert_eq!(listed[0]["name"], "pilot");
+        assert_eq!(
+            (&listed[0]["error"]["line"], &listed[0]["error"]["col"]),
+            (&json!(1), &json!(22))
+        );
+        let mut ana = f.hub.connect(f.session("ana"));
+        let opened = f.hub.open(&mut ana, "pilot", &BTreeMap::new());
+        assert_eq!(opened["type"], "layout");
+        assert_eq!(opened["error"], listed[0]["error"]);
+    }
+
+    #[test]
+    fn a_page_gets_the_fields_it_binds_once_each_time_they_change() {
+        let f = Fixture::new();
+        let mut ana = f.client("ana");
+        assert_eq!(f.hub.data_for(&mut ana), None);
+        let depth = Topic::new("nav.depth").unwrap();
+        let reading = DataMap::new().with("depth", 3.5).with("temperature", 9);
+        f.hub.observe(&depth, Stamp(10_000_000_000), &reading);
+        let data = f.hub.data_for(&mut ana).unwrap();
+        assert_eq!(
+            data["topics"],
+            json!({"nav.depth": {"stamp": 10.0, "fields": {"depth": 3.5}}})
+        );
+        assert_eq!(f.hub.data_for(&mut ana), None);
+        let elsewhere = Topic::new("nav.speed").unwrap();
+        f.hub.observe(&elsewhere, Stamp(11_000_000_000), &reading);
+        assert_eq!(f.hub.data_for(&mut ana), None);
+    }
+}

@@ -1,0 +1,363 @@
+//! The layout model: a parsed layout, its commands, widget tree and input bindings, and what it
+//! displays ([`Layout::bindings`]) and to whom ([`Layout::visible_to`]).
+
+use super::values::list;
+use seabus_medium::parse::parse_duration;
+use seabus_medium::xml::Pos;
+use seabus_medium::{DataMap, Topic, Value};
+use std::collections::BTreeMap;
+use std::time::Duration;
+
+/// How old a displayed value may be before it is shown as stale, when a widget gives no `fresh`.
+pub const DEFAULT_FRESH: Duration = Duration::from_secs(2);
+
+/// The time a `confirm="hold"` button is held, when the command gives no `hold`.
+pub const DEFAULT_HOLD: Duration = Duration::from_secs(1);
+
+/// The topic a `<health>` table shows when it gives no `bind`.
+pub const DEFAULT_HEALTH: &str = "vehicle.health";
+
+/// The topics a `<log>` shows when it gives no `topics`.
+pub const DEFAULT_LOG_TOPICS: &str = "cmd.status, vehicle.state";
+
+/// Elements directly inside `<layout>` other than widgets.
+pub(super) const TOP: [&str; 6] = ["var", "command", "template", "use", "keys", "gamepad"];
+
+/// Widgets that hold other widgets.
+pub(super) const CONTAINERS: [&str; 4] = ["row", "column", "tabs", "grid"];
+
+/// Every widget kind an element may name, containers first.
+pub(super) const WIDGETS: [&str; 16] = [
+    "row", "column", "tabs", "grid", "readout", "gauge", "plot", "track", "health", "log",
+    "history", "button", "slider", "number", "text", "toggle",
+];
+
+/// Widgets that display variables and take `fresh`.
+pub(super) const OUTPUTS: [&str; 6] = ["readout", "gauge", "plot", "track", "health", "log"];
+
+/// Every widget kind.
+pub(super) fn widget_kinds() -> Vec<&'static str> {
+    WIDGETS.to_vec()
+}
+
+/// How a command is confirmed before it is sent.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Confirm {
+    /// Sent at once.
+    None,
+    /// The page asks before sending.
+    Dialog,
+    /// The button must be held this long.
+    Hold(Duration),
+}
+
+/// A `<command>`: a topic and the fields it is sent with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CommandDecl {
+    /// Its name in the layout.
+    pub name: String,
+    /// The topic it is sent on.
+    pub topic: Topic,
+    /// Its fields with their initial values (which also fix their types).
+    pub fields: DataMap,
+    /// The role needed to send it (`None`: the console's lease role).
+    pub role: Option<String>,
+    /// How it is confirmed.
+    pub confirm: Confirm,
+    /// The rate of a dead-man command, per second.
+    pub rate_hz: Option<f64>,
+    /// Fields sent once when a dead-man command stops.
+    pub neutral: DataMap,
+    /// Whether control is needed to send it.
+    pub lease: bool,
+    /// Lowest values of fields.
+    pub min: BTreeMap<String, f64>,
+    /// Highest values of fields.
+    pub max: BTreeMap<String, f64>,
+    /// Where it is declared.
+    pub pos: Pos,
+}
+
+/// A displayed variable: a topic (or, for a log, a pattern) and the field shown.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Binding {
+    /// The topic, or a pattern of topics.
+    pub topic: String,
+    /// The field, when one field is shown.
+    pub field: Option<String>,
+    /// How old a value may be before it is stale.
+    pub fresh: Duration,
+    /// The id of the widget that shows it (`axis-N` for a gamepad axis's offset).
+    pub widget: String,
+    /// Where the widget is written.
+    pub pos: Pos,
+}
+
+/// A widget or container, with its attributes as written (variables substituted) and its children.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Node {
+    /// The element name: `row`, `readout`, `series`, …
+    pub kind: String,
+    /// Its id, unique in the layout (`KIND-N` in document order when the file gives none).
+    pub id: String,
+    /// Its label.
+    pub label: Option<String>,
+    /// The role a user needs to see it.
+    pub role: Option<String>,
+    /// Its other attributes.
+    pub attrs: BTreeMap<String, String>,
+    /// Widgets inside it (tabs of `<tabs>`, series of `<plot>`).
+    pub children: Vec<Node>,
+    /// Where it is written.
+    pub pos: Pos,
+}
+
+impl Node {
+    /// The command a sending widget names, and the field it sets.
+    pub fn command(&self) -> Option<(&str, Option<&str>)> {
+        let c = self.attrs.get("command")?;
+        Some(match c.split_once('.') {
+            Some((name, field)) => (name, Some(field)),
+            None => (c.as_str(), None),
+        })
+    }
+
+    /// This node and every node inside it, in document order.
+    pub fn walk(&self) -> Vec<&Node> {
+        let mut out = Vec::new();
+        let mut stack = vec![self];
+        while let Some(n) = stack.pop() {
+            out.push(n);
+            stack.extend(n.children.iter().rev());
+        }
+        out
+    }
+
+    /// How old a displayed value may be before it is stale.
+    fn fresh(&self) -> Duration {
+        self.attrs
+            .get("fresh")
+            .and_then(|f| parse_duration(f))
+            .unwrap_or(DEFAULT_FRESH)
+    }
+
+    /// An attribute written `topic.field`, split at the last dot.
+    fn bound(&self, attr: &str) -> Option<(&str, &str)> {
+        self.attrs.get(attr).and_then(|b| b.rsplit_once('.'))
+    }
+}
+
+/// A keyboard binding.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KeyBinding {
+    /// The `KeyboardEvent.key` it reacts to.
+    pub key: String,
+    /// The command it sends.
+    pub command: String,
+    /// The field it sets, when it sets one.
+    pub field: Option<String>,
+    /// The field's value while the key is held.
+    pub value: Option<Value>,
+    /// What each press adds to the field.
+    pub step: Option<f64>,
+    /// Where it is written.
+    pub pos: Pos,
+}
+
+/// What a gamepad axis adds to its shaped value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Offset {
+    /// A constant.
+    Number(f64),
+    /// The current value of a field of a topic: `(topic, field)`.
+    Binding(String, String),
+}
+
+/// A gamepad axis driving a command's field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxisBinding {
+    /// The axis index in the Gamepad API.
+    pub index: usize,
+    /// The command it drives.
+    pub command: String,
+    /// The field it sets.
+    pub field: String,
+    /// Readings below this magnitude count as 0 (0 to 1).
+    pub deadband: f64,
+    /// How cubic the response is (0 to 1).
+    pub expo: f64,
+    /// The factor after shaping.
+    pub gain: f64,
+    /// What is added after the gain.
+    pub offset: Offset,
+    /// Where it is written.
+    pub pos: Pos,
+}
+
+/// A gamepad button sending a command once per press.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PadButton {
+    /// The button index in the Gamepad API.
+    pub index: usize,
+    /// The command it sends.
+    pub command: String,
+    /// Where it is written.
+    pub pos: Pos,
+}
+
+/// A parsed layout: one page of the console.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Layout {
+    /// Its name.
+    pub name: String,
+    /// Its title (the name when the file gives none).
+    pub title: String,
+    /// The roles it is shown to (empty: everyone).
+    pub roles: Vec<String>,
+    /// Its variables with the values used.
+    pub vars: BTreeMap<String, String>,
+    /// Its commands by name.
+    pub commands: BTreeMap<String, CommandDecl>,
+    /// The widget tree (a `column` around them when the layout has several top-level widgets).
+    pub root: Node,
+    /// Keyboard bindings.
+    pub keys: Vec<KeyBinding>,
+    /// Gamepad axes.
+    pub axes: Vec<AxisBinding>,
+    /// Gamepad buttons.
+    pub buttons: Vec<PadButton>,
+    /// The file it was read from.
+    pub file: String,
+}
+
+impl Layout {
+    /// The widget with id `id`.
+    pub fn widget(&self, id: &str) -> Option<&Node> {
+        self.root.walk().into_iter().find(|n| n.id == id)
+    }
+
+    /// Whether a user with `roles` sees this layout.
+    pub fn visible_to(&self, roles: &[String]) -> bool {
+        self.roles.is_empty() || roles.iter().any(|r| self.roles.contains(r))
+    }
+
+    /// Number of widgets (containers and plot series not counted).
+    pub fn widget_count(&self) -> usize {
+        self.root
+            .walk()
+            .iter()
+            .filter(|n| !CONTAINERS.contains(&n.kind.as_str()) && n.kind != "tab")
+            .filter(|n| n.kind != "series")
+            .count()
+    }
+
+    /// Every displayed variable: readouts, gauges, plot series, the track's position and heading,
+    /// health tables, log topics (as patterns) and gamepad axis offsets.
+    pub fn bindings(&self) -> Vec<Binding> {
+        let mut out = Vec::new();
+        for node in self.root.walk() {
+            node_bindings(node, &mut out);
+        }
+        for a in &self.axes {
+            if let Offset::Binding(topic, field) = &a.offset {
+                out.push(Binding {
+                    topic: topic.clone(),
+                    field: Some(field.clone()),
+                    fresh: DEFAULT_FRESH,
+                    widget: format!("axis-{}", a.index),
+                    pos: a.pos.clone(),
+                });
+            }
+        }
+        out
+    }
+}
+
+/// The variables one node displays (a plot's are its series'), added to `out`.
+fn node_bindings(node: &Node, out: &mut Vec<Binding>) {
+    let fresh = node.fresh();
+    let mut add = |topic: &str, field: Option<&str>, node: &Node| {
+        out.push(Binding {
+            topic: topic.to_string(),
+            field: field.map(str::to_string),
+            fresh,
+            widget: node.id.clone(),
+            pos: node.pos.clone(),
+        });
+    };
+    match node.kind.as_str() {
+        "readout" | "gauge" => {
+            if let Some((t, f)) = node.bound("bind") {
+                add(t, Some(f), node);
+            }
+        }
+        "plot" => {
+            for s in &node.children {
+                if let Some((t, f)) = s.bound("bind") {
+                    add(t, Some(f), s);
+                }
+            }
+        }
+        "track" => {
+            if let Some(p) = node.attrs.get("position") {
+                add(p.trim(), None, node);
+            }
+            if let Some((t, f)) = node.bound("heading") {
+                add(t, Some(f), node);
+            }
+        }
+        "health" => {
+            let topic = node.attrs.get("bind").map_or(DEFAULT_HEALTH, |b| b.trim());
+            add(topic, None, node);
+        }
+        "log" => {
+            let topics = node
+                .attrs
+                .get("topics")
+                .map_or(DEFAULT_LOG_TOPICS, String::as_str);
+            for t in list(topics) {
+                add(t, None, node);
+            }
+        }
+        _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing::{example, parse};
+
+    #[test]
+    fn bindings_cover_every_displayed_variable() {
+        let got: Vec<(String, Option<String>, u128, String)> = example()
+            .bindings()
+            .into_iter()
+            .map(|b| (b.topic, b.field, b.fresh.as_millis(), b.widget))
+            .collect();
+        let want = [
+            ("nav.position", None, 2000, "track-1"),
+            ("nav.attitude", Some("yaw"), 2000, "track-1"),
+            ("nav.depth", Some("depth"), 2000, "readout-1"),
+            ("nav.velocity", Some("speed"), 5000, "speed"),
+            ("cmd.status", None, 2000, "log-1"),
+            ("vehicle.state", None, 2000, "log-1"),
+            ("nav.attitude", Some("yaw"), 2000, "axis-0"),
+        ];
+        let want: Vec<(String, Option<String>, u128, String)> = want
+            .iter()
+            .map(|(t, f, ms, w)| (t.to_string(), f.map(str::to_string), *ms, w.to_string()))
+            .collect();
+        assert_eq!(got, want);
+    }
+
+    #[test]
+    fn visibility_follows_roles() {
+        let l = example();
+        assert!(l.visible_to(&["designer".to_string()]));
+        assert!(!l.visible_to(&["scientist".to_string()]));
+        assert!(!l.visible_to(&[]));
+        let open = parse("<layout name=\"t\"/>").unwrap();
+        assert!(open.visible_to(&[]));
+        assert_eq!(open.root.kind, "column");
+    }
+}
