@@ -71,8 +71,10 @@ fn stations_on_the_allow_list_reach_the_vehicle_over_udp() {
         r#"<seabus node="vehicle">
   <medium name="bus" url="inproc://"/>
   <medium name="n1" url="dsaav+eth://{dev}?node=1"/>
+  <medium name="vehicle" url="dsaav+eth://{dev}?relay"/>
+  <medium name="stations" url="dsaav+udp://10.77.{s}.1:47999?relay"/>
   <module name="config" type="dsaav-config" medium="n1" config="starfish.ini" appdata="{app}" port="2"/>
-  <module name="wifi" type="dsaav-udp-bridge" medium="bus" iface="{dev}" bind="10.77.{s}.1:47999" allow="10.77.{s}.2"/>
+  <module name="wifi" type="dsaav-udp-bridge" media="vehicle stations bus" allow="10.77.{s}.2"/>
 </seabus>"#,
         dev = hosts.dev_a,
         app = dir.path().join("app.ini").display()

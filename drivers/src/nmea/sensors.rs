@@ -371,9 +371,10 @@ impl Sensor {
     /// true heading where the variation is known; pitch and roll from XDR, which with a fresh
     /// true heading make an attitude (output 1).
     fn read_heading(&mut self, parsed: &Parsed, now: Instant, out: &mut Readings) {
-        let fed = self.fed(0, parsed.formatter);
+        // asked only of the sentences a heading is read from
+        let fed = || self.fed(0, parsed.formatter);
         match &parsed.sentence {
-            Sentence::Hdt(h) if fed => {
+            Sentence::Hdt(h) if fed() => {
                 if let Some(hdg) = h.heading {
                     out.push((0, heading(f64::from(hdg), false)));
                 }
@@ -382,7 +383,7 @@ impl Sensor {
                 heading: Some(hdg),
                 deviation,
                 variation,
-            } if fed => {
+            } if fed() => {
                 let dev = deviation.unwrap_or(0.0);
                 match variation.or(self.variation) {
                     Some(var) => {
@@ -398,7 +399,7 @@ impl Sensor {
                     }
                 }
             }
-            Sentence::Hdm { heading: Some(hdg) } if fed => match self.variation {
+            Sentence::Hdm { heading: Some(hdg) } if fed() => match self.variation {
                 Some(var) => out.push((0, heading(hdg + var, false).and("variation", var))),
                 None => out.push((0, heading(*hdg, true))),
             },

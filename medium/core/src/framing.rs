@@ -107,12 +107,14 @@ impl fmt::Display for Reject {
 }
 
 /// The XOR checksum of an NMEA sentence body (the bytes between `$`/`!` and `*`).
+#[inline]
 pub fn nmea_checksum(body: &[u8]) -> u8 {
     body.iter().fold(0, |acc, b| acc ^ b)
 }
 
 /// The address of an NMEA sentence: the letters after `$`/`!` (`GPGGA` in `$GPGGA,…`, `C` in the
 /// Iver compass sentence `$C82.8P…`, which has no comma); empty when there are none.
+#[inline]
 pub fn nmea_address(sentence: &[u8]) -> &[u8] {
     let body = sentence.get(1..).unwrap_or_default();
     let len = body

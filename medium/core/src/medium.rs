@@ -16,6 +16,7 @@ use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queu
 use crate::tally::Tally;
 use crate::topic::{Pattern, Topic, TopicError};
 use crate::url::{MediumUrl, UrlError};
+use bytes::Bytes;
 use std::any::Any;
 use std::collections::{BTreeMap, VecDeque};
 use std::fmt;
@@ -193,7 +194,47 @@ pub trait Transport: Send + Sync + 'static {
 /// A frame encoded by a transport, in the transport's own type, on its way to the wire (through
 /// the fault stage, which may hold it back or copy it).
 #[derive(Clone)]
-pub(crate) struct Frame(Arc<dyn Any + Send + Sync>);
+pub(crate) enum Frame {
+    /// Bytes, the frame of most media: carried as they are, without an allocation of its own.
+    Bytes(Bytes),
+    /// Any other frame type.
+    Other(Arc<dyn Any + Send + Sync>),
+}
+
+impl Frame {
+    /// A transport's frame, hidden.
+    fn of<F: Clone + Send + Sync + 'static>(frame: F) -> Frame {
+        let mut slot = Some(frame);
+        match (&mut slot as &mut dyn Any).downcast_mut::<Option<Bytes>>() {
+            Some(bytes) => Frame::Bytes(bytes.take().unwrap_or_default()),
+            None => Frame::Other(Arc::new(slot)),
+        }
+    }
+
+    /// The transport's frame again; `None` when it is of another type.
+    fn into<F: Clone + Send + Sync + 'static>(self) -> Option<F> {
+        match self {
+            Frame::Bytes(b) => {
+                let mut slot = Some(b);
+                (&mut slot as &mut dyn Any)
+                    .downcast_mut::<Option<F>>()
+                    .and_then(Option::take)
+            }
+            Frame::Other(any) => any
+                .downcast::<Option<F>>()
+                .ok()
+                .and_then(Arc::unwrap_or_clone),
+        }
+    }
+
+    /// The transport's frame, borrowed; `None` when it is of another type.
+    fn as_ref<F: 'static>(&self) -> Option<&F> {
+        match self {
+            Frame::Bytes(b) => (b as &dyn Any).downcast_ref::<F>(),
+            Frame::Other(any) => any.downcast_ref::<Option<F>>().and_then(Option::as_ref),
+        }
+    }
+}
 
 /// A [`Transport`] with its frame type hidden, as a medium holds it.
 pub(crate) trait Wire: Send + Sync {
@@ -213,14 +254,14 @@ impl<T: Transport> Wire for T {
     }
 
     fn encode(&self, msg: &Message) -> Result<Frame, SendError> {
-        Ok(Frame(Arc::new(Transport::encode(self, msg)?)))
+        Ok(Frame::of(Transport::encode(self, msg)?))
     }
 
     fn transmit(&self, frame: Frame) -> BoxFuture<'_, Result<(), SendError>> {
         // a frame comes back only to the transport that encoded it
-        match frame.0.downcast::<T::Frame>() {
-            Ok(f) => Transport::transmit(self, Arc::unwrap_or_clone(f)),
-            Err(_) => Box::pin(std::future::ready(Err(SendError::Io {
+        match frame.into::<T::Frame>() {
+            Some(f) => Transport::transmit(self, f),
+            None => Box::pin(std::future::ready(Err(SendError::Io {
                 medium: String::new(),
                 reason: "a frame reached a transport that did not encode it".to_string(),
             }))),
@@ -228,7 +269,7 @@ impl<T: Transport> Wire for T {
     }
 
     fn local_copy(&self, msg: Message, frame: &Frame) -> Option<Message> {
-        match frame.0.downcast_ref::<T::Frame>() {
+        match frame.as_ref::<T::Frame>() {
             Some(f) => Transport::local_copy(self, msg, f),
             None => Some(msg),
         }
@@ -1168,5 +1209,28 @@ impl fmt::Debug for Interface {
             .field("medium", &self.medium.name())
             .field("subscriptions", &self.patterns)
             .finish()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frames_keep_their_type_and_bytes_need_no_allocation_of_their_own() {
+        let bytes = Bytes::from_static(b"frame");
+        let f = Frame::of(bytes.clone());
+        assert!(matches!(&f, Frame::Bytes(b) if *b == bytes));
+        assert_eq!(f.as_ref::<Bytes>(), Some(&bytes));
+        assert_eq!(f.as_ref::<u32>(), None);
+        assert_eq!(f.clone().into::<Bytes>(), Some(bytes));
+        assert_eq!(f.into::<u32>(), None, "a frame of another type");
+        let other = Frame::of(7u32);
+        assert!(matches!(other, Frame::Other(_)));
+        assert_eq!(other.as_ref::<u32>(), Some(&7));
+        let copy = other.clone();
+        assert_eq!(other.into::<u32>(), Some(7));
+        assert_eq!(copy.into::<u32>(), Some(7), "a copy the fault stage made");
+        assert_eq!(Frame::of(7u32).into::<Bytes>(), None);
     }
 }

@@ -23,10 +23,14 @@
 //! so two ports of one node talk as two nodes do, and a message addressed to another node is not
 //! seen here at all.
 //!
+//! With the `relay` option a `dsaav+eth` or `dsaav+udp` medium has no node of its own and carries
+//! every frame of its backbone as it is ([`relay`]), for a module that relays frames.
+//!
 //! Who may depend on it: the program (to register the schemes) and the DSAAV services, which
 //! speak its frames and addresses. It depends on the core only.
 
 pub mod dict;
+pub mod relay;
 mod sockets;
 pub mod wire;
 
@@ -39,6 +43,7 @@ use seabus_medium::medium::{
 };
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::payload::Payload;
+use seabus_medium::schemes::{CheckUrl, OpenTransport};
 use seabus_medium::topic::Topic;
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{Opened, Scheme, Schemes};
@@ -152,7 +157,7 @@ impl DsaavConfig {
     }
 }
 
-fn io_send(medium: &str, e: impl std::fmt::Display) -> SendError {
+pub(crate) fn io_send(medium: &str, e: impl std::fmt::Display) -> SendError {
     SendError::Io {
         medium: medium.to_string(),
         reason: e.to_string(),
@@ -327,10 +332,25 @@ enum Link {
     InProcess(Hub, u64),
 }
 
+/// Checks a DSAAV URL: a medium of a node, or a relay medium ([`relay`]).
+fn check(url: &mut MediumUrl) -> Result<Capabilities, UrlError> {
+    if relay::wanted(url)? {
+        return Ok(relay::RelayConfig::from_url(url)?.capabilities());
+    }
+    Ok(DsaavConfig::from_url(url)?.capabilities())
+}
+
+/// Opens a DSAAV medium: of a node, or a relay medium ([`relay`]).
+fn open_any(mut o: Opening) -> Result<Opened, OpenError> {
+    if relay::wanted(&mut o.url)? {
+        return Ok(Opened::from(relay::open(o)?));
+    }
+    Ok(Opened::from(open(o)?))
+}
+
 /// Adds `dsaav+eth://`, `dsaav+udp://` and `dsaav+inproc://`.
 pub fn register(schemes: &mut Schemes) {
-    let check = |url: &mut MediumUrl| Ok(DsaavConfig::from_url(url)?.capabilities());
-    let open = |o| Ok(Opened::from(open(o)?));
+    let (check, open) = (check as CheckUrl, open_any as OpenTransport);
     schemes
         .add(Scheme {
             name: "dsaav+eth",

@@ -276,3 +276,99 @@ async fn local_interfaces_see_what_a_receiver_on_the_node_would() {
     assert!(there.try_recv().is_err(), "nothing else there");
     assert_eq!(one.stats().transmitted, 3);
 }
+
+/// A UDP port nobody uses right now.
+fn unused_port() -> u16 {
+    UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .expect("an ephemeral port")
+}
+
+#[tokio::test]
+async fn a_relay_medium_carries_every_frame_as_it_is_both_ways() {
+    let (relay_port, node_port) = (unused_port(), unused_port());
+    let relay = open(&format!("dsaav+udp://127.0.0.1:{relay_port}?relay"));
+    assert!(relay.capabilities().is_native("dsaav-frames"));
+    let node = open(&format!(
+        "dsaav+udp://127.0.0.1:{node_port}?peer=127.0.0.1:{relay_port}&node=9"
+    ));
+    let mut at_relay = relay.attach("t").subscribed("**").unwrap();
+    let mut at_node = node.attach("t").subscribed("dsaav.**").unwrap();
+    // a node's frame to another node (not the relay's: it has none) arrives as it is
+    node.attach("s")
+        .send(
+            "dsaav.data",
+            DataMap::new().with("@dst", "4:2").with("depth", 3.5f64),
+        )
+        .await
+        .unwrap();
+    let m = next(&mut at_relay).await;
+    assert_eq!(m.topic.as_str(), "dsaav.frame");
+    let map = m.payload.as_map().unwrap().clone();
+    assert_eq!(
+        map.get_str("from"),
+        Some(format!("127.0.0.1:{node_port}").as_str())
+    );
+    assert_eq!((map.get_i64("src"), map.get_i64("dst")), (Some(9), Some(4)));
+    let Some(Value::Bytes(bytes)) = map.get("frame") else {
+        panic!("{map}")
+    };
+    let f = Frame::decode(bytes).unwrap();
+    assert_eq!(f.dst, Destination::To(Address { node: 4, port: 2 }));
+    // a frame the relay sends to the node's address is read by the node as from node 4
+    let back = Frame {
+        src: Address { node: 4, port: 2 },
+        dst: Destination::To(Address { node: 9, port: 0 }),
+        id: 77,
+        kind: f.kind,
+        reference: f.id,
+        params: vec![(f.params[0].0, Param::Double(1.25))],
+    };
+    relay
+        .attach("s")
+        .send(
+            "dsaav.frame",
+            DataMap::new()
+                .with("frame", Value::Bytes(back.encode().unwrap()))
+                .with("to", format!("127.0.0.1:{node_port}")),
+        )
+        .await
+        .unwrap();
+    let m = next(&mut at_node).await;
+    let map = m.payload.as_map().unwrap();
+    assert_eq!(map.get_str("@src"), Some("4:2"));
+    // the relay medium's other interfaces see what was sent on it, as on any medium
+    let local = next(&mut at_relay).await;
+    assert_eq!(
+        local.payload.as_map().unwrap().get_str("to"),
+        Some(format!("127.0.0.1:{node_port}").as_str())
+    );
+    assert_eq!(
+        (map.get_i64("@id"), map.get_i64("@ref")),
+        (Some(77), Some(i64::from(f.id)))
+    );
+    assert_eq!(map.get_f64("depth"), Some(1.25));
+    // what is not a frame is refused at send, and bytes that are not one are counted at receipt
+    let refused = relay
+        .attach("s")
+        .send(
+            "dsaav.frame",
+            DataMap::new().with("frame", Value::Bytes(vec![1, 2, 3])),
+        )
+        .await;
+    assert!(matches!(refused, Err(SendError::Io { .. })), "{refused:?}");
+    UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .send_to(b"not a frame", ("127.0.0.1", relay_port))
+        .unwrap();
+    let start = std::time::Instant::now();
+    while relay.stats().rejected_total() == 0 && start.elapsed() < WAIT {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert_eq!(relay.stats().rejected_total(), 1);
+    assert!(
+        at_relay.try_recv().is_err(),
+        "nothing is delivered for bytes that are not a frame"
+    );
+}

@@ -1,22 +1,24 @@
 //! `dsaav-udp-bridge`: lets a control station reach the vehicle's DSAAV services over UDP (the
-//! paper's Wi-Fi bridge), relaying IComms frames unchanged between a raw Ethernet interface and a
-//! UDP socket, for stations on an allow-list only.
+//! paper's Wi-Fi bridge), relaying IComms frames unchanged between the vehicle's backbone and the
+//! stations, for stations on an allow-list only. Both sides are DSAAV media in relay mode (they
+//! carry every frame as it is: `seabus_medium_dsaav::relay`); the module decides what crosses.
 //!
 //! ```xml
-//! <module name="wifi" type="dsaav-udp-bridge" medium="bus" iface="eth0" bind="10.0.0.1:47900" allow="10.0.0.7 10.0.0.8"/>
+//! <medium name="vehicle" url="dsaav+eth://eth0?relay"/>
+//! <medium name="stations" url="dsaav+udp://10.0.0.1:47900?relay"/>
+//! <module name="wifi" type="dsaav-udp-bridge" media="vehicle stations bus" allow="10.0.0.7 10.0.0.8"/>
 //! ```
-//! A frame from an allowed station goes onto the vehicle's Ethernet as it is, and the station's
-//! node is remembered; frames on the Ethernet addressed to a station's node, and channel broadcasts
-//! from the vehicle, go back to the stations. Datagrams from other addresses, and frames that do
-//! not read, are refused and counted; the counts are published on `seabus.bridge.<NAME>` at the
-//! module's tick.
+//! The first medium is the vehicle's backbone, the second the one stations send to, the third
+//! where the bridge's counts are published (`seabus.bridge.<NAME>`, at the module's tick). A frame
+//! from an allowed station goes onto the vehicle's backbone as it is, and the station's node is
+//! remembered with its address; frames on the backbone addressed to a station's node, and channel
+//! broadcasts from the vehicle, go back to the stations. Frames from other addresses are refused
+//! and counted.
 
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Topic};
-use seabus_medium_dsaav::ETHERTYPE;
-use seabus_medium_dsaav::eth::RawSocket;
-use seabus_medium_dsaav::wire::{Destination, Frame};
+use seabus_medium::{DataMap, Kind, Message, Topic, Value};
+use seabus_medium_dsaav::relay::{NATIVE, TOPIC};
 use seabus_modules::datasets::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
@@ -24,57 +26,46 @@ use seabus_modules::module::{
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
 use std::collections::HashMap;
 use std::net::{IpAddr, SocketAddr};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
 /// The `dsaav-udp-bridge` module type.
 pub const TYPE: ModuleType = ModuleType {
     name: "dsaav-udp-bridge",
     kind: ModuleKind::Bridge,
-    summary: "relays DSAAV frames between raw Ethernet and UDP stations on an allow-list",
+    summary: "relays DSAAV frames between the vehicle's backbone and UDP stations on an allow-list",
     build,
 };
 
+/// The ports: the vehicle's backbone, the stations' medium, the medium reports go to.
+const VEHICLE: usize = 0;
+const STATIONS: usize = 1;
+const REPORTS: usize = 2;
+
+/// Stations remembered, at most (a new one is not remembered past this; known ones move).
+const MAX_STATIONS: usize = 256;
+
 #[derive(Default)]
 struct Counts {
-    to_vehicle: AtomicU64,
-    to_stations: AtomicU64,
-    refused_peers: AtomicU64,
-    bad_frames: AtomicU64,
+    to_vehicle: u64,
+    to_stations: u64,
+    refused_peers: u64,
+    bad_frames: u64,
 }
 
 struct UdpBridge {
-    iface: String,
-    bind: SocketAddr,
     allow: Vec<IpAddr>,
-    counts: Arc<Counts>,
+    /// each station's node and the address it sends from
+    stations: HashMap<u16, SocketAddr>,
+    counts: Counts,
     report: Topic,
-    relay: Option<tokio::task::JoinHandle<()>>,
-}
-
-impl Drop for UdpBridge {
-    fn drop(&mut self) {
-        if let Some(r) = self.relay.take() {
-            r.abort();
-        }
-    }
+    frame_topic: Topic,
 }
 
 fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
     let p = &cfg.params;
-    let need = |name: &str| {
-        p.get(name)
-            .ok_or_else(|| cfg.pos.error(format!("a dsaav-udp-bridge needs `{name}`")))
-    };
-    let iface = need("iface")?.value.trim().to_string();
-    let bind_attr = need("bind")?;
-    let bind: SocketAddr = bind_attr
-        .value
-        .trim()
-        .parse()
-        .map_err(|_| bind_attr.error("expected ADDRESS:PORT to listen on"))?;
-    let allow_attr = need("allow")?;
+    let allow_attr = p
+        .get("allow")
+        .ok_or_else(|| cfg.pos.error("a dsaav-udp-bridge needs `allow`"))?;
     let allow = allow_attr
         .value
         .split([' ', ','])
@@ -86,105 +77,151 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         .collect::<Result<Vec<_>, _>>()?;
     let report = Topic::new(&format!("seabus.bridge.{}", cfg.name))
         .map_err(|e| cfg.pos.error(e.to_string()))?;
+    let frame_topic = Topic::new(TOPIC).map_err(|e| cfg.pos.error(e.to_string()))?;
+    let mut decl = Declaration::new(ModuleKind::Bridge)
+        .produces(TopicDecl::topic(report.as_str()).on_port(REPORTS))
+        .default_tick(Duration::from_secs(1));
+    for port in [VEHICLE, STATIONS] {
+        decl = decl
+            .consumes(TopicDecl::topic(TOPIC).on_port(port))
+            .produces(TopicDecl::topic(TOPIC).on_port(port));
+    }
     Ok(Built {
-        decl: Declaration::new(ModuleKind::Bridge)
-            .produces(TopicDecl::topic(report.as_str()))
-            .default_tick(Duration::from_secs(1)),
+        decl,
         module: Box::new(UdpBridge {
-            iface,
-            bind,
             allow,
-            counts: Arc::default(),
+            stations: HashMap::new(),
+            counts: Counts::default(),
             report,
-            relay: None,
+            frame_topic,
         }),
     })
 }
 
-/// Relays frames both ways until aborted.
-async fn relay(
-    eth: RawSocket,
-    udp: tokio::net::UdpSocket,
-    allow: Vec<IpAddr>,
-    counts: Arc<Counts>,
-) {
-    let mut stations: HashMap<u16, SocketAddr> = HashMap::new();
-    let mut from_udp = vec![0u8; 2048];
-    let mut from_eth = vec![0u8; 2048];
-    loop {
-        tokio::select! {
-            r = udp.recv_from(&mut from_udp) => {
-                let Ok((n, peer)) = r else { continue };
-                if !allow.contains(&peer.ip()) {
-                    counts.refused_peers.fetch_add(1, Ordering::Relaxed);
-                    tracing::debug!("dsaav-udp-bridge: refused a datagram from {peer}");
-                    continue;
-                }
-                let Ok(frame) = Frame::decode(&from_udp[..n]) else {
-                    counts.bad_frames.fetch_add(1, Ordering::Relaxed);
-                    continue;
-                };
-                if stations.len() < 256 || stations.contains_key(&frame.src.node) {
-                    stations.insert(frame.src.node, peer);
-                }
-                let to = match frame.dst {
-                    Destination::To(a) => Some(a.node),
-                    Destination::Channel(_) => None,
-                };
-                if eth.send(to, &from_udp[..n]).await.is_ok() {
-                    counts.to_vehicle.fetch_add(1, Ordering::Relaxed);
-                }
-            }
-            r = eth.recv(&mut from_eth) => {
-                let Ok(Some((mac, n))) = r else { continue };
-                let Ok(frame) = Frame::decode(&from_eth[..n]) else { continue };
-                // frames of stations that this bridge put on the wire are not sent back
-                if stations.contains_key(&frame.src.node) {
-                    continue;
-                }
-                eth.learn(frame.src.node, mac);
-                let targets: Vec<SocketAddr> = match frame.dst {
-                    Destination::To(a) => stations.get(&a.node).copied().into_iter().collect(),
-                    Destination::Channel(_) => stations.values().copied().collect(),
-                };
-                for t in targets {
-                    if udp.send_to(&from_eth[..n], t).await.is_ok() {
-                        counts.to_stations.fetch_add(1, Ordering::Relaxed);
-                    }
-                }
-            }
+/// What a relay medium read: the frame, who sent it, and its source and destination nodes.
+struct Read {
+    frame: Value,
+    from: String,
+    src: u16,
+    /// `None` for a channel broadcast
+    dst: Option<u16>,
+}
+
+impl Read {
+    fn of(msg: &Message) -> Option<Read> {
+        let map = msg.payload.as_map()?;
+        let node = |key: &str| map.get_i64(key).and_then(|n| u16::try_from(n).ok());
+        Some(Read {
+            frame: map.get("frame")?.clone(),
+            from: map.get("from")?.as_str()?.to_string(),
+            src: node("src")?,
+            dst: node("dst"),
+        })
+    }
+}
+
+impl UdpBridge {
+    /// A frame from a station: onto the vehicle's backbone when the station is allowed.
+    async fn station_frame(&mut self, ctx: &mut Context, read: Read) -> Result<(), ModuleError> {
+        let Ok(peer) = read.from.parse::<SocketAddr>() else {
+            self.counts.bad_frames += 1;
+            return Ok(());
+        };
+        if !self.allow.contains(&peer.ip()) {
+            self.counts.refused_peers += 1;
+            tracing::debug!("dsaav-udp-bridge: refused a frame from {peer}");
+            return Ok(());
+        }
+        if self.stations.len() < MAX_STATIONS || self.stations.contains_key(&read.src) {
+            self.stations.insert(read.src, peer);
+        }
+        let out = DataMap::new().with("frame", read.frame);
+        self.send(ctx, VEHICLE, out).await;
+        Ok(())
+    }
+
+    /// A frame on the vehicle's backbone: to the station it is addressed to, or to every station
+    /// for a channel broadcast.
+    async fn vehicle_frame(&mut self, ctx: &mut Context, read: Read) -> Result<(), ModuleError> {
+        // frames of stations that this bridge put on the backbone are not sent back
+        if self.stations.contains_key(&read.src) {
+            return Ok(());
+        }
+        let targets: Vec<SocketAddr> = match read.dst {
+            Some(node) => self.stations.get(&node).copied().into_iter().collect(),
+            None => self.stations.values().copied().collect(),
+        };
+        for to in targets {
+            let out = DataMap::new()
+                .with("frame", read.frame.clone())
+                .with("to", to.to_string());
+            self.send(ctx, STATIONS, out).await;
+        }
+        Ok(())
+    }
+
+    /// Sends a frame on `port`, counting it when it went out.
+    async fn send(&mut self, ctx: &mut Context, port: usize, map: DataMap) {
+        match ctx
+            .publish_on(port, Kind::Data, &self.frame_topic, map)
+            .await
+        {
+            Ok(()) if port == VEHICLE => self.counts.to_vehicle += 1,
+            Ok(()) => self.counts.to_stations += 1,
+            Err(e) => tracing::debug!("dsaav-udp-bridge: a frame not relayed: {e}"),
         }
     }
 }
 
 #[async_trait]
 impl Module for UdpBridge {
-    async fn start(&mut self, _: &mut Context) -> Result<(), ModuleError> {
-        let eth = RawSocket::open(&self.iface, ETHERTYPE)
-            .map_err(|e| ModuleError::msg(format!("raw socket on {}: {e}", self.iface)))?;
-        let udp = tokio::net::UdpSocket::bind(self.bind)
-            .await
-            .map_err(|e| ModuleError::msg(format!("binding {}: {e}", self.bind)))?;
-        if let Some(old) = self.relay.take() {
-            old.abort();
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        for port in [VEHICLE, STATIONS] {
+            let Some(p) = ctx.port(port) else {
+                return Err(ModuleError::msg(
+                    "a dsaav-udp-bridge is placed on three media: the vehicle's, the stations', \
+                     and the one its reports go to",
+                ));
+            };
+            let medium = p.medium();
+            if !medium.capabilities().is_native(NATIVE) {
+                return Err(ModuleError::msg(format!(
+                    "medium `{}` ({}) does not relay DSAAV frames: give its URL the `relay` option",
+                    medium.name(),
+                    medium.url()
+                )));
+            }
         }
-        self.relay = Some(tokio::spawn(relay(
-            eth,
-            udp,
-            self.allow.clone(),
-            self.counts.clone(),
-        )));
         Ok(())
+    }
+
+    async fn on_message(
+        &mut self,
+        ctx: &mut Context,
+        port: usize,
+        msg: Message,
+    ) -> Result<(), ModuleError> {
+        let Some(read) = Read::of(&msg) else {
+            self.counts.bad_frames += 1;
+            return Ok(());
+        };
+        match port {
+            STATIONS => self.station_frame(ctx, read).await,
+            VEHICLE => self.vehicle_frame(ctx, read).await,
+            _ => Ok(()),
+        }
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
         let c = &self.counts;
-        let get = |a: &AtomicU64| a.load(Ordering::Relaxed) as i64;
         let map = DataMap::new()
-            .with("to_vehicle", get(&c.to_vehicle))
-            .with("to_stations", get(&c.to_stations))
-            .with("refused_peers", get(&c.refused_peers))
-            .with("bad_frames", get(&c.bad_frames));
-        ctx.publish(&self.report, map).await
+            .with("to_vehicle", c.to_vehicle as i64)
+            .with("to_stations", c.to_stations as i64)
+            .with("refused_peers", c.refused_peers as i64)
+            .with("bad_frames", c.bad_frames as i64)
+            .with("stations", self.stations.len() as i64);
+        ctx.publish_on(REPORTS, Kind::Data, &self.report, map)
+            .await
+            .map_err(|e| ModuleError::msg(e.to_string()))
     }
 }
