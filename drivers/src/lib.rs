@@ -17,6 +17,12 @@
 //! - [`sim`] — a simulated vehicle: [`sim::kinematics`] (heading, depth, speed dynamics and dead
 //!   reckoning) and the `vehicle-sim` module that follows course commands and publishes navigation,
 //!   battery and state datasets.
+//!
+//! The CAN device driver (`can`, DBC files) needs the `can` feature (default on), which brings in
+//! `seabus-medium-can` for its frames.
+//!
+//! Who may depend on it: the program, which registers its types. It depends on the core, the
+//! module framework and (with `can`) the CAN medium's frame model.
 
 #[cfg(feature = "can")]
 pub mod can;

@@ -20,6 +20,8 @@
 //! - [`server`] serves the page ([`assets`], embedded), log-in and the WebSocket; each connection
 //!   is a [`hub::Client`].
 //! - [`console`] reads the `<console>` element of a system file and starts all of it.
+//!
+//! Who may depend on it: the program. It depends on the core and the module framework.
 
 pub mod assets;
 pub mod auth;

@@ -1,4 +1,5 @@
-//! The UDP medium: seabus's own datagram format over unicast, broadcast or multicast.
+//! seabus-medium-udp, the UDP medium: seabus's own datagram format over unicast, broadcast or
+//! multicast.
 //!
 //! ```text
 //! udp://239.255.42.1:47800?ttl=0            multicast group (joined on loopback when ttl is 0)
@@ -12,6 +13,9 @@
 //! default 4 MiB), `max` (largest datagram, default 65507). A message that encodes larger than `max`
 //! is refused at send. A datagram that does not decode is counted by reason and dropped. A node
 //! never receives its own datagrams back (multicast loopback): each carries its sender's id.
+//!
+//! Who may depend on it: the program, to register `udp://` ([`register`]). It depends on the core
+//! only.
 
 pub mod wire;
 
