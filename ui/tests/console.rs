@@ -480,6 +480,39 @@ async fn confirmed_commands_must_be_armed_and_held() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crafted_message_overriding_a_buttons_fixed_field_is_refused() {
+    let s = setup().await;
+    let mut d = driver(&s.bus);
+    let mut ana = connect(&s, "ana", "ana-password").await;
+    open(&mut ana, "pilot").await;
+    send(&mut ana, json!({"type": "lease", "action": "take"})).await;
+    next_where(&mut ana, "lease", |v| v["holder"] == "ana").await;
+    // armed and held as the start button is, but with the mission's action made up by the page
+    send(
+        &mut ana,
+        json!({"type": "arm", "layout": "pilot", "command": "start"}),
+    )
+    .await;
+    let arm = next(&mut ana, "armed").await["arm"].clone();
+    tokio::time::sleep(Duration::from_millis(350)).await;
+    refused_with(
+        &mut ana,
+        json!({"type": "send", "layout": "pilot", "command": "start", "confirmed": arm,
+               "fields": {"action": "abort"}}),
+        "field `action` is set by the layout's controls, and none of them sends \"abort\"",
+    )
+    .await;
+    let refusal = next_where(&mut ana, "command", |c| c["state"] == "refused").await;
+    assert_eq!(refusal["command"], "start");
+    assert!(
+        received(&mut d, Duration::from_millis(300))
+            .await
+            .is_empty(),
+        "the vehicle receives nothing"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dead_man_command_goes_neutral_once_when_its_re_sends_stop() {
     let s = setup().await;
     let mut d = driver(&s.bus);

@@ -68,6 +68,14 @@ pub enum CommandError {
     /// The fields do not fit the command (the reason from [`CommandDecl::build`]).
     #[error("{0}")]
     Fields(String),
+    /// A value no control of the layout sends, in a field its buttons or keys fix.
+    #[error("field `{field}` is set by the layout's controls, and none of them sends {value}")]
+    NotOffered {
+        /// The field.
+        field: String,
+        /// The value the page proposed.
+        value: String,
+    },
     /// A dead-man re-send of a command without a rate.
     #[error("`{0}` is not a dead-man command (no rate)")]
     NotDeadMan(String),
@@ -229,6 +237,34 @@ impl Hub {
             })
     }
 
+    /// Refuses a value the layout's controls would never send (a page that fixes a button's
+    /// field to something else): what a command carries is the pilot's choice or the layout's.
+    fn offered(client: &Client, decl: &CommandDecl, set: &DataMap) -> Result<(), CommandError> {
+        let Some(layout) = &client.layout else {
+            return Ok(());
+        };
+        let offers = layout.offers(&decl.name);
+        for (field, value) in set.iter() {
+            let fitted = decl.fit(field, value).map_err(CommandError::Fields)?;
+            let same = |fixed: &seabus_medium::Value, v: &seabus_medium::Value| {
+                decl.fit(field, fixed).is_ok_and(|f| &f == v)
+            };
+            if !offers.allows(field, &fitted, same) {
+                tracing::warn!(
+                    component = "console",
+                    user = %client.session.user,
+                    command = %decl.name,
+                    "refused `{field}` = {value}: no control of the layout sends it"
+                );
+                return Err(CommandError::NotOffered {
+                    field: field.to_string(),
+                    value: value.to_string(),
+                });
+            }
+        }
+        Ok(())
+    }
+
     /// What stops `session` from sending `decl` now.
     fn allowed(&self, session: &Session, decl: &CommandDecl) -> Result<(), CommandError> {
         let role = decl.role.as_deref().unwrap_or(&self.settings.lease_role);
@@ -296,6 +332,7 @@ impl Hub {
     ) -> Result<(Topic, DataMap), CommandError> {
         let decl = Hub::decl(client, layout, command)?;
         self.allowed(&client.session, decl)?;
+        Hub::offered(client, decl, set)?;
         let hold = match decl.confirm {
             Confirm::None => None,
             Confirm::Dialog => Some(Duration::ZERO),
@@ -534,6 +571,66 @@ mod tests {
         let again = send(&f, &mut ana, "stop", DataMap::new(), Some(arm)).await;
         assert_eq!(again, Err(CommandError::NotArmed));
         assert!(waiting(&mut driver).is_empty());
+    }
+
+    #[tokio::test]
+    async fn a_value_no_control_sends_is_refused_and_nothing_reaches_the_vehicle() {
+        let f = Fixture::new();
+        let mut driver = f.driver();
+        let mut ana = f.pilot("ana").await;
+        // the stop button sends the declared `action=stop`; a page that fixes `abort` is refused
+        let arm = f.hub.arm(&ana, "pilot", "stop").unwrap();
+        let forged = send(
+            &f,
+            &mut ana,
+            "stop",
+            DataMap::new().with("action", "abort"),
+            Some(arm),
+        )
+        .await;
+        assert_eq!(
+            forged.unwrap_err().to_string(),
+            "field `action` is set by the layout's controls, and none of them sends \"abort\""
+        );
+        assert!(
+            waiting(&mut driver).is_empty(),
+            "nothing reaches the vehicle"
+        );
+        // the camera's note has no control on this layout; its `on` has a toggle
+        let note = send(
+            &f,
+            &mut ana,
+            "camera",
+            DataMap::new().with("note", "y"),
+            None,
+        )
+        .await;
+        assert!(
+            matches!(note, Err(CommandError::NotOffered { ref field, .. }) if field == "note"),
+            "{note:?}"
+        );
+        send(
+            &f,
+            &mut ana,
+            "camera",
+            DataMap::new().with("on", true),
+            None,
+        )
+        .await
+        .unwrap();
+        let sent = waiting(&mut driver);
+        assert_eq!(sent.len(), 1);
+        assert_eq!(field(&sent[0], "on"), Some(Value::from(true)));
+        assert_eq!(field(&sent[0], "note"), Some(Value::from("x")));
+        // the refusals are in everyone's history
+        let refused: Vec<String> = f.hub.history()["commands"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|c| c["state"] == "refused")
+            .map(|c| c["command"].as_str().unwrap().to_string())
+            .collect();
+        assert_eq!(refused, ["stop", "camera"]);
     }
 
     #[tokio::test(start_paused = true)]

@@ -19,6 +19,7 @@ pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot obser
   <command name="anchor" topic="cmd.anchor" fields="drop=true" role="captain"/>
   <column>
     <readout bind="nav.depth.depth"/>
+    <slider command="course.heading" min="0" max="360"/>
     <slider command="course.speed" min="0" max="3"/>
     <button command="start"/>
     <button command="stop"/>

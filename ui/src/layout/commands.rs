@@ -34,7 +34,7 @@ impl CommandDecl {
     }
 
     /// `value` for field `name`, converted to the field's type and within its range.
-    pub(super) fn fit(&self, name: &str, value: &Value) -> Result<Value, String> {
+    pub fn fit(&self, name: &str, value: &Value) -> Result<Value, String> {
         let Some(default) = self.fields.get(name) else {
             return Err(format!(
                 "command `{}` has no field `{name}`; fields: {}",

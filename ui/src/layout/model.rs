@@ -1,11 +1,11 @@
 //! The layout model: a parsed layout, its commands, widget tree and input bindings, and what it
 //! displays ([`Layout::bindings`]) and to whom ([`Layout::visible_to`]).
 
-use super::values::list;
+use super::values::{field_list, list};
 use seabus_medium::parse::parse_duration;
 use seabus_medium::xml::Pos;
 use seabus_medium::{DataMap, Topic, Value};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 /// How old a displayed value may be before it is shown as stale, when a widget gives no `fresh`.
@@ -269,6 +269,82 @@ impl Layout {
                 });
             }
         }
+        out
+    }
+}
+
+/// What a layout's controls let a page put in one command: the fields some control sets to a value
+/// the user chooses, and for the others the values its buttons and keys fix. A value no control
+/// could send is not the user's choice: the server refuses it.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Offers {
+    /// Fields a control sets freely: sliders, numbers, texts, toggles, gamepad axes, stepping keys.
+    pub free: BTreeSet<String>,
+    /// Fields buttons and keys set to values of their own, with those values.
+    pub fixed: BTreeMap<String, Vec<Value>>,
+}
+
+impl Offers {
+    /// Whether some control of the layout sends `value` in `field`; `same` compares two values of
+    /// the field as the command takes them.
+    pub fn allows(
+        &self,
+        field: &str,
+        value: &Value,
+        same: impl Fn(&Value, &Value) -> bool,
+    ) -> bool {
+        self.free.contains(field)
+            || self
+                .fixed
+                .get(field)
+                .is_some_and(|vs| vs.iter().any(|v| same(v, value)))
+    }
+}
+
+impl Layout {
+    /// What the layout's controls let a page put in command `name` (see [`Offers`]).
+    pub fn offers(&self, name: &str) -> Offers {
+        let mut out = Offers::default();
+        let mut fix =
+            |field: &str, value: Value| out.fixed.entry(field.to_string()).or_default().push(value);
+        let mut free = BTreeSet::new();
+        for node in self.root.walk() {
+            let Some((command, field)) = node.command() else {
+                continue;
+            };
+            if command != name {
+                continue;
+            }
+            match (node.kind.as_str(), field) {
+                ("button", _) => {
+                    let set = node
+                        .attrs
+                        .get("set")
+                        .and_then(|s| field_list(s).ok())
+                        .unwrap_or_default();
+                    for (f, v) in set.iter() {
+                        fix(f, v.clone());
+                    }
+                }
+                (_, Some(f)) => {
+                    free.insert(f.to_string());
+                }
+                _ => {}
+            }
+        }
+        for k in self.keys.iter().filter(|k| k.command == name) {
+            match (&k.field, &k.value, k.step) {
+                (Some(f), Some(v), _) => fix(f, v.clone()),
+                (Some(f), None, Some(_)) => {
+                    free.insert(f.clone());
+                }
+                _ => {}
+            }
+        }
+        for a in self.axes.iter().filter(|a| a.command == name) {
+            free.insert(a.field.clone());
+        }
+        out.free = free;
         out
     }
 }
