@@ -412,6 +412,63 @@ async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn escape_stops_the_mission_at_once_without_a_dialog() {
+    let sys = start(&[repo("configs/console/pilot.xml")]);
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    take_control(&c, "pilot").await;
+    until(
+        &c,
+        Duration::from_secs(20),
+        "a frontseat that takes commands",
+        "const l = document.querySelector('[data-kind=log]'); return l && /control=(accepting|in-control)/.test(l.innerText);",
+    )
+    .await;
+    while sys.spy.try_recv().is_ok() {}
+    let pressed = Instant::now();
+    c.find(Locator::Css("body"))
+        .await
+        .expect("the page")
+        .send_keys("\u{E00C}")
+        .await
+        .expect("Escape pressed");
+    let mut seen = Vec::new();
+    let stop = wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(5),
+        "cmd.mission",
+        |v| v["topic"] == "cmd.mission",
+    );
+    let took = pressed.elapsed();
+    assert_eq!(stop["payload"]["action"], "stop", "{stop}");
+    assert!(took < Duration::from_millis(500), "stop took {took:?}");
+    assert_eq!(
+        js(
+            &c,
+            "return document.querySelector('dialog[open]') === null;"
+        )
+        .await,
+        json!(true),
+        "no dialog was asked"
+    );
+    // the simulated frontseat takes it: the driver acknowledges the stop
+    let ack = wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(10),
+        "the stop's acknowledgement",
+        |v| {
+            v["topic"] == "cmd.status"
+                && v["payload"]["request_seq"] == stop["seq"]
+                && v["payload"]["state"] != "pending"
+        },
+    );
+    assert_eq!(ack["payload"]["state"], "acknowledged", "{ack}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
     let sys = start(&[
         repo("configs/console/pilot.xml"),

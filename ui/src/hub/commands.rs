@@ -238,7 +238,8 @@ impl Hub {
     }
 
     /// Refuses a value the layout's controls would never send (a page that fixes a button's
-    /// field to something else): what a command carries is the pilot's choice or the layout's.
+    /// field to something else): what a command carries is the pilot's choice or the layout's —
+    /// a control's, or the value the command itself declares.
     fn offered(client: &Client, decl: &CommandDecl, set: &DataMap) -> Result<(), CommandError> {
         let Some(layout) = &client.layout else {
             return Ok(());
@@ -249,7 +250,8 @@ impl Hub {
             let same = |fixed: &seabus_medium::Value, v: &seabus_medium::Value| {
                 decl.fit(field, fixed).is_ok_and(|f| &f == v)
             };
-            if !offers.allows(field, &fitted, same) {
+            let declared = decl.fields.get(field).is_some_and(|d| same(d, &fitted));
+            if !declared && !offers.allows(field, &fitted, same) {
                 tracing::warn!(
                     component = "console",
                     user = %client.session.user,
