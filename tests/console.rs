@@ -222,10 +222,16 @@ async fn until(c: &Client, limit: Duration, what: &str, script: &str) -> Json {
         if truthy {
             return v;
         }
-        assert!(
-            Instant::now() < deadline,
-            "{what}: not within {limit:?} (last: {v})"
-        );
+        if Instant::now() >= deadline {
+            let blocked = js(
+                c,
+                "return window.seabusConsole ? window.seabusConsole.policyViolations() : [location.href, document.body.className, document.title];",
+            )
+            .await;
+            panic!(
+                "{what}: not within {limit:?} (last: {v}; blocked by the content policy: {blocked})"
+            );
+        }
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
@@ -402,6 +408,11 @@ async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
     .await;
     assert!(history.contains("acknowledged"), "{history}");
     screenshot(&c, "pilot.png").await;
+    assert_eq!(
+        js(&c, "return window.seabusConsole.policyViolations();").await,
+        json!([]),
+        "the content policy blocked part of the page"
+    );
     let log = std::fs::read_to_string(sys.dir.join("commands.csv")).expect("the command log");
     assert!(
         log.lines()
@@ -491,6 +502,30 @@ async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
     )
     .await;
     assert_eq!(controls, json!(0), "an observer sees no command controls");
+    // everything is drawn under the page's content policy: nothing blocked, and the plot's
+    // legend keeps its colours (set through the style object, not a style attribute)
+    until(
+        &c,
+        Duration::from_secs(10),
+        "a plot legend",
+        "return document.querySelector('[data-kind=plot] .sw');",
+    )
+    .await;
+    assert_eq!(
+        js(&c, "return window.seabusConsole.policyViolations();").await,
+        json!([]),
+        "the content policy blocked part of the page"
+    );
+    let swatch = js(
+        &c,
+        "return getComputedStyle(document.querySelector('[data-kind=plot] .sw')).backgroundColor;",
+    )
+    .await;
+    assert_ne!(
+        swatch,
+        json!("rgba(0, 0, 0, 0)"),
+        "the legend lost its colour"
+    );
     // the health table: each component and the vehicle's severity, live. Both lines are up once
     // the serial media have opened their pseudo-terminals (until then the frontseat may show
     // OFFLINE): then both components are HEALTHY and the severity is NONE.

@@ -7,6 +7,13 @@ import { createDesigner } from './designer.js';
 const HOLD_MARGIN_MS = 100; // a held command is sent a little after its hold time, never before
 const ARM_TIMEOUT_MS = 5000;
 
+// what the page's content policy blocked (an inline style or script, another origin): counted, so
+// that a page the policy breaks is seen, not silently half-drawn
+const policyViolations = [];
+document.addEventListener('securitypolicyviolation', (e) => {
+  policyViolations.push(`${e.violatedDirective}: ${e.blockedURI || 'inline'}`);
+});
+
 if (document.body.classList.contains('login-page')) loginPage();
 else consolePage();
 
@@ -656,6 +663,7 @@ function consolePage() {
       };
     },
     sent: () => S.sent.slice(),
+    policyViolations: () => policyViolations.slice(),
   };
 
   connect();

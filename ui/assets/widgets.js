@@ -18,6 +18,8 @@ export function el(tag, attrs, ...children) {
       if (v === undefined || v === null || v === false) continue;
       if (k === 'class') e.className = v;
       else if (k === 'text') e.textContent = v;
+      // through the object model: the page's policy allows no style attributes
+      else if (k === 'style') e.style.cssText = v;
       else if (k.startsWith('on') && typeof v === 'function') e.addEventListener(k.slice(2), v);
       else e.setAttribute(k, v === true ? '' : String(v));
     }

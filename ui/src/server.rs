@@ -33,6 +33,49 @@ pub const SILENCE_LIMIT: Duration = Duration::from_secs(20);
 /// The largest message a page may send (a layout saved from the designer).
 pub const MAX_MESSAGE: usize = 1 << 20;
 
+/// What every answer of the console says of itself to the browser: only the console's own scripts,
+/// styles and connections run on its pages (no inline script or style; the WebSocket only back to
+/// the host the page came from, which `connect-src` names), no other site may frame them, no
+/// address leaks to another site (the same origin still gets it: log-in checks the Origin), and no
+/// type is guessed.
+pub const SECURITY_HEADERS: [(&str, &str); 4] = [
+    (
+        "content-security-policy",
+        "default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; \
+         frame-ancestors 'none'; base-uri 'none'; form-action 'self'; connect-src 'self'",
+    ),
+    ("x-frame-options", "DENY"),
+    ("referrer-policy", "same-origin"),
+    ("x-content-type-options", "nosniff"),
+];
+
+/// The host a request names, when it is only a host name or address and a port.
+fn plain_host(headers: &HeaderMap) -> Option<&str> {
+    let host = headers.get(header::HOST)?.to_str().ok()?;
+    let plain = !host.is_empty()
+        && host.len() <= 255
+        && host
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b".-:[]".contains(&b));
+    plain.then_some(host)
+}
+
+/// Adds [`SECURITY_HEADERS`] to every answer, the page's own WebSocket address in `connect-src`.
+async fn secured(request: axum::extract::Request, next: axum::middleware::Next) -> Response {
+    let socket = plain_host(request.headers()).map(|h| format!(" ws://{h} wss://{h}"));
+    let mut r = next.run(request).await;
+    for (name, value) in SECURITY_HEADERS {
+        let value = match (&socket, name) {
+            (Some(ws), "content-security-policy") => HeaderValue::from_str(&format!("{value}{ws}"))
+                .unwrap_or(HeaderValue::from_static(value)),
+            _ => HeaderValue::from_static(value),
+        };
+        r.headers_mut()
+            .insert(header::HeaderName::from_static(name), value);
+    }
+    r
+}
+
 /// The console's routes.
 pub fn router(hub: Arc<Hub>) -> Router {
     Router::new()
@@ -41,6 +84,7 @@ pub fn router(hub: Arc<Hub>) -> Router {
         .route("/logout", get(logout))
         .route("/assets/{file}", get(asset))
         .route("/ws", get(ws))
+        .layer(axum::middleware::from_fn(secured))
         .with_state(hub)
 }
 

@@ -274,6 +274,39 @@ async fn log_in_needs_the_password_and_is_rate_limited() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_answer_carries_the_security_headers() {
+    let s = setup().await;
+    let (_, cookie, _) = login(s.addr, "ana", "ana-password").await;
+    let cookie = cookie.expect("a session");
+    for (path, with) in [
+        ("/login", None),
+        ("/", Some(&cookie)),
+        ("/", None),
+        ("/assets/console.js", None),
+        ("/assets/nothing.js", None),
+    ] {
+        let cookie = with.map_or(String::new(), |c| format!("Cookie: {c}\r\n"));
+        let (status, text) = http(
+            s.addr,
+            format!("GET {path} HTTP/1.1\r\nHost: x\r\n{cookie}Connection: close\r\n\r\n"),
+        )
+        .await;
+        let head = text.split("\r\n\r\n").next().unwrap().to_ascii_lowercase();
+        for (name, value) in seabus_ui::server::SECURITY_HEADERS {
+            assert!(
+                head.contains(&format!("{name}: {}", value.to_ascii_lowercase())),
+                "{path} ({status}) lacks {name}:\n{head}"
+            );
+        }
+        assert!(
+            head.contains("connect-src 'self' ws://x wss://x\r\n"),
+            "the page's own WebSocket: {head}"
+        );
+        assert!(!head.contains("unsafe-inline"), "{head}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_observer_cannot_command_even_with_a_forged_message() {
     let s = setup().await;
     let mut d = driver(&s.bus);
