@@ -340,8 +340,7 @@ impl Encode for SlcanEncoder {
     }
 
     fn encode(&self, msg: &Message, line: &LinkSender<Bytes>) -> Result<Bytes, SendError> {
-        let frame = CanFrame::from_message(msg.topic.as_str(), &msg.payload)
-            .map_err(|reason| line.error(reason))?;
+        let frame = frame_to_send(line.medium(), msg)?;
         slcan::encode_frame(&frame, None)
             .map(Bytes::from)
             .map_err(|reason| line.error(reason))

@@ -6,8 +6,6 @@
 //! anything is opened ([`crate::Schemes::check`]), and an opened medium reports the same
 //! ([`crate::Medium::capabilities`]).
 
-use std::fmt;
-
 /// How a wire delimits what it carries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Framing {
@@ -23,18 +21,6 @@ pub enum Framing {
     Stream,
 }
 
-impl fmt::Display for Framing {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Framing::Memory => "memory",
-            Framing::Datagram => "datagram",
-            Framing::Line => "line",
-            Framing::Frame => "frame",
-            Framing::Stream => "stream",
-        })
-    }
-}
-
 /// What payloads a wire carries as they are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Carries {
@@ -44,16 +30,6 @@ pub enum Carries {
     DataMap,
     /// Bytes (or text) only; a datamap cannot be sent.
     Bytes,
-}
-
-impl fmt::Display for Carries {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(match self {
-            Carries::Any => "bytes, datamaps and XML",
-            Carries::DataMap => "datamaps",
-            Carries::Bytes => "bytes",
-        })
-    }
 }
 
 /// What a transport can do.
@@ -101,29 +77,5 @@ impl Capabilities {
     /// Whether the wire's own message model is `model` (see [`Capabilities::native`]).
     pub fn is_native(&self, model: &str) -> bool {
         self.native == Some(model)
-    }
-}
-
-impl fmt::Display for Capabilities {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}, carries {}", self.framing, self.carries)?;
-        if let Some(max) = self.max_frame {
-            write!(f, ", at most {max} bytes")?;
-        }
-        f.write_str(if self.provenance {
-            ", provenance"
-        } else {
-            ", no provenance"
-        })?;
-        if self.hears_own {
-            f.write_str(", hears its own sends")?;
-        }
-        if self.link_state {
-            f.write_str(", reports its link")?;
-        }
-        if let Some(n) = self.native {
-            write!(f, ", {n} messages")?;
-        }
-        Ok(())
     }
 }

@@ -159,12 +159,12 @@ impl<F: Send> LinkSender<F> {
     pub async fn flush(&self) {
         let target = self.shared.queued.load(Ordering::Acquire);
         loop {
+            // made before the check: a wake-up between the check and the wait is not lost
             let progress = self.shared.progress.notified();
             if !self.is_up() || self.shared.done.load(Ordering::Acquire) >= target {
                 return;
             }
-            // a bound on the wait, in case a wake-up races the check
-            let _ = tokio::time::timeout(Duration::from_millis(50), progress).await;
+            progress.await;
         }
     }
 
@@ -189,11 +189,6 @@ impl<F: Send> LinkSender<F> {
     /// The medium's name.
     pub fn medium(&self) -> &str {
         &self.medium
-    }
-
-    /// What the link reaches.
-    pub fn peer(&self) -> &str {
-        &self.peer
     }
 }
 

@@ -48,12 +48,6 @@ impl WireError {
     pub fn detail(&self) -> &str {
         &self.detail
     }
-
-    /// The same error, `by` bytes further into a larger input.
-    pub fn shifted(mut self, by: usize) -> WireError {
-        self.offset = self.offset.map(|o| o + by);
-        self
-    }
 }
 
 impl fmt::Display for WireError {
@@ -76,7 +70,6 @@ mod tests {
         let e = WireError::at(7, "bad-magic", "not a seabus datagram");
         assert_eq!(e.to_string(), "byte 7: not a seabus datagram");
         assert_eq!((e.kind(), e.offset()), ("bad-magic", Some(7)));
-        assert_eq!(e.shifted(5).offset(), Some(12));
         let e = WireError::new("slcan-bad-hex", "`G` is not a hex digit");
         assert_eq!(e.to_string(), "`G` is not a hex digit");
         assert_eq!(e.offset(), None);

@@ -241,10 +241,9 @@ impl Hub {
     /// field to something else): what a command carries is the pilot's choice or the layout's —
     /// a control's, or the value the command itself declares.
     fn offered(client: &Client, decl: &CommandDecl, set: &DataMap) -> Result<(), CommandError> {
-        let Some(layout) = &client.layout else {
+        let Some(offers) = client.offers.get(&decl.name) else {
             return Ok(());
         };
-        let offers = layout.offers(&decl.name);
         for (field, value) in set.iter() {
             let fitted = decl.fit(field, value).map_err(CommandError::Fields)?;
             let same = |fixed: &seabus_medium::Value, v: &seabus_medium::Value| {

@@ -23,7 +23,7 @@ pub use lease::{CONTROL_TOPIC, LEASE_GRACE, LeaseError};
 pub use save::SaveError;
 
 use crate::auth::{Limiter, Session, Sessions};
-use crate::layout::Layout;
+use crate::layout::{Layout, Offers};
 use crate::users::Users;
 use commands::{Arms, Drives};
 use history::{Ack, History};
@@ -113,6 +113,8 @@ pub struct Client {
     pub layout: Option<Layout>,
     /// The fields of each command as last set.
     values: HashMap<String, DataMap>,
+    /// What the layout's controls let a page put in each command (made when it is opened).
+    offers: HashMap<String, Offers>,
     /// What the layout binds: topic patterns and the fields wanted (`None`: all).
     interest: Vec<(Pattern, Option<Vec<String>>)>,
     /// The data version last sent.
@@ -166,6 +168,7 @@ impl Hub {
             session,
             layout: None,
             values: HashMap::new(),
+            offers: HashMap::new(),
             interest: Vec::new(),
             seen: 0,
         }

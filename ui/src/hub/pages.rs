@@ -131,6 +131,11 @@ impl Hub {
                 .iter()
                 .map(|(n, c)| (n.clone(), c.fields.clone()))
                 .collect();
+            client.offers = layout
+                .commands
+                .keys()
+                .map(|n| (n.clone(), layout.offers(n)))
+                .collect();
             client.interest = interest;
             client.seen = 0;
             client.layout = Some(layout);
