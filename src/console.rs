@@ -33,31 +33,22 @@ const DEMO_USERS: [(&str, &[&str]); 4] = [
     ("observer", &["observer"]),
 ];
 
-/// Starts every console of `spec` on the runtime's media. In the demo the consoles get the
-/// demo's users, with fresh passwords printed; elsewhere a console needs its users file.
+/// Starts the consoles [`console::check`] made ready, on the runtime's media. The demo's take any
+/// free port when their usual one is taken.
 pub async fn start(
+    ready: Vec<console::Ready>,
     spec: &SystemSpec,
     registry: &Registry,
     runtime: &Runtime,
     demo: bool,
 ) -> Result<Vec<Console>, String> {
-    let specs = console::specs(spec).map_err(|e| e.to_string())?;
     let mut out = Vec::new();
-    for mut cs in specs {
-        let users = match (demo, &cs.users) {
-            (true, _) => demo_users()?,
-            (false, Some(path)) => Users::load(path).map_err(|e| e.to_string())?,
-            (false, None) => {
-                return Err(cs
-                    .element
-                    .error(
-                        "a console needs `users`, a users file with password hashes (`seabus user \
-                         add FILE NAME --roles pilot` writes one); only `seabus demo` makes its own \
-                         users",
-                    )
-                    .to_string());
-            }
-        };
+    for console::Ready {
+        spec: mut cs,
+        users,
+        ..
+    } in ready
+    {
         let Some(medium) = runtime.medium(&cs.medium) else {
             return Err(cs
                 .element
@@ -70,7 +61,6 @@ pub async fn start(
                 .map(|p| p.pattern)
                 .collect();
         let console = match Console::start(&cs, users.clone(), medium, produced.clone()).await {
-            // the demo takes any free port when its usual one is taken
             Err(e) if demo => {
                 eprintln!("  {e}; the console takes another port");
                 cs.settings.listen.set_port(0);
@@ -84,7 +74,7 @@ pub async fn start(
 }
 
 /// The demo's users with fresh passwords, printed.
-fn demo_users() -> Result<Users, String> {
+pub fn demo_users() -> Result<Users, String> {
     let passwords: Vec<String> = DEMO_USERS
         .iter()
         .map(|_| users::random_password())

@@ -373,18 +373,36 @@ fn seconds(value: Option<f64>) -> Result<Option<Duration>, ExitCode> {
 }
 
 /// Runs a system until Ctrl-C, SIGTERM or `duration`; `demo_dir` is the demo's own directory
-/// (its consoles get the demo's users; it is removed at the end).
+/// (its consoles get the demo's users; it is removed at the end). Nothing starts unless the system
+/// passes the same validation as `seabus check`; its warnings are logged.
 async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>) -> ExitCode {
     let duration = match seconds(duration) {
         Ok(d) => d,
         Err(code) => return code,
     };
     let registry = registry();
-    let runtime = match Runtime::start(&spec, &registry, Catalogue::built_in()).await {
+    let catalogue = Catalogue::built_in();
+    let given = match demo_dir.as_ref().map(|_| console::demo_users()).transpose() {
+        Ok(users) => users,
+        Err(e) => {
+            eprintln!("seabus demo: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let checked = match seabus_ui::console::check(&spec, &registry, &catalogue, given.as_ref()) {
+        Ok(c) => c,
+        Err(e) => return file_error(&e),
+    };
+    // the system's own warnings are logged by the runtime as it starts
+    for w in &checked.warnings {
+        tracing::warn!("{w}");
+    }
+    let runtime = match Runtime::start(&spec, &registry, catalogue).await {
         Ok(r) => r,
         Err(e) => return file_error(&e),
     };
-    let consoles = match console::start(&spec, &registry, &runtime, demo_dir.is_some()).await {
+    let demo = demo_dir.is_some();
+    let consoles = match console::start(checked.consoles, &spec, &registry, &runtime, demo).await {
         Ok(c) => c,
         Err(e) => {
             eprintln!("{e}");
@@ -425,23 +443,16 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
     ExitCode::SUCCESS
 }
 
+/// `seabus check FILE`: the validation `seabus run` makes before it starts anything.
 fn check(file: &std::path::Path) -> ExitCode {
     let spec = match SystemSpec::load(file) {
         Ok(s) => s,
         Err(e) => return file_error(&e),
     };
-    // a console's layouts must read (`seabus layout check` compares them with the system)
-    let checked = system::check(&spec, &registry(), &Catalogue::built_in()).and_then(|report| {
-        for console in seabus_ui::console::specs(&spec)? {
-            for layout in &console.settings.layouts {
-                seabus_ui::Layout::load(layout, &Default::default())?;
-            }
-        }
-        Ok(report)
-    });
+    let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in(), None);
     match checked {
         Err(e) => file_error(&e),
-        Ok(report) if report.warnings.is_empty() => {
+        Ok(c) if c.report.warnings.is_empty() && c.warnings.is_empty() => {
             println!(
                 "{}: valid ({} media, {} modules, {} bridges)",
                 spec.file,
@@ -451,8 +462,8 @@ fn check(file: &std::path::Path) -> ExitCode {
             );
             ExitCode::SUCCESS
         }
-        Ok(report) => {
-            for w in &report.warnings {
+        Ok(c) => {
+            for w in c.report.warnings.iter().chain(&c.warnings) {
                 eprintln!("{w}");
             }
             ExitCode::from(1)
@@ -623,15 +634,22 @@ mod tests {
 
     #[test]
     fn the_demo_system_is_valid() {
-        // as `seabus demo` runs it: from its own directory, with its built-in files
+        // as `seabus demo` runs it: from its own directory, with its built-in files and users
         let (dir, file) = console::write_demo(DEMO).unwrap();
         let spec = SystemSpec::load(&file).unwrap();
-        let report = system::check(&spec, &registry(), &Catalogue::built_in()).unwrap();
-        let consoles = seabus_ui::console::specs(&spec).unwrap();
-        for layout in &consoles[0].settings.layouts {
-            seabus_ui::Layout::load(layout, &Default::default()).unwrap();
-        }
+        let users =
+            seabus_ui::users::Users::with_passwords(&[("pilot", &["pilot"], "pw")]).unwrap();
+        let checked =
+            seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in(), Some(&users));
         std::fs::remove_dir_all(dir).unwrap();
-        assert!(report.warnings.is_empty(), "{:?}", report.warnings);
+        let checked = checked.unwrap();
+        assert!(
+            checked.report.warnings.is_empty(),
+            "{:?}",
+            checked.report.warnings
+        );
+        assert!(checked.warnings.is_empty(), "{:?}", checked.warnings);
+        assert_eq!(checked.consoles.len(), 1);
+        assert_eq!(checked.consoles[0].layouts.len(), 2);
     }
 }

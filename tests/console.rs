@@ -24,6 +24,9 @@ struct System {
     dir: PathBuf,
     _run: Running,
     url: String,
+    /// The loopback network the system's commands go out on (and `test.**` comes in on, when a
+    /// test's modules bridge it in).
+    net: String,
     /// The bus as `seabus spy` shows it (commands and statuses).
     spy: mpsc::Receiver<Json>,
     _spy: Running,
@@ -132,6 +135,7 @@ fn start_with(modules: &str, layouts: &[PathBuf]) -> System {
         dir: d,
         _run: run,
         url,
+        net,
         spy,
         _spy: spy_run,
     }
@@ -349,7 +353,7 @@ async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
     )
     .await;
     let depth_id = depth_id.as_str().expect("a readout id").to_string();
-    let first = until(
+    until(
         &c,
         Duration::from_secs(15),
         "a live heading",
@@ -358,21 +362,18 @@ async fn a_pilot_sees_the_vehicle_live_and_a_slider_command_is_acknowledged() {
     .await;
     assert!(js(&c, &widget_text(&depth_id)).await.is_string());
     // values keep changing (the simulated vehicle moves)
+    let readouts = "return [...document.querySelectorAll('[data-kind=readout]')].map(r => r.innerText).join(' | ');";
+    let first = js(&c, readouts).await;
     let mut changed = false;
     for _ in 0..50 {
         tokio::time::sleep(Duration::from_millis(200)).await;
-        let now = js(
-            &c,
-            "return document.querySelectorAll('[data-kind=readout]')[0].innerText;",
-        )
-        .await;
+        let now = js(&c, readouts).await;
         if now != first {
             changed = true;
             break;
         }
     }
-    let speed = js(&c, "return [...document.querySelectorAll('[data-kind=readout]')].map(r => r.innerText).join(' | ');").await;
-    assert!(changed, "the readouts never changed: {speed}");
+    assert!(changed, "the readouts never changed: {first}");
 
     take_control(&c, "pilot").await;
     // the driver sends commands once the frontseat takes them (it refuses them while offline)
@@ -536,9 +537,9 @@ async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
         "const h = document.querySelector('[data-kind=health]');
          if (!h) return null;
          const sev = h.querySelector('[data-testid=severity]');
-         const state = (n) => { const r = h.querySelector(`tr[data-component=\"${n}\"]`); return r ? r.lastElementChild.textContent : null; };
-         return {severity: sev && sev.textContent, Frontseat: state('Frontseat'), Sensors: state('Sensors')};",
-        json!({"severity": "severity NONE", "Frontseat": "HEALTHY", "Sensors": "HEALTHY"}),
+         const state = (n) => { const r = h.querySelector(`tr[data-component=\"${n}\"]`); return r ? [r.children[4].textContent, r.children[5].textContent] : null; };
+         return {severity: sev && sev.textContent, Frontseat: state('Frontseat'), Sensors: state('Sensors'), Navigation: state('Navigation'), VehicleState: state('VehicleState')};",
+        json!({"severity": "severity NONE", "Frontseat": ["HEALTHY", ""], "Sensors": ["HEALTHY", ""], "Navigation": ["HEALTHY", ""], "VehicleState": ["HEALTHY", ""]}),
     )
     .await;
     screenshot(&c, "observer.png").await;
@@ -639,8 +640,13 @@ async fn a_second_pilot_cannot_command_until_the_first_releases_control() {
         .expect("clicked");
     take_control(&b, "copilot").await;
     slide(&b, "depth", 4.5).await;
+    // the course, then the console keeping it (once a second) with the same values
     let got = commands_on(&sys.spy, "cmd.course", Duration::from_secs(3));
-    assert_eq!(got.len(), 1, "{got:?}");
+    assert!((2..=5).contains(&got.len()), "{got:?}");
+    assert!(
+        got.iter().all(|c| c["payload"] == got[0]["payload"]),
+        "{got:?}"
+    );
     assert_eq!(got[0]["payload"]["depth"].as_f64(), Some(4.5));
     a.close().await.expect("closed");
     b.close().await.expect("closed");
@@ -725,11 +731,8 @@ async fn a_gamepad_that_freezes_mid_command_sends_neutral_once_then_nothing() {
 async fn a_bad_layout_shows_its_line_and_column_and_log_ins_are_limited() {
     let bad_dir = tempfile::tempdir().expect("dir");
     let bad = bad_dir.path().join("bad.xml");
-    std::fs::write(
-        &bad,
-        "<layout name=\"bad\" roles=\"pilot\">\n  <column>\n    <readout bind=\"nav.depth.depth\" precision=\"two\"/>\n  </column>\n</layout>\n",
-    )
-    .expect("written");
+    let bad_text = "<layout name=\"bad\" roles=\"pilot\">\n  <column>\n    <readout bind=\"nav.depth.depth\" precision=\"two\"/>\n  </column>\n</layout>\n";
+    std::fs::write(&bad, bad_text).expect("written");
     // the check command names the place …
     let out = seabus()
         .args(["layout", "check"])
@@ -747,8 +750,11 @@ async fn a_bad_layout_shows_its_line_and_column_and_log_ins_are_limited() {
         .and_then(|rest| rest.split_once(": "))
         .unwrap_or_else(|| panic!("an error at line 3 of {}: {err}", bad.display()));
     let (col, message) = (col.to_string(), message.to_string());
-    // … and so does the page
+    // … and so does the page, for a layout that breaks while the console runs (`seabus run`
+    // refuses to start with it broken)
+    std::fs::write(&bad, bad_text.replace("\"two\"", "\"2\"")).expect("written");
     let sys = start(std::slice::from_ref(&bad));
+    std::fs::write(&bad, bad_text).expect("written");
     let driver = chromedriver();
     let c = browser(&driver).await;
     log_in(&c, &sys.url, "pilot", "pilot-password").await;
@@ -1002,4 +1008,642 @@ async fn a_layout_loads_before_data_and_shows_missing_producers_and_stale_values
         "the last value stays shown: {stale}"
     );
     c.close().await.expect("closed");
+}
+
+// ------------------------------------------------------------------ plots and readouts
+//
+// Values the test publishes on the system's network (`test.**`, bridged onto the console's bus),
+// read back from what each plot drew (`window.seabusConsole.plot(LABEL)`: lines in canvas
+// pixels, axes) and from the readouts' text.
+
+/// Modules that bring `test.**` from the network onto the console's bus.
+const FEED: &str = r#"
+  <bridge name="feed" media="net bus">
+    <route from="net" to="bus" topics="test.**"/>
+  </bridge>
+"#;
+
+/// A layout of plots, readouts and a track over `test.**`, for the observer.
+const LINES: &str = r#"<layout name="lines" roles="observer">
+  <row>
+    <column>
+      <plot label="Heading" window="60s">
+        <series bind="test.heading.heading" label="Heading" unit="°" angle="true"/>
+      </plot>
+      <plot label="Depth and speed" window="60s">
+        <series bind="test.motion.depth" label="Depth" unit="m"/>
+        <series bind="test.motion.speed" label="Speed" unit="m/s"/>
+      </plot>
+      <grid columns="2">
+        <readout id="heading" bind="test.heading.heading" unit="°" precision="0" angle="true"/>
+        <readout id="armed" bind="test.state.armed" label="Thrusters" true="armed" false="safe"/>
+      </grid>
+    </column>
+    <track position="test.position" trail="600"/>
+  </row>
+</layout>
+"#;
+
+/// The system with [`LINES`], an observer's page on it, and a port that publishes on its network.
+async fn lines_page() -> (
+    System,
+    Driver,
+    Client,
+    seabus_medium::Interface,
+    tempfile::TempDir,
+) {
+    let dir = tempfile::tempdir().expect("dir");
+    let layout = dir.path().join("lines.xml");
+    std::fs::write(&layout, LINES).expect("layout");
+    let sys = start_with(FEED, &[layout]);
+    let net = common::schemes()
+        .open("net", &sys.net, &seabus_medium::Node::new("feeder"))
+        .expect("the network opens");
+    let port = net.attach("feeder");
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "ivo", "observer-password").await;
+    until(
+        &c,
+        Duration::from_secs(15),
+        "the layout",
+        "return document.querySelectorAll('[data-kind=plot]').length === 2
+                && window.seabusConsole.plot('Heading');",
+    )
+    .await;
+    (sys, driver, c, port, dir)
+}
+
+/// Publishes `fields` on `topic` of the network.
+async fn publish(port: &seabus_medium::Interface, topic: &str, fields: seabus_medium::DataMap) {
+    port.send(topic, fields).await.expect("published");
+}
+
+/// What the plot labelled `label` drew.
+async fn drawn(c: &Client, label: &str) -> Json {
+    js(c, &format!("return window.seabusConsole.plot('{label}');")).await
+}
+
+/// The points of each line of a plot's drawing (`[[x, y], …]` each).
+fn lines_of(plot: &Json, series: &str) -> Vec<Vec<(f64, f64)>> {
+    plot["lines"]
+        .as_array()
+        .expect("lines")
+        .iter()
+        .filter(|l| l["series"] == series)
+        .map(|l| {
+            l["points"]
+                .as_array()
+                .expect("points")
+                .iter()
+                .map(|p| (p[0].as_f64().expect("x"), p[1].as_f64().expect("y")))
+                .collect()
+        })
+        .collect()
+}
+
+/// Waits (at most 10 s) until the readout `id` shows `text`; fails with what it shows.
+async fn readout_shows(c: &Client, id: &str, text: &str) {
+    until_eq(
+        c,
+        Duration::from_secs(10),
+        &format!("readout {id}"),
+        &format!(
+            "const v = document.querySelector('[data-widget-id=\"{id}\"] [data-testid=value]');
+             return v && v.textContent;"
+        ),
+        json!(text),
+    )
+    .await;
+}
+
+async fn no_policy_violations(c: &Client) {
+    assert_eq!(
+        js(c, "return window.seabusConsole.policyViolations();").await,
+        json!([]),
+        "the content policy blocked part of the page"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_heading_crossing_north_draws_no_wall_and_readouts_read_true() {
+    let (_sys, _driver, c, port, _dir) = lines_page().await;
+    // a heading turning steadily from 350° through north to 10°, as a compass reports it
+    for i in 0..=20 {
+        let heading = (350.0 + f64::from(i)) % 360.0;
+        publish(
+            &port,
+            "test.heading",
+            seabus_medium::DataMap::new().with("heading", heading),
+        )
+        .await;
+        tokio::time::sleep(Duration::from_millis(150)).await;
+    }
+    let plot = until(
+        &c,
+        Duration::from_secs(10),
+        "all 21 headings drawn",
+        "const p = window.seabusConsole.plot('Heading');
+         return p && p.lines.reduce((n, l) => n + l.points.length, 0) >= 21 && p;",
+    )
+    .await;
+    let lines = lines_of(&plot, "Heading");
+    assert_eq!(lines.len(), 1, "one line, no gap: {plot}");
+    let points = &lines[0];
+    assert_eq!(points.len(), 21, "{plot}");
+    // the heading only rises, so the line only climbs, by about a twentieth of the axis each
+    // step: no segment drops across the plot at north
+    let height = plot["area"]["height"].as_f64().expect("height");
+    for w in points.windows(2) {
+        let dy = w[1].1 - w[0].1;
+        assert!(
+            dy < 0.0 && -dy < 0.15 * height,
+            "a step of {dy} px on a plot {height} px high: {points:?}"
+        );
+    }
+    // one axis, in degrees, numbered within [0, 360) on both sides of north
+    let axes = plot["axes"].as_array().expect("axes");
+    assert_eq!(axes.len(), 1, "{plot}");
+    assert_eq!(axes[0]["unit"], "°");
+    let ticks: Vec<f64> = axes[0]["ticks"]
+        .as_array()
+        .expect("ticks")
+        .iter()
+        .map(|t| t.as_str().and_then(|t| t.parse().ok()).expect("a number"))
+        .collect();
+    assert!(
+        ticks.iter().all(|t| (0.0..360.0).contains(t))
+            && ticks.iter().any(|t| *t >= 340.0)
+            && ticks.iter().any(|t| *t < 20.0),
+        "{ticks:?}"
+    );
+    // the readout of the same heading, at precision 0: within 0–359, never 360
+    readout_shows(&c, "heading", "10").await;
+    for (heading, shown) in [(359.96, "0"), (359.4, "359"), (-0.3, "0"), (725.0, "5")] {
+        publish(
+            &port,
+            "test.heading",
+            seabus_medium::DataMap::new().with("heading", heading),
+        )
+        .await;
+        readout_shows(&c, "heading", shown).await;
+    }
+    // a true/false value shows the readout's words
+    for (armed, shown) in [(false, "safe"), (true, "armed"), (false, "safe")] {
+        publish(
+            &port,
+            "test.state",
+            seabus_medium::DataMap::new().with("armed", armed),
+        )
+        .await;
+        readout_shows(&c, "armed", shown).await;
+    }
+    screenshot(&c, "angles.png").await;
+    no_policy_violations(&c).await;
+    c.close().await.expect("closed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gap_in_the_data_breaks_the_line_and_each_unit_gets_its_own_axis() {
+    let (_sys, _driver, c, port, _dir) = lines_page().await;
+    // depth (m) and speed (m/s) every 200 ms, then nothing for 3 s, then again
+    for burst in 0..2 {
+        if burst == 1 {
+            tokio::time::sleep(Duration::from_secs(3)).await;
+        }
+        for i in 0..8 {
+            let k = f64::from(burst * 8 + i);
+            let fields = seabus_medium::DataMap::new()
+                .with("depth", 10.0 + 0.1 * k)
+                .with("speed", 1.2 - 0.01 * k);
+            publish(&port, "test.motion", fields).await;
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
+    let plot = until(
+        &c,
+        Duration::from_secs(10),
+        "all 16 samples of each series drawn",
+        "const p = window.seabusConsole.plot('Depth and speed');
+         return p && p.lines.reduce((n, l) => n + l.points.length, 0) >= 32 && p;",
+    )
+    .await;
+    for series in ["Depth", "Speed"] {
+        let lines = lines_of(&plot, series);
+        let sizes: Vec<usize> = lines.iter().map(Vec::len).collect();
+        assert_eq!(
+            sizes,
+            [8, 8],
+            "{series}: two lines of 8, split at the gap: {plot}"
+        );
+        // the second starts well right of where the first ends (3 s of a 60 s window)
+        let width = plot["area"]["width"].as_f64().expect("width");
+        let (end, start) = (lines[0][7].0, lines[1][0].0);
+        assert!(start - end > 0.04 * width, "{series}: {end} → {start}");
+    }
+    // two axes: metres on the left, metres per second on the right, each fitting its series
+    let axes: Vec<Json> = plot["axes"]
+        .as_array()
+        .expect("axes")
+        .iter()
+        .map(|a| json!([a["unit"], a["side"]]))
+        .collect();
+    assert_eq!(axes, [json!(["m", "left"]), json!(["m/s", "right"])]);
+    let range = |k: usize| {
+        let a = &plot["axes"][k];
+        (
+            a["min"].as_f64().expect("min"),
+            a["max"].as_f64().expect("max"),
+        )
+    };
+    let ((d0, d1), (s0, s1)) = (range(0), range(1));
+    assert!(d0 > 9.0 && d1 < 12.0, "depth axis {d0}–{d1}");
+    assert!(s0 > 0.9 && s1 < 1.3, "speed axis {s0}–{s1}");
+    screenshot(&c, "gap-and-axes.png").await;
+    no_policy_violations(&c).await;
+    c.close().await.expect("closed");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_backlog_fills_the_plot_and_the_track_at_once() {
+    let (_sys, _driver, c, port, _dir) = lines_page().await;
+    // the last 30 s of heading and position, one sample a second, as the server sends them when
+    // a page opens its layout: handed to the page's own message handler
+    let script = "const now = Date.now() / 1000;
+         const heading = [], position = [];
+         for (let i = 0; i < 30; i++) {
+           const stamp = now - 29.5 + i;
+           heading.push({stamp, fields: {heading: (345 + i) % 360}});
+           position.push({stamp, fields: {lat: 43.5 + i * 1e-4, lon: 16.4}});
+         }
+         window.backlog = {type: 'backlog', topics: {'test.heading': heading, 'test.position': position}};
+         window.seabusConsole.receive(window.backlog);
+         return true;";
+    js(&c, script).await;
+    let trail = "const t = document.querySelector('[data-kind=track] [data-testid=trail]');
+         return t ? t.getAttribute('points').trim().split(/\\s+/).length : 0;";
+    let plot = drawn(&c, "Heading").await;
+    let lines = lines_of(&plot, "Heading");
+    assert_eq!(
+        lines.iter().map(Vec::len).collect::<Vec<_>>(),
+        [30],
+        "{plot}"
+    );
+    // where their times are in the 60 s window: the oldest half way, the newest near now
+    let (left, width) = (
+        plot["area"]["left"].as_f64().expect("left"),
+        plot["area"]["width"].as_f64().expect("width"),
+    );
+    let at = |ago: f64| left + width * (1.0 - ago / 60.0);
+    let (first, last) = (lines[0][0].0, lines[0][29].0);
+    assert!(
+        (first - at(29.5)).abs() < 0.03 * width,
+        "{first}, not {}",
+        at(29.5)
+    );
+    assert!(
+        (last - at(0.5)).abs() < 0.03 * width,
+        "{last}, not {}",
+        at(0.5)
+    );
+    assert_eq!(js(&c, trail).await, json!(30), "the track's trail");
+    // the same again changes nothing: one sample per stamp
+    js(
+        &c,
+        "window.seabusConsole.receive(window.backlog); return true;",
+    )
+    .await;
+    let again = drawn(&c, "Heading").await;
+    assert_eq!(lines_of(&again, "Heading")[0].len(), 30, "{again}");
+    assert_eq!(js(&c, trail).await, json!(30));
+    // live values go on after it
+    for i in 0..3 {
+        publish(
+            &port,
+            "test.heading",
+            seabus_medium::DataMap::new().with("heading", 15.0 + f64::from(i)),
+        )
+        .await;
+        publish(
+            &port,
+            "test.position",
+            seabus_medium::DataMap::new()
+                .with("lat", 43.504 + f64::from(i) * 1e-4)
+                .with("lon", 16.4),
+        )
+        .await;
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    until(
+        &c,
+        Duration::from_secs(10),
+        "the live samples after the backlog",
+        "const p = window.seabusConsole.plot('Heading');
+         return p && p.lines.length === 1 && p.lines[0].points.length === 33;",
+    )
+    .await;
+    assert_eq!(js(&c, trail).await, json!(33));
+    no_policy_violations(&c).await;
+    c.close().await.expect("closed");
+}
+
+// ---------------------------------------------------------------- what the pilot commands
+
+/// Waits for the frontseat to take backseat commands (the log shows its control).
+async fn frontseat_accepting(c: &Client) {
+    until(
+        c,
+        Duration::from_secs(20),
+        "a frontseat that takes commands",
+        "const l = document.querySelector('[data-kind=log]'); return l && /control=(accepting|in-control)/.test(l.innerText);",
+    )
+    .await;
+}
+
+/// A browser logged in as the pilot, with control, once the frontseat takes commands.
+async fn pilot_in_control(sys: &System) -> (Driver, Client) {
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    take_control(&c, "pilot").await;
+    frontseat_accepting(&c).await;
+    (driver, c)
+}
+
+/// The next course the spy sees with `pred`, and the frontseat's settled answer to it.
+fn course_and_answer(
+    spy: &mpsc::Receiver<Json>,
+    what: &str,
+    pred: impl Fn(&Json) -> bool,
+) -> (Json, Json) {
+    let mut seen = Vec::new();
+    let course = wait_for_line(spy, &mut seen, Duration::from_secs(10), what, |v| {
+        v["topic"] == "cmd.course" && pred(&v["payload"])
+    });
+    let answer = wait_for_line(
+        spy,
+        &mut seen,
+        Duration::from_secs(10),
+        "the frontseat's answer",
+        |v| {
+            v["topic"] == "cmd.status"
+                && v["payload"]["request_seq"] == course["seq"]
+                && v["payload"]["state"] != "pending"
+        },
+    );
+    (course, answer)
+}
+
+/// The vehicle's control (`vehicle.state.control`) as the page has it.
+const CONTROL: &str =
+    "const s = window.seabusConsole.topic('vehicle.state'); return s && s.fields.control;";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_course_changed_in_one_field_keeps_the_others_and_is_held_until_control_is_released() {
+    let sys = start(&[repo("configs/console/pilot.xml")]);
+    let (_driver, c) = pilot_in_control(&sys).await;
+    // depth, then speed: each goes with the other fields as they were
+    slide(&c, "depth", 3.0).await;
+    let (_, answer) = course_and_answer(&sys.spy, "a course at 3 m", |p| p["depth"] == 3.0);
+    assert_eq!(answer["payload"]["state"], "acknowledged", "{answer}");
+    slide(&c, "speed", 1.2).await;
+    let (course, _) = course_and_answer(&sys.spy, "a course at 1.2 m/s", |p| p["speed"] == 1.2);
+    assert_eq!(course["payload"]["depth"], 3.0, "{course}");
+    // a new page starts from what the vehicle was commanded, not from the layout's zeros
+    c.refresh().await.expect("reloaded");
+    until_eq(
+        &c,
+        Duration::from_secs(15),
+        "the depth slider at the commanded depth",
+        "const w = document.querySelector('[data-widget-id=depth]'); return w && [w.dataset.source, w.querySelector('output').textContent];",
+        json!(["commanded", "3"]),
+    )
+    .await;
+    while sys.spy.try_recv().is_ok() {}
+    slide(&c, "heading", 200.0).await;
+    let (course, answer) =
+        course_and_answer(&sys.spy, "a course to 200°", |p| p["heading"] == 200.0);
+    assert_eq!(course["payload"]["depth"], 3.0, "{course}");
+    assert_eq!(course["payload"]["speed"], 1.2, "{course}");
+    assert_eq!(answer["payload"]["state"], "acknowledged", "{answer}");
+    until(
+        &c,
+        Duration::from_secs(5),
+        "holding course",
+        "const k = document.querySelector('[data-testid=kept]'); return k && /holding course since \\d\\d:\\d\\d:\\d\\d/.test(k.innerText) && k.innerText;",
+    )
+    .await;
+    // a minute later the console still keeps it: the frontseat never times out
+    let mut resent = 0;
+    let mut controls = Vec::new();
+    let minute = Instant::now() + Duration::from_secs(60);
+    while Instant::now() < minute {
+        let courses = commands_on(&sys.spy, "cmd.course", Duration::from_secs(5));
+        resent += courses
+            .iter()
+            .filter(|v| v["payload"]["heading"] == 200.0 && v["payload"]["speed"] == 1.2)
+            .count();
+        controls.push(js(&c, CONTROL).await);
+    }
+    assert!(resent >= 50, "{resent} courses in a minute");
+    assert!(
+        controls.iter().all(|s| s == "in-control"),
+        "the vehicle left backseat control: {controls:?}"
+    );
+    // releasing control is the safe action: speed 0 once, then nothing
+    c.find(Locator::Css("[data-testid=release-control]"))
+        .await
+        .expect("release button")
+        .click()
+        .await
+        .expect("released");
+    let mut seen = Vec::new();
+    let neutral = wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(2),
+        "the course's neutral",
+        |v| v["topic"] == "cmd.course" && v["payload"]["speed"] == 0.0,
+    );
+    assert_eq!(neutral["payload"]["heading"], 200.0, "{neutral}");
+    let after = commands_on(&sys.spy, "cmd.course", Duration::from_secs(3));
+    assert!(after.is_empty(), "courses after release: {after:?}");
+    assert_eq!(
+        js(&c, "return window.seabusConsole.policyViolations();").await,
+        json!([])
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_course_the_stopped_vehicle_refuses_says_why_and_offers_start() {
+    let sys = start(&[repo("configs/console/pilot.xml")]);
+    let (_driver, c) = pilot_in_control(&sys).await;
+    slide(&c, "heading", 90.0).await;
+    let (_, answer) = course_and_answer(&sys.spy, "a course to 90°", |p| p["heading"] == 90.0);
+    assert_eq!(answer["payload"]["state"], "acknowledged", "{answer}");
+    // the mission stops: the next time the course goes, the vehicle refuses it
+    c.find(Locator::Css("body"))
+        .await
+        .expect("the page")
+        .send_keys("\u{E00C}")
+        .await
+        .expect("Escape pressed");
+    let reason = until_text(
+        &c,
+        Duration::from_secs(10),
+        "why the course is no longer held",
+        "const r = document.querySelector('[data-testid=kept-reason]'); return r && r.innerText;",
+    )
+    .await;
+    assert_eq!(
+        reason,
+        "the vehicle refused it: the frontseat is stopped (mode S)"
+    );
+    // what was on its way before is passed over; after it, nothing
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    while sys.spy.try_recv().is_ok() {}
+    let stopped = commands_on(&sys.spy, "cmd.course", Duration::from_secs(3));
+    assert!(stopped.is_empty(), "courses after the refusal: {stopped:?}");
+    // the page offers the start, held as the layout asks
+    js(
+        &c,
+        "const b = document.querySelector('[data-testid=kept-resume]');
+         b.dispatchEvent(new PointerEvent('pointerdown', {bubbles: true, button: 0}));
+         setTimeout(() => b.dispatchEvent(new PointerEvent('pointerup', {bubbles: true})), 1600);
+         return b.innerText;",
+    )
+    .await;
+    let mut seen = Vec::new();
+    let start = wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(5),
+        "the mission's start",
+        |v| v["topic"] == "cmd.mission",
+    );
+    assert_eq!(start["payload"]["action"], "start", "{start}");
+    until_eq(
+        &c,
+        Duration::from_secs(10),
+        "the vehicle taking commands again",
+        CONTROL,
+        json!("accepting"),
+    )
+    .await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_page_reloaded_after_half_a_minute_shows_the_last_half_minute_at_once() {
+    let sys = start(&[
+        repo("configs/console/pilot.xml"),
+        repo("configs/console/scientist.xml"),
+    ]);
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "pilot", "pilot-password").await;
+    let trail = "const t = document.querySelector('[data-kind=track] [data-testid=trail]');
+         return t ? t.getAttribute('points').trim().split(/\\s+/).filter(Boolean).length : 0;";
+    until(&c, Duration::from_secs(15), "the track", trail).await;
+    tokio::time::sleep(Duration::from_secs(30)).await;
+    c.refresh().await.expect("reloaded");
+    // the track is full as soon as the layout is there (the vehicle reports 4 times a second)
+    let loaded = Instant::now();
+    until(
+        &c,
+        Duration::from_secs(15),
+        "the reloaded track",
+        "return !!document.querySelector('[data-kind=track] [data-testid=trail]');",
+    )
+    .await;
+    let shown = until(
+        &c,
+        Duration::from_secs(3),
+        "a full track",
+        &format!("const n = (() => {{ {trail} }})(); return n >= 40 && n;"),
+    )
+    .await;
+    assert!(
+        loaded.elapsed() < Duration::from_secs(10),
+        "{shown} points after {:?}",
+        loaded.elapsed()
+    );
+    // a layout never opened before has the past too: the observer's heading plot spans the
+    // half minute
+    c.goto(&format!("{}/logout", sys.url))
+        .await
+        .expect("logged out");
+    log_in(&c, &sys.url, "ivo", "observer-password").await;
+    let span = until(
+        &c,
+        Duration::from_secs(5),
+        "the heading plot spanning the last half minute",
+        "const p = window.seabusConsole.plot('Heading');
+         if (!p || !p.lines.length) return false;
+         const xs = p.lines.flatMap((l) => l.points.map((q) => q[0]));
+         const span = (Math.max(...xs) - Math.min(...xs)) / p.area.width;
+         return span > 0.35 && span;",
+    )
+    .await;
+    assert!(span.as_f64().is_some_and(|s| s <= 1.0), "{span}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_silent_frontseat_on_a_live_line_leaves_healthy_within_3_s_with_the_reason() {
+    // the simulated frontseat falls silent for 5 s of every 9 while its serial line stays open
+    let silent = IVER.replace(
+        r#"noise="0.2"/>"#,
+        r#"noise="0.2" silence_every="9s" silence_for="5s"/>"#,
+    );
+    assert_ne!(silent, IVER);
+    let sys = start_with(&silent, &[repo("configs/console/scientist.xml")]);
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &sys.url, "ivo", "observer-password").await;
+    // the page notes when the navigation last moved and when the health row first left HEALTHY
+    js(
+        &c,
+        "window.watch = {last: null, stamp: null, left: null, reason: null};
+         setInterval(() => {
+           const w = window.watch;
+           const p = window.seabusConsole.topic('nav.attitude');
+           if (p && p.stamp !== w.stamp) { w.stamp = p.stamp; w.last = performance.now(); w.left = null; }
+           const r = document.querySelector('[data-kind=health] tr[data-component=Navigation]');
+           if (!r || w.last === null || w.left !== null) return;
+           if (r.children[4].textContent !== 'HEALTHY') {
+             w.left = performance.now() - w.last;
+             w.reason = r.children[5].textContent;
+             w.state = r.children[4].textContent;
+           }
+         }, 50);
+         return true;",
+    )
+    .await;
+    let seen = until(
+        &c,
+        Duration::from_secs(25),
+        "the navigation row leaving HEALTHY",
+        "const w = window.watch; return w.left !== null && w;",
+    )
+    .await;
+    let after = seen["left"].as_f64().expect("milliseconds");
+    assert!(
+        after < 3000.0,
+        "left HEALTHY {after} ms after the last attitude"
+    );
+    let reason = seen["reason"].as_str().unwrap_or("");
+    assert!(
+        reason.starts_with("nav.position silent for ") && reason.ends_with(" s"),
+        "{seen}"
+    );
+    assert_eq!(seen["state"], "UNAVAILABLE", "{seen}");
+    // when the frontseat talks again, the row is HEALTHY with no reason
+    until_eq(
+        &c,
+        Duration::from_secs(15),
+        "the navigation row healthy again",
+        "const r = document.querySelector('[data-kind=health] tr[data-component=Navigation]');
+         return r && [r.children[4].textContent, r.children[5].textContent];",
+        json!(["HEALTHY", ""]),
+    )
+    .await;
 }

@@ -1,10 +1,13 @@
 //! The health monitor in a running system: a component reporting over the network goes OFFLINE
 //! when it stops, within its timeout, raising the configured severity and sending the emergency
 //! action; it reports again and is HEALTHY again. A serial driver's link that is down makes its
-//! component OFFLINE; the monitor's own modules are watched through their states.
+//! component OFFLINE; the monitor's own modules are watched through their states. A frontseat
+//! that stops sending navigation while its serial line stays open leaves HEALTHY, with the
+//! silent topic named, and comes back when its data does.
 
 mod common;
 use common::*;
+use std::cell::Cell;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
@@ -271,4 +274,154 @@ fn starfish_components_report_over_dsaav_and_a_dead_controller_goes_offline() {
         |v| snapshot(v) && all.iter().all(|c| state(v, c) == "HEALTHY"),
     );
     assert_eq!(back["payload"]["severity"], "NONE", "{back}");
+}
+
+/// The seconds in a reason's `TOPIC silent for 4.2 s`.
+fn silent_for(reason: &str, topic: &str) -> Option<f64> {
+    let rest = reason.split("; ").find_map(|r| r.strip_prefix(topic))?;
+    rest.strip_prefix(" silent for ")?
+        .strip_suffix(" s")
+        .and_then(|n| n.parse().ok())
+}
+
+/// The demo's frontseat (the Iver2 simulator on a pseudo-terminal, the Iver2 driver on the serial
+/// end, the NMEA sensors line) under the demo's health rules (configs/demo-health.xml). The
+/// simulator goes quiet for 5 s of every 9 (from 4 s after it starts): its pseudo-terminal stays
+/// open, so the serial link stays up, but no navigation comes. The health snapshot leaves HEALTHY
+/// within 3 s of the last navigation message, names the silent topic in its reasons, goes OFFLINE
+/// after the rules' 3 s, and is HEALTHY again once the navigation flows again.
+#[test]
+fn a_frontseat_that_stops_navigating_on_an_open_line_leaves_healthy_and_comes_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let rules = concat!(env!("CARGO_MANIFEST_DIR"), "/configs/demo-health.xml");
+    std::fs::copy(rules, dir.path().join("health.xml")).unwrap();
+    let (front, sensors) = (dir.path().join("frontseat"), dir.path().join("sensors"));
+    let (front, sensors) = (front.display(), sensors.display());
+    let net = format!("udp://{}:{}?ttl=0", group(), free_port());
+    let system = format!(
+        r#"<seabus node="health-data">
+  <medium name="bus" url="inproc://"/>
+  <medium name="net" url="{net}"/>
+  <medium name="frontseat" url="pty://{front}?framing=lines"/>
+  <medium name="serial" url="serial://{front}?baud=19200&amp;framing=nmea"/>
+  <medium name="sensors-out" url="pty://{sensors}"/>
+  <medium name="sensors" url="serial://{sensors}?baud=4800&amp;framing=nmea"/>
+  <module name="frontseat-sim" type="iver2-sim" media="frontseat sensors-out" autostart="true"
+          silence_every="9s" silence_for="5s"/>
+  <module name="iver" type="iver2" media="serial bus" version="5" request_every="250ms"/>
+  <module name="health" type="health-monitor" media="bus serial sensors" rules="health.xml"/>
+  <bridge name="link" media="bus net" report="0">
+    <route from="bus" to="net" topics="vehicle.health"/>
+    <route from="bus" to="net" topics="nav.position"/>
+  </bridge>
+</seabus>"#
+    );
+    let path = dir.path().join("system.xml");
+    std::fs::write(&path, system).unwrap();
+    let checked = check(&path);
+    assert!(
+        checked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    let (mut spy, rx) = spy_json(&net, 60);
+    let mut run = spawn_run(&path, &[]);
+    let snapshot = |v: &serde_json::Value| v["topic"] == "vehicle.health";
+    let is_nav = |v: &serde_json::Value| v["topic"] == "nav.position";
+    let navigation = |v: &serde_json::Value| v["payload"]["components"]["Navigation"].clone();
+    let all_healthy = |v: &serde_json::Value| {
+        snapshot(v)
+            && ["Frontseat", "Navigation", "VehicleState", "Sensors"]
+                .iter()
+                .all(|c| v["payload"]["components"][c] == "HEALTHY")
+    };
+    let mut seen = Vec::new();
+
+    // the navigation flows: everything HEALTHY, nothing to explain
+    let heard = Cell::new(false);
+    let healthy = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(20),
+        "a HEALTHY snapshot after navigation",
+        |v| {
+            heard.set(heard.get() || is_nav(v));
+            heard.get() && all_healthy(v)
+        },
+    );
+    assert_eq!(healthy["payload"]["severity"], "NONE", "{healthy}");
+    assert_eq!(
+        healthy["payload"]["reasons"],
+        serde_json::json!({}),
+        "{healthy}"
+    );
+
+    // the frontseat goes quiet on an open line: Navigation leaves HEALTHY within 3 s
+    let last_nav = Cell::new(Instant::now());
+    let silent = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(15),
+        "Navigation leaving HEALTHY",
+        |v| {
+            if is_nav(v) {
+                last_nav.set(Instant::now());
+            }
+            snapshot(v) && navigation(v) != "HEALTHY"
+        },
+    );
+    let after = last_nav.get().elapsed();
+    assert!(
+        after < Duration::from_secs(3),
+        "left HEALTHY {after:?} after the last navigation message"
+    );
+    assert_eq!(navigation(&silent), "UNAVAILABLE", "{silent}");
+    assert_eq!(silent["payload"]["severity"], "WARN", "{silent}");
+    assert_eq!(
+        silent["payload"]["components"]["Frontseat"], "HEALTHY",
+        "the serial link stays up: {silent}"
+    );
+    let reason = silent["payload"]["reasons"]["Navigation"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    let secs = silent_for(&reason, "nav.position").unwrap_or(-1.0);
+    assert!((1.0..3.0).contains(&secs), "{reason}");
+
+    // still quiet after the rules' timeout (3 s): OFFLINE, an abort
+    let offline = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(5),
+        "Navigation OFFLINE",
+        |v| snapshot(v) && navigation(v) == "OFFLINE",
+    );
+    assert_eq!(offline["payload"]["severity"], "ABORT", "{offline}");
+    let reason = offline["payload"]["reasons"]["Navigation"]
+        .as_str()
+        .unwrap_or_default()
+        .to_string();
+    let secs = silent_for(&reason, "nav.position").unwrap_or(-1.0);
+    assert!((3.0..5.0).contains(&secs), "{reason}");
+    assert!(silent_for(&reason, "nav.attitude").is_some(), "{reason}");
+
+    // the frontseat speaks again: HEALTHY, the severity back to NONE, nothing to explain
+    let resumed = Cell::new(false);
+    let back = wait_for_line(
+        &rx,
+        &mut seen,
+        Duration::from_secs(10),
+        "a HEALTHY snapshot after the navigation resumed",
+        |v| {
+            resumed.set(resumed.get() || is_nav(v));
+            resumed.get() && all_healthy(v)
+        },
+    );
+    assert_eq!(back["payload"]["severity"], "NONE", "{back}");
+    assert_eq!(back["payload"]["reasons"], serde_json::json!({}), "{back}");
+
+    terminate(&run);
+    assert!(wait_for(&mut run, Duration::from_secs(5)).is_some());
+    let _ = spy.kill();
+    let _ = spy.wait();
 }

@@ -61,7 +61,9 @@ pub fn layout(data: &[u8]) -> bool {
     assert_eq!(commands.len(), layout.commands.len());
     for b in layout.bindings() {
         assert!(
-            b.widget.starts_with("axis-") || ids.contains(&b.widget),
+            b.widget.starts_with("axis-")
+                || b.widget.starts_with("command-")
+                || ids.contains(&b.widget),
             "binding of `{}` names no widget: `{}`",
             b.topic,
             b.widget
@@ -72,6 +74,7 @@ pub fn layout(data: &[u8]) -> bool {
             .build(
                 &seabus_medium::DataMap::new(),
                 &seabus_medium::DataMap::new(),
+                &Default::default(),
             )
             .unwrap_or_else(|e| panic!("command `{}` refuses its own fields: {e}", c.name));
         assert_eq!(sent, c.fields, "command `{}` sends other fields", c.name);

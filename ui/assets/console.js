@@ -1,10 +1,11 @@
 // The operator console: connection, header, layout, commands and control.
 
-import { el, renderNode, fmtFields, parseBind } from './widgets.js';
+import { el, renderNode, fmtFields, fmtTime, fmtValue, parseBind } from './widgets.js';
 import { createInputs } from './inputs.js';
 import { createDesigner } from './designer.js';
 
 const HOLD_MARGIN_MS = 100; // a held command is sent a little after its hold time, never before
+const PENDING_MS = 3000; // a value sent shows until the bus has it, or this long
 const ARM_TIMEOUT_MS = 5000;
 
 // what the page's content policy blocked (an inline style or script, another origin): counted, so
@@ -41,7 +42,7 @@ function consolePage() {
     conn: $('connection'), userName: $('user-name'), userRoles: $('user-roles'),
     edit: $('edit-toggle'), designer: $('designer'), toasts: $('toasts'),
     dialog: $('confirm-dialog'), dialogTitle: $('confirm-title'), dialogText: $('confirm-text'), dialogFields: $('confirm-fields'),
-    holdBox: $('hold-indicator'),
+    holdBox: $('hold-indicator'), kept: $('kept'),
   };
 
   const S = {
@@ -51,7 +52,10 @@ function consolePage() {
     lease: { holder: null, since: null },
     layoutName: null, layout: null, layoutError: null,
     producers: {}, topics: {}, now: undefined, nowAt: 0,
-    fields: {}, history: [],
+    // fields: the values the pilot changed and has not sent yet, by command; pending: sent, not
+    // yet seen commanded; commanded: the values last commanded, by topic; chosen: the fields the
+    // layout's controls let the pilot choose, by command; kept: commands the console keeps, by topic
+    fields: {}, pending: {}, commanded: {}, chosen: {}, kept: {}, history: [],
     sentCount: 0, driveCount: 0, releaseCount: 0, lastSent: null, sent: [],
     helloSeen: false,
   };
@@ -116,13 +120,16 @@ function consolePage() {
       const h = c && Number(c.hold_ms);
       return Number.isFinite(h) && h > 0 ? h : 1000;
     },
-    fieldValue(n, f) {
-      const fs = S.fields[n];
-      return fs ? fs[f] : undefined;
-    },
+    fieldValue(n, f) { return fieldValue(n, f).value; },
+    /** Where a field's value comes from: changed, sending, measured, commanded, layout or unknown. */
+    fieldSource(n, f) { return fieldValue(n, f).source; },
     fields(n) { return { ...(S.fields[n] || {}) }; },
     setFields(n, set) {
       S.fields[n] = { ...(S.fields[n] || {}), ...set };
+      syncInputs();
+    },
+    clearFields(n) {
+      delete S.fields[n];
       syncInputs();
     },
     clamp(n, f, v) {
@@ -244,6 +251,9 @@ function consolePage() {
       case 'lease': return onLease(m);
       case 'command': return onCommand(m);
       case 'history': return onHistory(m);
+      case 'backlog': return onBacklog(m);
+      case 'commanded': return onCommanded(m);
+      case 'kept': return onKept(m);
       case 'armed': return onArmed(m);
       case 'error': return onError(m);
       default: return undefined;
@@ -320,14 +330,13 @@ function consolePage() {
     S.layout = L;
     S.layoutName = L.name || S.layoutName;
     S.producers = normaliseProducers(m.producers);
-    const prev = same ? S.fields : {};
-    S.fields = {};
-    for (const [n, c] of Object.entries(L.commands || {})) {
-      const defaults = c && c.fields && typeof c.fields === 'object' ? c.fields : {};
-      const kept = prev[n] || {};
-      S.fields[n] = { ...defaults };
-      for (const k of Object.keys(defaults)) if (k in kept) S.fields[n][k] = kept[k];
-    }
+    if (!same) S.fields = {};
+    S.pending = {};
+    S.chosen = m.chosen && typeof m.chosen === 'object' ? m.chosen : {};
+    S.commanded = m.commanded && typeof m.commanded === 'object' ? m.commanded : {};
+    S.kept = {};
+    for (const k of Array.isArray(m.kept) ? m.kept : []) if (k && k.topic) S.kept[k.topic] = k;
+    showKept();
     if (!S.layouts.some((l) => l.name === L.name)) {
       S.layouts.push({ name: L.name, title: L.title || L.name });
       ui.select.append(el('option', { value: L.name, text: L.title || L.name }));
@@ -403,6 +412,7 @@ function consolePage() {
     const { type, ...c } = m;
     upsertCommand(c);
     if (c.user === S.user) {
+      if (c.state === 'refused' && c.command) { delete S.pending[c.command]; syncInputs(); }
       if (c.state === 'refused') toast(`${c.command || c.topic} refused${c.reason ? `: ${c.reason}` : ''}`, 'error');
       else if (c.state === 'timed-out') toast(`${c.command || c.topic} timed out`, 'warn');
     }
@@ -413,6 +423,121 @@ function consolePage() {
     S.history = [];
     for (const c of Array.isArray(m.commands) ? m.commands : []) upsertCommand(c);
     widgets.forEach((w) => w.onHistory && w.onHistory());
+  }
+
+  /** The recent samples of the bound topics, `{TOPIC: [{stamp, fields}]}` oldest first: to the plots and tracks. */
+  function onBacklog(m) {
+    const topics = m.topics && typeof m.topics === 'object' ? m.topics : {};
+    for (const w of widgets) {
+      if (!w.onBacklog) continue;
+      try { w.onBacklog(topics); } catch (e) { console.error('widget', w.node && w.node.id, e); }
+    }
+  }
+
+  // ------------------------------------------------------------ command values
+
+  /** A field's value and where it comes from: what the pilot changed, what was just sent, what
+   * was last commanded, else the variable the layout measures it by, or (for a field no control
+   * chooses) the layout's own value. A field the pilot chooses never takes the layout's value. */
+  function fieldValue(n, f) {
+    const c = ctx.command(n);
+    if (!c || !f) return { value: undefined, source: 'unknown' };
+    const changed = S.fields[n];
+    if (changed && changed[f] !== undefined) return { value: changed[f], source: 'changed' };
+    const p = S.pending[n];
+    if (p && p.fields[f] !== undefined && performance.now() - p.at < PENDING_MS) return { value: p.fields[f], source: 'sending' };
+    const cmd = S.commanded[c.topic];
+    if (cmd && cmd[f] !== undefined) return { value: cmd[f], source: 'commanded' };
+    const from = c.from && c.from[f];
+    if (from) {
+      const t = S.topics[from.topic];
+      const v = t && t.fields ? t.fields[from.field] : undefined;
+      if (typeof v === 'number' && Number.isFinite(v)) return { value: ctx.clamp(n, f, v), source: 'measured' };
+      return { value: undefined, source: 'unknown' };
+    }
+    const chosen = S.chosen[n] || [];
+    if (!chosen.includes(f) && c.fields && c.fields[f] !== undefined) return { value: c.fields[f], source: 'layout' };
+    return { value: undefined, source: 'unknown' };
+  }
+
+  /** The values `name` would send with `set`: each field with its value and whether the pilot
+   * changed it; and the fields the pilot must set first (no known value). */
+  function outgoing(name, set) {
+    const c = ctx.command(name);
+    const values = [];
+    const unknown = [];
+    for (const f of Object.keys((c && c.fields) || {})) {
+      const v = set[f] !== undefined ? set[f] : fieldValue(name, f).value;
+      if (v === undefined) unknown.push(f);
+      else values.push({ field: f, value: v, changed: set[f] !== undefined });
+    }
+    return { values, unknown };
+  }
+
+  function onCommanded(m) {
+    if (!m.topic || !m.fields || typeof m.fields !== 'object') return;
+    S.commanded[m.topic] = m.fields;
+    for (const [n, c] of Object.entries((S.layout && S.layout.commands) || {})) {
+      if (c && c.topic === m.topic) delete S.pending[n];
+    }
+    syncInputs();
+  }
+
+  function onKept(m) {
+    if (!m.topic) return;
+    S.kept[m.topic] = m;
+    showKept();
+  }
+
+  /** The kept commands: "holding course since …" with its values and the vehicle's mode, or
+   * why it is no longer held, with the command that resumes it. */
+  let keptShown = '';
+  function showKept() {
+    const box = ui.kept;
+    if (!box) return;
+    const state = S.topics['vehicle.state'];
+    const shown = JSON.stringify([S.kept, state && state.fields && [state.fields.mode, state.fields.control]]);
+    if (shown === keptShown) return;
+    keptShown = shown;
+    const rows = [];
+    for (const k of Object.values(S.kept)) {
+      const c = ctx.command(k.command);
+      if (!c) continue;
+      const since = fmtTime(k.since);
+      if (k.reason === undefined) {
+        const mode = state && state.fields ? [state.fields.mode, state.fields.control].filter((x) => x !== undefined && x !== '').join(' · ') : '';
+        rows.push(el('div', { class: 'kept-row holding', 'data-testid': 'kept', 'data-command': k.command },
+          el('strong', { text: `holding ${k.command} since ${since}` }),
+          el('span', { class: 'kept-values', text: fmtFields(k.fields || {}) }),
+          mode ? el('span', { class: 'kept-mode', 'data-testid': 'vehicle-mode', text: `vehicle: ${mode}` }) : null));
+      } else {
+        const resume = c.resume && ctx.command(c.resume) ? c.resume : null;
+        const row = el('div', { class: 'kept-row ended', 'data-testid': 'kept', 'data-command': k.command },
+          el('strong', { text: `${k.command} no longer held` }),
+          el('span', { class: 'kept-reason', 'data-testid': 'kept-reason', text: k.reason }));
+        if (resume) {
+          const b = el('button', { type: 'button', class: 'btn btn-small', 'data-testid': 'kept-resume', text: `Send ${resume}` });
+          const rc = ctx.command(resume);
+          if (rc.confirm === 'hold') {
+            let h = null;
+            b.title = `hold for ${(ctx.holdMs(resume) / 1000).toFixed(1)} s`;
+            b.addEventListener('pointerdown', (ev) => {
+              ev.preventDefault();
+              if (!h) h = holdCommand(resume, {}, { end() { h = null; } });
+            });
+            const let_go = () => { if (h) { h.cancel(); h = null; } };
+            b.addEventListener('pointerup', let_go);
+            b.addEventListener('pointerleave', let_go);
+          } else {
+            b.addEventListener('click', () => sendCommand(resume, {}));
+          }
+          row.append(b);
+        }
+        rows.push(row);
+      }
+    }
+    box.replaceChildren(...rows);
+    box.hidden = rows.length === 0;
   }
 
   function onArmed(m) {
@@ -478,7 +603,7 @@ function consolePage() {
     for (const w of widgets) if (w.sync) w.sync();
   }
 
-  setInterval(() => { for (const w of widgets) w.tick(); }, 250);
+  setInterval(() => { for (const w of widgets) w.tick(); showKept(); }, 250);
   window.addEventListener('resize', () => ctx.redrawSoon());
 
   // ------------------------------------------------------------ commands
@@ -506,9 +631,22 @@ function consolePage() {
     if (!a.ok) { toast(`${name}: ${a.why}`, 'warn'); return null; }
     const fields = { ...(S.fields[name] || {}), ...set };
     for (const [k, v] of Object.entries(fields)) fields[k] = ctx.clamp(name, k, v);
+    const { unknown } = outgoing(name, fields);
+    if (unknown.length) {
+      const names = unknown.join(', ');
+      toast(`${name} not sent: ${names} ${unknown.length > 1 ? 'have' : 'has'} no known value (nothing commanded or measured yet): set ${unknown.length > 1 ? 'them' : 'it'}`, 'error');
+      return null;
+    }
     S.fields[name] = fields;
     syncInputs();
     return { c, fields };
+  }
+
+  /** `fields` of `name` went out: they show as sent until the bus has them. */
+  function wentOut(name, fields) {
+    S.pending[name] = { fields, at: performance.now() };
+    delete S.fields[name];
+    syncInputs();
   }
 
   /** Sends a command with some fields set, asking first when it needs confirmation. */
@@ -520,13 +658,15 @@ function consolePage() {
       confirmDialog(name, c, fields);
       return true;
     }
-    return sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields });
+    const ok = sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields });
+    if (ok) wentOut(name, fields);
+    return ok;
   }
 
   async function armAndSend(name, fields) {
     try {
       const id = await arm(name);
-      sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: id });
+      if (sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: id })) wentOut(name, fields);
     } catch (e) {
       toast(`${name} not sent: ${e.message}`, 'error');
     }
@@ -558,7 +698,8 @@ function consolePage() {
       if (performance.now() - t0 < holdMs || armId === null) return;
       done = true;
       clearInterval(ticking);
-      sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields: S.fields[name] || p.fields, confirmed: armId });
+      const fields = S.fields[name] || p.fields;
+      if (sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: armId })) wentOut(name, fields);
       end();
     }
     return {
@@ -592,7 +733,10 @@ function consolePage() {
     ui.dialogText.textContent = hold
       ? `Press and hold Send for ${(ctx.holdMs(name) / 1000).toFixed(1)} s to send ${c.topic || name}.`
       : `This sends ${c.topic || name} to the vehicle.`;
-    ui.dialogFields.textContent = fmtFields(fields).split(', ').join('\n');
+    // exactly what goes out: every field, the ones the pilot changed marked
+    ui.dialogFields.textContent = outgoing(name, fields).values
+      .map((v) => `${v.field} = ${fmtValue(v.value)}${v.changed ? '   (changed)' : ''}`)
+      .join('\n');
     okBtn.textContent = hold ? 'Hold to send' : 'Send';
     let h = null;
     const fill = el('span', { class: 'fill' });
@@ -663,7 +807,15 @@ function consolePage() {
       };
     },
     sent: () => S.sent.slice(),
+    topic: (n) => S.topics[n] || null,
     policyViolations: () => policyViolations.slice(),
+    // what the plot labelled `label` last drew: its area, axes and lines in canvas pixels
+    plot(label) {
+      const w = widgets.find((x) => x.drawn && x.node.label === label);
+      return w ? w.drawn() : null;
+    },
+    // a message handled as if the server had sent it
+    receive: (m) => handle(m),
   };
 
   connect();

@@ -11,7 +11,7 @@ const ATTRS = {
   grid: ['columns'],
   tabs: [],
   tab: ['title', 'sizes'],
-  readout: ['bind', 'unit', 'precision', 'fresh'],
+  readout: ['bind', 'unit', 'precision', 'angle', 'true', 'false', 'fresh'],
   gauge: ['bind', 'min', 'max', 'unit', 'ranges', 'precision', 'fresh'],
   plot: ['window', 'min', 'max', 'fresh'],
   track: ['position', 'heading', 'trail', 'waypoints', 'grid', 'fresh'],
@@ -25,6 +25,7 @@ const ATTRS = {
   toggle: ['command', 'on', 'off'],
 };
 const COMMON = ['id', 'label', 'role'];
+const SERIES = ['bind', 'label', 'colour', 'unit', 'angle'];
 const NUMERIC = new Set(['min', 'max', 'step', 'precision', 'columns', 'trail', 'lines']);
 const TEXTUAL = new Set(['label', 'unit', 'title', 'role', 'command', 'set', 'ranges', 'waypoints', 'topics', 'position', 'on', 'off', 'grid', 'id']);
 const BINDS = new Set(['bind', 'heading']);
@@ -99,6 +100,10 @@ function nodeAttrPairs(node, freshDefault) {
   return pairs;
 }
 
+function seriesXml(s, pad) {
+  return `${pad}<series${attrsText(SERIES.map((k) => [k, k === 'colour' ? s.colour || s.color : scalar(s[k])]))}/>`;
+}
+
 function nodeXml(node, ind) {
   const pad = '  '.repeat(ind);
   const kind = node.kind;
@@ -114,13 +119,9 @@ function nodeXml(node, ind) {
     for (const c of children) kids.push(nodeXml(c, ind + 1));
   }
   if (Array.isArray(node.series)) {
-    for (const s of node.series) {
-      kids.push(`${pad}  <series${attrsText([['bind', bindText(s.bind)], ['label', s.label], ['colour', s.colour || s.color]])}/>`);
-    }
+    for (const s of node.series) kids.push(seriesXml(s, `${pad}  `));
   }
-  if (kind === 'series') {
-    return `${pad}<series${attrsText([['bind', bindText(node.bind)], ['label', node.label], ['colour', node.colour || node.color]])}/>`;
-  }
+  if (kind === 'series') return seriesXml(node, pad);
   if (!kids.length) return `${pad}<${kind}${attrs}/>`;
   return `${pad}<${kind}${attrs}>\n${kids.join('\n')}\n${pad}</${kind}>`;
 }
@@ -426,9 +427,9 @@ export function createDesigner(ctx, panel, toggle) {
     const items = list || nodeChildren(node).filter((c) => c.kind === 'series');
     items.forEach((s, i) => {
       const grid = el('div', { class: 'attr-list' });
-      for (const k of ['bind', 'label', 'colour']) {
+      for (const k of SERIES) {
         const id = `series-${i}-${k}`;
-        const input = el('input', { id, type: 'text', value: k === 'bind' ? bindText(s.bind) : (s[k] || (k === 'colour' ? s.color || '' : '')) });
+        const input = el('input', { id, type: 'text', value: k === 'colour' ? s.colour || s.color || '' : scalar(s[k]) });
         input.addEventListener('change', () => {
           const t = input.value.trim();
           if (!t) delete s[k];

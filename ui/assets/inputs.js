@@ -54,18 +54,7 @@ export function createInputs(ctx) {
     const f = c && Number(c.frozen_ms);
     return Number.isFinite(f) && f > 0 ? f : DEFAULT_FROZEN_MS;
   }
-  function neutralOf(name) {
-    const c = cmdOf(name);
-    const n = c && c.neutral;
-    if (!n) return {};
-    if (typeof n === 'object') return n;
-    const out = {};
-    for (const p of String(n).split(',')) {
-      const i = p.indexOf('=');
-      if (i > 0) out[p.slice(0, i).trim()] = parseValue(p.slice(i + 1).trim());
-    }
-    return out;
-  }
+
 
   function ref(b) {
     if (!b) return null;
@@ -115,7 +104,8 @@ export function createInputs(ctx) {
     clearInterval(e.timer);
     active.delete(name);
     if (release) ctx.sendMsg({ type: 'release', layout: e.layout, command: name });
-    ctx.setFields(name, neutralOf(name));
+    // the server sends the neutral; the inputs show what it commanded
+    ctx.clearFields(name);
   }
 
   function stopSources(pred, release) {
@@ -185,7 +175,12 @@ export function createInputs(ctx) {
           held.push({ b, r, restore });
         }
       } else if (r.field && b.step !== undefined && b.step !== null) {
-        const cur = Number(ctx.fieldValue(r.name, r.field)) || 0;
+        const cur = Number(ctx.fieldValue(r.name, r.field));
+        if (!Number.isFinite(cur)) {
+          // a step from an unknown value would send a value nobody chose
+          ctx.toast(`${r.name}: ${r.field} has no known value to step from: set it first`, 'warn');
+          continue;
+        }
         const v = ctx.clamp(r.name, r.field, +(cur + num(b.step, 0)).toFixed(10));
         ctx.send(r.name, { [r.field]: v });
       } else {

@@ -142,6 +142,59 @@ export function fmtValue(v, precision) {
   return String(v);
 }
 
+/** An attribute that is a flag: `true` (as the layout's JSON or the designer writes it). */
+function isOn(x) {
+  return x === true || x === 'true';
+}
+
+/** An angle in degrees within [0, 360). */
+export function angle360(v) {
+  let a = v % 360;
+  if (a < 0) a += 360;
+  return a >= 360 ? 0 : a;
+}
+
+/** An angle in degrees as text within [0, 360): 359.96 with precision 0 is `0`, never `360`. */
+export function fmtAngle(v, precision) {
+  const s = fmtValue(angle360(v), precision);
+  return parseFloat(s) >= 360 ? fmtValue(0, precision) : s;
+}
+
+/** How a switch shows a boolean field. */
+const SWITCH_WORDS = { true: 'on', false: 'off' };
+
+/**
+ * A value as an output widget shows it: a boolean as the widget's `true` / `false` words (yes
+ * and no without them), a number of an `angle="true"` widget within [0, 360), else as it is.
+ */
+export function fmtOutput(node, v) {
+  if (typeof v === 'boolean') return v ? String(node.true ?? 'yes') : String(node.false ?? 'no');
+  if (typeof v === 'number' && Number.isFinite(v) && isOn(node.angle)) return fmtAngle(v, node.precision);
+  return fmtValue(v, node.precision);
+}
+
+/**
+ * Two lists of stamped items, each oldest first, as one list oldest first with one item per
+ * stamp (the one already in `list` kept). Appends to `list` when `more` is all newer.
+ */
+export function mergeByStamp(list, more, stampOf) {
+  const last = list.length ? stampOf(list[list.length - 1]) : -Infinity;
+  let prev = last;
+  let newer = true;
+  for (const x of more) {
+    const t = stampOf(x);
+    if (!(t > prev)) { newer = false; break; }
+    prev = t;
+  }
+  if (newer) {
+    for (const x of more) list.push(x);
+    return list;
+  }
+  if (more.length === 1 && stampOf(more[0]) === last) return list;
+  const all = list.concat(more).sort((a, b) => stampOf(a) - stampOf(b));
+  return all.filter((x, i) => i === 0 || stampOf(x) !== stampOf(all[i - 1]));
+}
+
 function fmtObject(v) {
   try {
     const s = JSON.stringify(v);
@@ -404,6 +457,8 @@ function outputWidget(ctx, node, kind, body, topicsList, handlers) {
     },
     redraw: handlers.redraw,
     onHistory: handlers.onHistory,
+    onBacklog: handlers.onBacklog,
+    drawn: handlers.drawn,
   };
   ctx.register(w);
   w.update();
@@ -428,8 +483,7 @@ function readout(ctx, node) {
   if (!node.label && b) node = { ...node, label: bindText(b) };
   return outputWidget(ctx, node, 'readout', body, b ? [[b.topic]] : [], {
     update() {
-      const v = valueOf(ctx, b);
-      const s = fmtValue(v, node.precision);
+      const s = fmtOutput(node, valueOf(ctx, b));
       if (value.textContent !== s) value.textContent = s;
     },
   });
@@ -490,7 +544,7 @@ function gauge(ctx, node) {
   return outputWidget(ctx, node, 'gauge', body, b ? [[b.topic]] : [], {
     update() {
       const v = valueOf(ctx, b);
-      const t = fmtValue(v, node.precision);
+      const t = fmtOutput(node, v);
       if (valText.textContent !== t) valText.textContent = t;
       if (typeof v === 'number' && Number.isFinite(v)) {
         needleG.setAttribute('transform', `rotate(${ang(v).toFixed(2)} ${cx} ${cy})`);
@@ -502,19 +556,95 @@ function gauge(ctx, node) {
 
 // ---------------------------------------------------------------- plot
 
+/** A line breaks where no sample came for this long, and longer than 3 usual intervals around. */
+const GAP_FLOOR_S = 1;
+/** Intervals either side that say what is usual where a line may break. */
+const GAP_NEIGHBOURS = 5;
+/** The width of one y axis with its tick labels, in CSS pixels. */
+const AXIS_W = 46;
+
 function plotSeries(node) {
   const list = Array.isArray(node.series) ? node.series : nodeChildren(node).filter((c) => c && c.kind === 'series');
   return list.map((s, i) => ({
     bind: parseBind(s.bind),
     label: s.label || bindText(s.bind) || `series ${i + 1}`,
     colour: colour(s.colour || s.color, i),
+    unit: s.unit ? String(s.unit) : '',
+    angle: isOn(s.angle),
     samples: [],
-    lastStamp: undefined,
   })).filter((s) => s.bind);
+}
+
+/** The y axes of `series`: one per unit (angles apart), in the order the series come. */
+function plotAxes(series) {
+  const axes = [];
+  for (const s of series) {
+    const key = `${s.unit}\u0000${s.angle}`;
+    let i = axes.findIndex((a) => a.key === key);
+    if (i < 0) {
+      i = axes.length;
+      axes.push({ key, unit: s.unit || (s.angle ? '°' : ''), angle: s.angle, colour: s.colour, side: i % 2 ? 'right' : 'left', slot: i >> 1 });
+    }
+    s.axis = i;
+  }
+  return axes;
+}
+
+/** Whether the line breaks before `samples[i]`: a gap of more than 3 usual intervals and the floor. */
+function breaksBefore(samples, i) {
+  const dt = samples[i][0] - samples[i - 1][0];
+  if (!(dt > GAP_FLOOR_S)) return false;
+  const around = [];
+  for (let j = Math.max(1, i - GAP_NEIGHBOURS); j <= Math.min(samples.length - 1, i + GAP_NEIGHBOURS); j++) {
+    if (j !== i) around.push(samples[j][0] - samples[j - 1][0]);
+  }
+  if (!around.length) return false;
+  around.sort((a, b) => a - b);
+  return dt > 3 * around[around.length >> 1];
+}
+
+/** The difference of two angles in degrees, within [−180, 180). */
+function turn(d) {
+  return angle360(d + 180) - 180;
+}
+
+/**
+ * The samples of `s` from `from` on as lines of [t, v]: broken at gaps, and an angle unwrapped
+ * (359 → 1 goes on to 361), starting in [0, 360) or near where `refs` says its axis is.
+ */
+function plotLines(s, from, refs) {
+  const lines = [];
+  let line = null;
+  let prevRaw, prevV;
+  let i = s.samples.findIndex(([t]) => t >= from);
+  if (i < 0) return lines;
+  for (; i < s.samples.length; i++) {
+    const [t, raw] = s.samples[i];
+    let v = raw;
+    if (s.angle) {
+      if (prevRaw === undefined) {
+        v = angle360(raw);
+        const ref = refs.get(s.axis);
+        if (ref === undefined) refs.set(s.axis, v);
+        else v += 360 * Math.round((ref - v) / 360);
+      } else {
+        v = prevV + turn(raw - prevRaw);
+      }
+      prevRaw = raw;
+      prevV = v;
+    }
+    if (!line || breaksBefore(s.samples, i)) {
+      line = [];
+      lines.push(line);
+    }
+    line.push([t, v]);
+  }
+  return lines;
 }
 
 function plot(ctx, node) {
   const series = plotSeries(node);
+  const axes = plotAxes(series);
   const windowMs = node.window_ms !== undefined ? num(node.window_ms, 60000) : parseDuration(node.window, 1000, 60000);
   const fixedMin = num(node.min, undefined);
   const fixedMax = num(node.max, undefined);
@@ -527,8 +657,8 @@ function plot(ctx, node) {
     legend.append(item);
     return [item, v];
   });
-  const body = el('div', { style: 'display:flex;flex-direction:column;gap:4px;flex:1;min-height:0' }, wrap, legend);
-  let dirty = true;
+  const body = el('div', { class: 'w-stack' }, wrap, legend);
+  let drawn = null;
   if (!node.label) node = { ...node, label: series.map((x) => x.label).join(' · ') || 'Plot' };
 
   function draw() {
@@ -543,34 +673,71 @@ function plot(ctx, node) {
     g.setTransform(dpr, 0, 0, dpr, 0, 0);
     g.clearRect(0, 0, W, H);
     const now = ctx.serverNow();
-    const t0 = now - windowMs / 1000;
-    let lo = Infinity, hi = -Infinity;
-    for (const s of series) for (const [t, v] of s.samples) if (t >= t0) { if (v < lo) lo = v; if (v > hi) hi = v; }
-    if (fixedMin !== undefined) lo = fixedMin;
-    if (fixedMax !== undefined) hi = fixedMax;
-    if (!Number.isFinite(lo) || !Number.isFinite(hi)) { lo = 0; hi = 1; }
-    if (hi - lo < 1e-9) { lo -= 1; hi += 1; } else if (fixedMin === undefined || fixedMax === undefined) {
-      const pad = (hi - lo) * 0.06;
-      if (fixedMin === undefined) lo -= pad;
-      if (fixedMax === undefined) hi += pad;
-    }
-    const L = 48, R = 8, T = 6, B = 18;
-    const pw = W - L - R, ph = H - T - B;
-    const X = (t) => L + ((t - t0) / (windowMs / 1000)) * pw;
-    const Y = (v) => T + (1 - (v - lo) / (hi - lo)) * ph;
+    const wS = windowMs / 1000;
+    const t0 = now - wS;
+    const refs = new Map();
+    const lines = series.map((s) => plotLines(s, t0 - wS * 0.05, refs));
+    const ranges = axes.map((a, k) => {
+      let lo = Infinity, hi = -Infinity;
+      series.forEach((s, i) => {
+        if (s.axis !== k) return;
+        for (const line of lines[i]) for (const [t, v] of line) if (t >= t0) { if (v < lo) lo = v; if (v > hi) hi = v; }
+      });
+      const fixLo = k === 0 && !a.angle ? fixedMin : undefined;
+      const fixHi = k === 0 && !a.angle ? fixedMax : undefined;
+      if (fixLo !== undefined) lo = fixLo;
+      if (fixHi !== undefined) hi = fixHi;
+      if (!Number.isFinite(lo) || !Number.isFinite(hi)) { lo = 0; hi = 1; }
+      if (hi - lo < 1e-9) { lo -= 1; hi += 1; } else {
+        const pad = (hi - lo) * 0.06;
+        if (fixLo === undefined) lo -= pad;
+        if (fixHi === undefined) hi += pad;
+      }
+      return [lo, hi];
+    });
+    const left = axes.filter((a) => a.side === 'left').length;
+    const right = axes.length - left;
+    const L = Math.max(1, left) * AXIS_W + 2, R = right ? right * AXIS_W + 2 : 8;
+    const T = axes.some((a) => a.unit) ? 18 : 6, B = 18;
+    const pw = Math.max(1, W - L - R), ph = Math.max(1, H - T - B);
+    const X = (t) => L + ((t - t0) / wS) * pw;
+    const Ys = ranges.map(([lo, hi]) => (v) => T + (1 - (v - lo) / (hi - lo)) * ph);
     g.font = '11px ui-monospace, monospace';
     g.lineWidth = 1;
-    const ystep = niceStep(hi - lo, 4);
-    g.textAlign = 'right';
-    g.textBaseline = 'middle';
-    for (let v = Math.ceil(lo / ystep) * ystep; v <= hi + 1e-9; v += ystep) {
-      const y = Math.round(Y(v)) + 0.5;
-      g.strokeStyle = Math.abs(v) < ystep * 1e-6 ? '#2f5d80' : '#173550';
-      g.beginPath(); g.moveTo(L, y); g.lineTo(W - R, y); g.stroke();
-      g.fillStyle = '#7f9bb3';
-      g.fillText(fmtValue(+v.toFixed(6)), L - 5, y);
-    }
-    const wS = windowMs / 1000;
+    const axesDrawn = axes.map((a, k) => {
+      const [lo, hi] = ranges[k];
+      const Y = Ys[k];
+      const x = a.side === 'left' ? L - a.slot * AXIS_W : L + pw + a.slot * AXIS_W;
+      const out = a.side === 'left' ? -1 : 1;
+      const ink = axes.length > 1 ? a.colour : '#7f9bb3';
+      const ystep = niceStep(hi - lo, 4);
+      const ticks = [];
+      g.textAlign = a.side === 'left' ? 'right' : 'left';
+      g.textBaseline = 'middle';
+      for (let v = Math.ceil(lo / ystep) * ystep; v <= hi + 1e-9; v += ystep) {
+        const y = Math.round(Y(v)) + 0.5;
+        if (k === 0) {
+          g.strokeStyle = Math.abs(v) < ystep * 1e-6 && !a.angle ? '#2f5d80' : '#173550';
+          g.beginPath(); g.moveTo(L, y); g.lineTo(L + pw, y); g.stroke();
+        }
+        g.strokeStyle = '#1f4563';
+        g.beginPath(); g.moveTo(x, y); g.lineTo(x + 4 * out, y); g.stroke();
+        const text = a.angle ? fmtAngle(+v.toFixed(6)) : fmtValue(+v.toFixed(6));
+        g.fillStyle = ink;
+        g.fillText(text, x + 5 * out, y);
+        ticks.push(text);
+      }
+      if (a.slot > 0) {
+        g.strokeStyle = '#1f4563';
+        g.beginPath(); g.moveTo(x + 0.5, T); g.lineTo(x + 0.5, T + ph); g.stroke();
+      }
+      if (a.unit) {
+        g.fillStyle = ink;
+        g.textBaseline = 'bottom';
+        g.fillText(a.unit, x + 5 * out, T - 3);
+      }
+      return { unit: a.unit, angle: a.angle, side: a.side, min: lo, max: hi, ticks };
+    });
     const tstep = niceStep(wS, 4);
     g.textAlign = 'center';
     g.textBaseline = 'top';
@@ -579,31 +746,47 @@ function plot(ctx, node) {
       g.strokeStyle = '#173550';
       g.beginPath(); g.moveTo(x, T); g.lineTo(x, T + ph); g.stroke();
       g.fillStyle = '#7f9bb3';
-      g.fillText(a === 0 ? 'now' : `-${fmtValue(+a.toFixed(3))}s`, Math.min(W - R - 12, Math.max(L + 12, x)), T + ph + 3);
+      g.fillText(a === 0 ? 'now' : `-${fmtValue(+a.toFixed(3))}s`, Math.min(L + pw - 12, Math.max(L + 12, x)), T + ph + 3);
     }
     g.save();
     g.beginPath(); g.rect(L, T, pw, ph); g.clip();
-    for (const s of series) {
+    const linesDrawn = [];
+    series.forEach((s, i) => {
+      const Y = Ys[s.axis];
       g.strokeStyle = s.colour;
+      g.fillStyle = s.colour;
       g.lineWidth = 2;
-      g.beginPath();
-      let started = false;
-      for (const [t, v] of s.samples) {
-        if (t < t0 - wS * 0.05) continue;
-        const x = X(t), y = Y(v);
-        if (!started) { g.moveTo(x, y); started = true; } else g.lineTo(x, y);
+      for (const line of lines[i]) {
+        const points = line.map(([t, v]) => [X(t), Y(v)]);
+        if (points.length === 1) {
+          g.beginPath(); g.arc(points[0][0], points[0][1], 1.5, 0, Math.PI * 2); g.fill();
+        } else {
+          g.beginPath();
+          points.forEach(([x, y], j) => (j ? g.lineTo(x, y) : g.moveTo(x, y)));
+          g.stroke();
+        }
+        linesDrawn.push({ series: s.label, axis: s.axis, points: points.map(([x, y]) => [+x.toFixed(1), +y.toFixed(1)]) });
       }
-      g.stroke();
-      const last = s.samples[s.samples.length - 1];
+      const last = lines[i].length ? lines[i][lines[i].length - 1].at(-1) : undefined;
       if (last && last[0] >= t0) {
-        g.fillStyle = s.colour;
         g.beginPath(); g.arc(X(last[0]), Y(last[1]), 3, 0, Math.PI * 2); g.fill();
       }
-    }
+    });
     g.restore();
     g.strokeStyle = '#1f4563';
     g.strokeRect(L + 0.5, T + 0.5, pw, ph);
-    dirty = false;
+    drawn = { area: { left: L, top: T, width: pw, height: ph }, axes: axesDrawn, lines: linesDrawn };
+  }
+
+  /** Drops what is out of the window (and more than 20000 samples a series). */
+  function trim() {
+    const cut = ctx.serverNow() - windowMs / 1000 * 1.2;
+    for (const s of series) {
+      let k = 0;
+      while (k < s.samples.length && s.samples[k][0] < cut) k++;
+      if (k) s.samples.splice(0, k);
+      if (s.samples.length > 20000) s.samples.splice(0, s.samples.length - 20000);
+    }
   }
 
   const topics = series.map((s) => [s.bind.topic]);
@@ -614,21 +797,28 @@ function plot(ctx, node) {
         if (!t || !t.fields) return;
         const v = t.fields[s.bind.field];
         const stamp = num(t.stamp, NaN);
-        if (typeof v === 'number' && Number.isFinite(v) && stamp !== s.lastStamp) {
-          s.lastStamp = stamp;
-          s.samples.push([stamp, v]);
-          dirty = true;
+        if (typeof v === 'number' && Number.isFinite(v) && Number.isFinite(stamp)) {
+          s.samples = mergeByStamp(s.samples, [[stamp, v]], (x) => x[0]);
         }
-        const txt = fmtValue(v, node.precision);
+        const txt = fmtOutput({ angle: s.angle, precision: node.precision }, v);
         if (legendVals[i][1].textContent !== txt) legendVals[i][1].textContent = txt;
       });
-      const cut = ctx.serverNow() - windowMs / 1000 * 1.2;
+      trim();
+    },
+    onBacklog(backlog) {
       for (const s of series) {
-        let k = 0;
-        while (k < s.samples.length && s.samples[k][0] < cut) k++;
-        if (k) s.samples.splice(0, k);
-        if (s.samples.length > 20000) s.samples.splice(0, s.samples.length - 20000);
+        const list = backlog[s.bind.topic];
+        if (!Array.isArray(list)) continue;
+        const got = [];
+        for (const m of list) {
+          const v = m && m.fields ? m.fields[s.bind.field] : undefined;
+          const stamp = num(m && m.stamp, NaN);
+          if (typeof v === 'number' && Number.isFinite(v) && Number.isFinite(stamp)) got.push([stamp, v]);
+        }
+        s.samples = mergeByStamp(s.samples, got.sort((a, b) => a[0] - b[0]), (x) => x[0]);
       }
+      trim();
+      draw();
     },
     tick() {
       const now = ctx.serverNow();
@@ -637,10 +827,10 @@ function plot(ctx, node) {
         const last = s.samples[s.samples.length - 1];
         legendVals[i][0].classList.toggle('stale', !last || now - last[0] > fresh);
       });
-      dirty = true;
       draw();
     },
-    redraw() { dirty = true; draw(); },
+    redraw: draw,
+    drawn: () => drawn,
   });
 }
 
@@ -664,17 +854,34 @@ function track(ctx, node) {
   const trailN = Math.max(2, Math.round(num(node.trail, 600)));
   const waypoints = parseWaypoints(node.waypoints);
   const gridAttr = node.grid;
-  const trail = [];
-  let lastStamp;
+  // positions oldest first, {lat, lon, t}: one per stamp, none the same as the one before
+  let trail = [];
   let origin = waypoints.length ? { ...waypoints[0] } : null;
   let heading;
   const wrap = el('div', { class: 'track-wrap' });
   const s = svg('svg', { role: 'img', 'aria-label': node.label || 'vehicle track' });
   wrap.append(s);
   const info = el('div', { class: 'track-info', 'data-testid': 'track-info' });
-  const body = el('div', { style: 'display:flex;flex-direction:column;gap:4px;flex:1;min-height:0' }, wrap, info);
+  const body = el('div', { class: 'w-stack' }, wrap, info);
   let dirty = true;
   if (!node.label) node = { ...node, label: 'Track' };
+
+  /** Takes in positions (oldest first): merged by stamp, the trail kept to `trail` points. */
+  function addPositions(more) {
+    const before = trail.length;
+    const merged = mergeByStamp(trail, more, (p) => p.t);
+    if (merged === trail && merged.length === before) return;
+    trail = merged.filter((p, i) => i === 0 || p.lat !== merged[i - 1].lat || p.lon !== merged[i - 1].lon);
+    if (trail.length > trailN) trail.splice(0, trail.length - trailN);
+    dirty = true;
+  }
+
+  /** A position message's point, or null. */
+  function positionOf(m) {
+    if (!m || !m.fields) return null;
+    const p = { lat: num(m.fields.lat, NaN), lon: num(m.fields.lon, NaN), t: num(m.stamp, NaN) };
+    return Number.isFinite(p.lat) && Number.isFinite(p.lon) && Number.isFinite(p.t) ? p : null;
+  }
 
   const project = (p) => {
     const lat0 = origin.lat * Math.PI / 180;
@@ -738,6 +945,7 @@ function track(ctx, node) {
       s.append(svg('polyline', {
         points: pts.map(([x, y]) => `${SX(x).toFixed(1)},${SY(y).toFixed(1)}`).join(' '),
         fill: 'none', stroke: '#3fc1e0', 'stroke-width': 2, 'stroke-linejoin': 'round', opacity: 0.9,
+        'data-testid': 'trail',
       }));
     }
     if (pts.length) {
@@ -776,34 +984,30 @@ function track(ctx, node) {
   const topicsList = [posNames];
   return outputWidget(ctx, node, 'track', body, topicsList, {
     update() {
-      const t = positionTopic();
-      if (t && t.fields) {
-        const lat = num(t.fields.lat, NaN), lon = num(t.fields.lon, NaN);
-        if (Number.isFinite(lat) && Number.isFinite(lon) && t.stamp !== lastStamp) {
-          lastStamp = t.stamp;
-          if (!origin) origin = { lat, lon };
-          const prev = trail[trail.length - 1];
-          if (!prev || prev.lat !== lat || prev.lon !== lon) {
-            trail.push({ lat, lon });
-            if (trail.length > trailN) trail.splice(0, trail.length - trailN);
-          } else {
-            trail[trail.length - 1] = { lat, lon };
-          }
-          dirty = true;
-        }
+      const p = positionOf(positionTopic());
+      if (p) {
+        if (!origin) origin = { lat: p.lat, lon: p.lon };
+        addPositions([p]);
       }
       const h = valueOf(ctx, headB);
       if (h !== heading) { heading = typeof h === 'number' ? h : undefined; dirty = true; }
       const cur = trail[trail.length - 1];
       const parts = [];
       if (cur) parts.push(`${cur.lat.toFixed(6)}, ${cur.lon.toFixed(6)}`);
-      if (typeof heading === 'number') parts.push(`hdg ${heading.toFixed(0)}°`);
+      if (typeof heading === 'number') parts.push(`hdg ${fmtAngle(heading, 0)}°`);
       if (cur && origin) {
         const [x, y] = project(cur);
         parts.push(`${x >= 0 ? 'E' : 'W'} ${Math.abs(x).toFixed(0)} m  ${y >= 0 ? 'N' : 'S'} ${Math.abs(y).toFixed(0)} m from ${waypoints.length ? 'WP1' : 'start'}`);
       }
       const txt = parts.join('   ');
       if (info.textContent !== txt) info.textContent = txt;
+    },
+    onBacklog(backlog) {
+      const list = posNames.map((n) => backlog[n]).find(Array.isArray) || [];
+      addPositions(list.map(positionOf).filter(Boolean).sort((a, b) => a.t - b.t));
+      // without waypoints the trail's start is where distances are measured from
+      if (!waypoints.length && trail.length) origin = { lat: trail[0].lat, lon: trail[0].lon };
+      draw();
     },
     tick: () => draw(),
     redraw() { dirty = true; draw(); },
@@ -843,7 +1047,7 @@ function health(ctx, node) {
   const sev = el('span', { class: 'health-severity', 'data-testid': 'severity', text: 'severity —' });
   const tbody = el('tbody');
   const table = el('table', { class: 'tbl' },
-    el('thead', {}, el('tr', {}, ['component', 'online', 'healthy', 'data', 'state'].map((h) => el('th', { scope: 'col', text: h })))),
+    el('thead', {}, el('tr', {}, ['component', 'online', 'healthy', 'data', 'state', 'why'].map((h) => el('th', { scope: 'col', text: h })))),
     tbody);
   const extra = el('div', { class: 'fields' });
   const body = el('div', { style: 'display:flex;flex-direction:column;gap:6px;flex:1;min-height:0' }, sev, el('div', { class: 'scroll' }, table, extra));
@@ -863,6 +1067,8 @@ function health(ctx, node) {
       sev.textContent = `severity ${sevName}`;
       sev.className = `health-severity sev-${sevName.toUpperCase()}`;
       let comps = m.components !== undefined ? m.components : m.Components;
+      // why each unhealthy component is so ("nav.position silent for 4.2 s")
+      const reasons = m.reasons && typeof m.reasons === 'object' ? m.reasons : {};
       if (comps && typeof comps === 'object' && !Array.isArray(comps)) {
         for (const [name, c] of Object.entries(comps)) {
           let online, healthy, data, state;
@@ -880,13 +1086,14 @@ function health(ctx, node) {
           const stText = typeof state === 'object' ? fmtValue(state) : String(state ?? '');
           tbody.append(el('tr', { 'data-component': name },
             el('td', { text: name }), el('td', {}, yesNo(online)), el('td', {}, yesNo(healthy)), el('td', {}, yesNo(data)),
-            el('td', { class: `st-${stText.toUpperCase()}`, text: stText })));
+            el('td', { class: `st-${stText.toUpperCase()}`, text: stText }),
+            el('td', { class: 'health-reason', 'data-testid': 'health-reason', text: reasons[name] !== undefined ? String(reasons[name]) : '' })));
         }
       } else if (comps !== undefined) {
         extra.append(el('div', { text: `components: ${fmtValue(comps)}` }));
       }
       for (const [k, v] of Object.entries(m)) {
-        if (['severity', 'Severity', 'components', 'Components'].includes(k)) continue;
+        if (['severity', 'Severity', 'components', 'Components', 'reasons'].includes(k)) continue;
         extra.append(el('div', { class: 'fields', text: `${k}: ${fmtValue(v)}` }));
       }
     },
@@ -1042,7 +1249,7 @@ function input(ctx, node, kind) {
     sync = () => {
       if (dragging) return;
       const v = ctx.fieldValue(ref.name, ref.field);
-      if (typeof v === 'number') { r.value = String(v); show(); }
+      if (typeof v === 'number') { r.value = String(v); show(); } else out.textContent = '—';
     };
     controls.push(r);
     control = [r, out];
@@ -1091,13 +1298,13 @@ function input(ctx, node, kind) {
     const state = el('span', { class: 'input-value', 'data-testid': 'input-value' });
     c.addEventListener('change', () => {
       const v = c.checked ? onV : offV;
-      state.textContent = fmtValue(v);
+      state.textContent = fmtOutput(SWITCH_WORDS, v);
       ctx.setAndSend(ref.name, ref.field, v);
     });
     sync = () => {
       const v = ctx.fieldValue(ref.name, ref.field);
       c.checked = v === onV || String(v) === String(onV);
-      state.textContent = fmtValue(v);
+      state.textContent = fmtOutput(SWITCH_WORDS, v);
     };
     controls.push(c);
     control = [el('label', { class: 'switch' }, c), state];
@@ -1123,7 +1330,16 @@ function input(ctx, node, kind) {
       why.textContent = dis ? a.why : '';
       why.hidden = !dis;
     },
-    sync: sync || (() => {}),
+    sync() {
+      if (sync) sync();
+      if (!ref.field || !ctx.fieldSource) return;
+      // where the value shown comes from; a field the pilot changed is marked until it is sent
+      const src = ctx.fieldSource(ref.name, ref.field);
+      e.dataset.source = src;
+      e.classList.toggle('changed', src === 'changed');
+      e.classList.toggle('no-value', src === 'unknown');
+      e.title = src === 'unknown' ? 'no value yet: nothing commanded or measured' : e.title;
+    },
   };
   ctx.register(w);
   w.permissions();

@@ -5,17 +5,21 @@
 //!          layouts="console/pilot.xml console/scientist.xml" ack_timeout="5s"/>
 //! ```
 //!
-//! [`specs`] reads the elements (`seabus check` and `seabus run` both use it); [`Console::start`]
-//! binds the address, attaches to the medium and runs the [`Hub`]'s reader and watchdog and the
-//! [`server`](crate::server).
+//! [`specs`] reads the elements; [`check`] is the one validation `seabus check` and `seabus run`
+//! share (the system, then each console's attributes, users and layouts, and the layouts against
+//! the system); [`Console::start`] binds the address, attaches to the medium and runs the
+//! [`Hub`]'s reader and watchdog and the [`server`](crate::server).
 
+use crate::auth::Sessions;
 use crate::hub::{Hub, Settings};
+use crate::layout::Layout;
 use crate::users::Users;
-use seabus_medium::xml::{Element, FileError};
+use seabus_medium::xml::{Attr, Element, FileError};
 use seabus_medium::{Kind, Medium, Pattern};
-use seabus_modules::system::SystemSpec;
+use seabus_modules::system::{self, Report, SystemSpec};
+use seabus_modules::{Catalogue, Registry};
 use std::net::SocketAddr;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -33,6 +37,9 @@ pub struct ConsoleSpec {
     pub medium: String,
     /// The users file (required except where users are given in code).
     pub users: Option<PathBuf>,
+    /// The session file: attribute `sessions`, else beside the users file
+    /// ([`sessions_beside`](crate::auth::sessions_beside)); none: sessions end with the console.
+    pub sessions: Option<PathBuf>,
     /// Everything else.
     pub settings: Settings,
     /// The element, for errors.
@@ -45,6 +52,17 @@ fn duration(el: &Element, name: &str, default: Duration) -> Result<Duration, Fil
         Some(a) => seabus_medium::parse::parse_duration(&a.value)
             .ok_or_else(|| a.error(format!("`{}` is not a duration (such as 5s)", a.value))),
     }
+}
+
+/// The `history` attribute: how far back plotted and tracked variables are kept, from 10 s to
+/// 24 h (default 10 min).
+fn history(el: &Element) -> Result<Duration, FileError> {
+    let d = duration(el, "history", Duration::from_secs(600))?;
+    if d < Duration::from_secs(10) || d > Duration::from_secs(24 * 3600) {
+        let a = el.required("history")?;
+        return Err(a.error("`history` is how far back plots are kept: from 10s to 24h"));
+    }
+    Ok(d)
 }
 
 /// Reads the `<console>` elements of a system.
@@ -60,6 +78,8 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<ConsoleSpec>, FileError> {
             "log",
             "lease_role",
             "designer_role",
+            "sessions",
+            "history",
         ])?;
         el.only_children(&[])?;
         let medium = el
@@ -103,11 +123,16 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<ConsoleSpec>, FileError> {
             el.get(name)
                 .map_or_else(|| default.to_string(), |r| r.trim().to_string())
         };
+        let users = el
+            .get("users")
+            .map(|u| seabus_modules::system::beside(&el.pos, u));
         out.push(ConsoleSpec {
             medium,
-            users: el
-                .get("users")
-                .map(|u| seabus_modules::system::beside(&el.pos, u)),
+            sessions: el.get("sessions").map_or_else(
+                || users.as_deref().map(crate::auth::sessions_beside),
+                |s| Some(seabus_modules::system::beside(&el.pos, s)),
+            ),
+            users,
             settings: Settings {
                 listen,
                 ack_timeout: duration(el, "ack_timeout", Duration::from_secs(5))?,
@@ -117,11 +142,128 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<ConsoleSpec>, FileError> {
                     .get("log")
                     .map(|l| seabus_modules::system::beside(&el.pos, l)),
                 layouts,
+                history: history(el)?,
             },
             element: el.clone(),
         });
     }
     Ok(out)
+}
+
+/// What a console without a `users` attribute is told.
+const NEEDS_USERS: &str = "a console needs `users`, a users file with password hashes (`seabus user \
+     add FILE NAME --roles pilot` writes one); only `seabus demo` makes its own users";
+
+/// A console ready to start: its element read, its users and its layouts loaded.
+#[derive(Debug, Clone)]
+pub struct Ready {
+    /// The `<console>` element, read.
+    pub spec: ConsoleSpec,
+    /// Who may log in.
+    pub users: Users,
+    /// Its layouts, read with their variables' defaults.
+    pub layouts: Vec<Layout>,
+}
+
+/// What [`check`] found in a system it accepts.
+#[derive(Debug)]
+pub struct Checked {
+    /// The system's own warnings (route cycles).
+    pub report: Report,
+    /// Every console, ready to start.
+    pub consoles: Vec<Ready>,
+    /// Warnings about the consoles' layouts against the system (`FILE:LINE:COL: warning: …`).
+    pub warnings: Vec<FileError>,
+}
+
+/// Validates a system before anything of it starts; `seabus check` and `seabus run` both call it,
+/// so that they refuse the same files with the same message. In order, the first error wins: the
+/// system itself ([`system::check`]); every `<console>` element ([`specs`]: attributes, medium);
+/// two consoles on one port; then for each console its users file (it must exist and read, each
+/// user well formed) and each layout file (it must exist, read and expand). A layout that reads is
+/// compared with the system ([`Layout::check_on`]): what it finds are warnings. `given` are users
+/// made in code (the demo's), given to every console instead of a users file.
+///
+/// What only the running system can tell is not checked: a medium that cannot be opened, an
+/// address already in use.
+pub fn check(
+    spec: &SystemSpec,
+    registry: &Registry,
+    catalogue: &Catalogue,
+    given: Option<&Users>,
+) -> Result<Checked, FileError> {
+    let report = system::check(spec, registry, catalogue)?;
+    let specs = specs(spec)?;
+    distinct_addresses(&specs)?;
+    let mut consoles = Vec::new();
+    let mut warnings = Vec::new();
+    for cs in specs {
+        let users = match given {
+            Some(u) => u.clone(),
+            None => users_of(&cs)?,
+        };
+        let attr = cs.element.required("layouts")?;
+        let mut layouts = Vec::new();
+        for path in &cs.settings.layouts {
+            readable(attr, path, "layout")?;
+            let layout = Layout::load(path, &Default::default())?;
+            warnings.extend(layout.check_on(spec, registry, catalogue, &cs.medium));
+            layouts.push(layout);
+        }
+        consoles.push(Ready {
+            spec: cs,
+            users,
+            layouts,
+        });
+    }
+    Ok(Checked {
+        report,
+        consoles,
+        warnings,
+    })
+}
+
+/// The users of a console: its `users` file, which must exist and read.
+fn users_of(cs: &ConsoleSpec) -> Result<Users, FileError> {
+    let (Some(path), Some(attr)) = (&cs.users, cs.element.attr("users")) else {
+        return Err(cs.element.error(NEEDS_USERS));
+    };
+    readable(attr, path, "users file")?;
+    Users::load(path)
+}
+
+/// Refuses a file named by `attr` that cannot be opened; the error is placed at the attribute.
+fn readable(attr: &Attr, path: &Path, what: &str) -> Result<(), FileError> {
+    std::fs::File::open(path)
+        .map(drop)
+        .map_err(|e| attr.error(format!("cannot read the {what} {}: {e}", path.display())))
+}
+
+/// Refuses a console that listens on the port of an earlier one (port 0 takes any free port).
+fn distinct_addresses(specs: &[ConsoleSpec]) -> Result<(), FileError> {
+    for (i, b) in specs.iter().enumerate() {
+        let x = b.settings.listen;
+        let clash = |a: &&ConsoleSpec| {
+            let y = a.settings.listen;
+            x.port() != 0
+                && y.port() == x.port()
+                && (y.ip() == x.ip() || y.ip().is_unspecified() || x.ip().is_unspecified())
+        };
+        if let Some(a) = specs[..i].iter().find(clash) {
+            let msg = format!(
+                "`{x}`: the console at line {} listens on {} already; give each console a port \
+                 of its own",
+                a.element.pos.line, a.settings.listen
+            );
+            return Err(match b.element.attr("listen") {
+                Some(attr) => attr.error(msg),
+                None => b
+                    .element
+                    .error(format!("{msg} (this one listens on the default)")),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// A running console.
@@ -145,16 +287,28 @@ impl Console {
             .map_err(|e| format!("console: cannot listen on {}: {e}", spec.settings.listen))?;
         let addr = listener.local_addr().map_err(|e| e.to_string())?;
         let mut reader = medium.attach_with("console", 1 << 14, 256);
-        reader
-            .subscribe_kind("**", Some(Kind::Data))
-            .map_err(|e| e.to_string())?;
-        let hub = Arc::new(Hub::new(
+        // data, and the commands others send (what pages' inputs start from)
+        for kind in [Kind::Data, Kind::Command] {
+            reader
+                .subscribe_kind("**", Some(kind))
+                .map_err(|e| e.to_string())?;
+        }
+        let mut hub = Hub::new(
             spec.settings.clone(),
             users,
             medium.attach("console-commands"),
             produced,
-        ));
+        );
+        if let Some(path) = &spec.sessions {
+            hub.sessions = Sessions::open(path, &hub.users);
+        }
+        hub.follow_layouts();
+        let hub = Arc::new(hub);
         let mut tasks = Vec::new();
+        tasks.push(tokio::spawn({
+            let hub = hub.clone();
+            async move { hub.sessions.keep().await }
+        }));
         tasks.push(tokio::spawn({
             let hub = hub.clone();
             async move { hub.read(reader).await }
@@ -197,5 +351,7 @@ impl Drop for Console {
         for t in &self.tasks {
             t.abort();
         }
+        // sessions started since the last write are kept too
+        self.hub.sessions.save_now();
     }
 }

@@ -2,11 +2,12 @@
 //! logged-in session may open.
 //!
 //! Routes: `GET /` (the console, or a redirect to `/login`), `GET /login` and `POST /login`
-//! (form fields `name`, `password`; limited by [`crate::auth::Limiter`]), `GET /logout`,
+//! (form fields `name`, `password`; limited by [`crate::auth::Limiter`]; a right one gets a
+//! session, see [`crate::auth::Sessions`]), `GET /logout`,
 //! `GET /assets/{file}` (embedded), `GET /ws`. Every connection is a [`Client`] of the [`Hub`].
 
 use crate::assets;
-use crate::auth::{COOKIE, Session};
+use crate::auth::{COOKIE, Key, QUEUE_WAIT, Refused, Session};
 use crate::hub::{Client, Hub};
 use axum::Router;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
@@ -18,7 +19,7 @@ use futures_util::{SinkExt, StreamExt};
 use seabus_medium::DataMap;
 use serde_json::{Value as Json, json};
 use std::collections::BTreeMap;
-use std::net::SocketAddr;
+use std::net::{IpAddr, SocketAddr};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -109,10 +110,11 @@ fn token(headers: &HeaderMap) -> Option<String> {
         .map(|(_, v)| v.to_string())
 }
 
-fn session(hub: &Hub, headers: &HeaderMap) -> Option<(String, Session)> {
-    let t = token(headers)?;
-    let s = hub.sessions.get(&t)?;
-    Some((t, s))
+/// The request's session and the key it is known by.
+fn session(hub: &Hub, headers: &HeaderMap) -> Option<(Key, Session)> {
+    let key = Key::of(&token(headers)?)?;
+    let s = hub.sessions.find(&key)?;
+    Some((key, s))
 }
 
 fn file(name: &str) -> Response {
@@ -168,6 +170,52 @@ fn back_to_login(error: &str) -> Response {
     Redirect::to(&login_url(error)).into_response()
 }
 
+/// The answer to a log-in refused for too many failures: 429 for programs; a browser is sent on to
+/// the log-in page, which says why.
+fn limited(wait: Duration) -> Response {
+    let to = login_url(&format!(
+        "Too many failed log-ins: try again in {} s",
+        wait.as_secs().max(1)
+    ));
+    let page = format!(
+        "<!doctype html><meta http-equiv=\"refresh\" content=\"0; url={to}\"><title>seabus console</title>"
+    );
+    let mut r = (StatusCode::TOO_MANY_REQUESTS, axum::response::Html(page)).into_response();
+    if let Ok(v) = HeaderValue::from_str(&wait.as_secs().max(1).to_string()) {
+        r.headers_mut().insert(header::RETRY_AFTER, v);
+    }
+    r
+}
+
+/// Checks a log-in: it waits its turn under the limit, then for one of the few password checks
+/// that run at once (each takes tens of milliseconds and ~19 MiB); the user's roles when right.
+async fn check(
+    hub: Arc<Hub>,
+    ip: IpAddr,
+    name: String,
+    password: String,
+) -> Result<Vec<String>, Refused> {
+    let attempt = hub.limiter.attempt(ip, &name).await?;
+    let Ok(Ok(_permit)) = tokio::time::timeout(QUEUE_WAIT, hub.checks.acquire()).await else {
+        return Err(attempt.busy());
+    };
+    let verified = {
+        let hub = hub.clone();
+        tokio::task::spawn_blocking(move || {
+            hub.users.verify(&name, &password).map(|u| u.roles.clone())
+        })
+        .await
+    };
+    match verified {
+        Ok(Some(roles)) => {
+            attempt.succeed();
+            Ok(roles)
+        }
+        Ok(None) => Err(attempt.fail()),
+        Err(_) => Err(attempt.busy()),
+    }
+}
+
 async fn login(
     State(hub): State<Arc<Hub>>,
     ConnectInfo(addr): ConnectInfo<SocketAddr>,
@@ -181,45 +229,18 @@ async fn login(
     if !crate::users::is_name(&form.name) {
         return back_to_login("Wrong name or password");
     }
-    if let Err(wait) = hub.limiter.attempt(ip, &form.name) {
-        tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in refused: too many failures");
-        // 429 for programs; a browser is sent on to the log-in page, which says why
-        let to = login_url(&format!(
-            "Too many failed log-ins: try again in {} s",
-            wait.as_secs().max(1)
-        ));
-        let page = format!(
-            "<!doctype html><meta http-equiv=\"refresh\" content=\"0; url={to}\"><title>seabus console</title>"
-        );
-        let mut r = (StatusCode::TOO_MANY_REQUESTS, axum::response::Html(page)).into_response();
-        if let Ok(v) = HeaderValue::from_str(&wait.as_secs().max(1).to_string()) {
-            r.headers_mut().insert(header::RETRY_AFTER, v);
+    // checked in a task of its own: a failure counts even when the client hangs up meanwhile
+    let checked = tokio::spawn(check(hub.clone(), ip, form.name.clone(), form.password)).await;
+    let roles = match checked {
+        Ok(Ok(roles)) => roles,
+        Ok(Err(Refused::Wrong)) => return back_to_login("Wrong name or password"),
+        Ok(Err(Refused::Limited(wait))) => return limited(wait),
+        Ok(Err(Refused::Busy)) | Err(_) => {
+            let mut r = back_to_login("The console is busy: try again");
+            *r.status_mut() = StatusCode::SERVICE_UNAVAILABLE;
+            return r;
         }
-        return r;
-    }
-    // a password check takes tens of milliseconds and ~19 MiB: a few at a time
-    let Ok(_permit) = hub.checks.try_acquire() else {
-        let mut r = back_to_login("The console is busy: try again");
-        *r.status_mut() = StatusCode::SERVICE_UNAVAILABLE;
-        return r;
     };
-    let checked = {
-        let hub = hub.clone();
-        let name = form.name.clone();
-        tokio::task::spawn_blocking(move || {
-            hub.users
-                .verify(&name, &form.password)
-                .map(|u| u.roles.clone())
-        })
-        .await
-        .ok()
-        .flatten()
-    };
-    let Some(roles) = checked else {
-        tracing::warn!(component = "console", address = %ip, user = %form.name, "log-in failed");
-        return back_to_login("Wrong name or password");
-    };
-    hub.limiter.succeed(ip, &form.name);
     let Some(t) = hub.sessions.start(&form.name, &roles) else {
         return (
             StatusCode::INTERNAL_SERVER_ERROR,
@@ -237,11 +258,13 @@ async fn login(
 }
 
 async fn logout(State(hub): State<Arc<Hub>>, headers: HeaderMap) -> Response {
-    if let Some((t, session)) = session(&hub, &headers) {
-        hub.sessions.end(&t);
+    if let Some((key, session)) = session(&hub, &headers) {
+        hub.sessions.end(&key);
         tracing::info!(component = "console", user = %session.user, "logged out");
         // control goes with its holder's log-out (for anyone else there is nothing to release)
         let _ = hub.lease(&session, false).await;
+        // the log-out is in the session file before it is answered
+        hub.sessions.save().await;
     }
     let mut r = Redirect::to("/login").into_response();
     r.headers_mut().insert(
@@ -270,7 +293,7 @@ async fn ws(
     headers: HeaderMap,
     upgrade: WebSocketUpgrade,
 ) -> Response {
-    let Some((token, session)) = session(&hub, &headers) else {
+    let Some((key, session)) = session(&hub, &headers) else {
         return (StatusCode::UNAUTHORIZED, "log in first").into_response();
     };
     if !same_origin(&headers) {
@@ -278,10 +301,10 @@ async fn ws(
     }
     upgrade
         .max_message_size(MAX_MESSAGE)
-        .on_upgrade(move |socket| connection(hub, token, session, socket))
+        .on_upgrade(move |socket| connection(hub, key, session, socket))
 }
 
-async fn connection(hub: Arc<Hub>, token: String, session: Session, socket: WebSocket) {
+async fn connection(hub: Arc<Hub>, key: Key, session: Session, socket: WebSocket) {
     let mut client = hub.connect(session);
     let (mut sink, mut stream) = socket.split();
     let mut events = hub.events();
@@ -325,7 +348,7 @@ async fn connection(hub: Arc<Hub>, token: String, session: Session, socket: WebS
             },
             _ = tick.tick() => {
                 // logged out elsewhere: the connection ends with the session
-                if hub.sessions.get(&token).is_none() {
+                if hub.sessions.find(&key).is_none() {
                     break;
                 }
                 if let Some(data) = hub.data_for(&mut client) {
@@ -388,7 +411,8 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
                         .collect()
                 })
                 .unwrap_or_default();
-            vec![hub.open(client, &s("layout"), &vars)]
+            let opened = hub.open(client, &s("layout"), &vars);
+            std::iter::once(opened).chain(hub.backlog(client)).collect()
         }
         "lease" => {
             let take = match s("action").as_str() {

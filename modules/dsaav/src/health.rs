@@ -29,7 +29,12 @@
 //!   is OFFLINE once it has sent none for `timeout`; `passive` — the monitor polls it every `poll`
 //!   and it is OFFLINE once it has not answered for `timeout`, which must be longer than `poll`;
 //!   `link` — the component is the link of medium `medium`: HEALTHY while the link is up, OFFLINE
-//!   while it is down, no timeout.
+//!   while it is down, no timeout; `data` — the component is the data it publishes: each of its
+//!   `<data topic="…" period="…"/>` children names a topic and the expected time between two
+//!   messages on it; a topic silent for `unavailable-after` (default four periods) makes the
+//!   component UNAVAILABLE, silent for `timeout` OFFLINE, and a message on it makes it HEALTHY
+//!   again. `period`, `unavailable-after` and `timeout` on the component are defaults for its
+//!   topics.
 //! - `<severity state="…" level="…"/>` maps a component state (HEALTHY, UNAVAILABLE, MALFUNCTION,
 //!   OFFLINE) to a severity level (NONE, WARN, ABORT, EMERGENCY); names are read in any case. Inside
 //!   `<component>` it holds for that component; directly inside `<health>` for every component.
@@ -41,7 +46,7 @@
 //! Every error names file, line and column and what was expected:
 //!
 //! ```text
-//! health.xml:2:23: attribute `mode`: `sleepy` is not a mode: active, passive or link
+//! health.xml:2:23: attribute `mode`: `sleepy` is not a mode: active, passive, link or data
 //! health.xml:4:5: state OFFLINE already has a severity at line 3
 //! ```
 //!
@@ -49,13 +54,15 @@
 //!
 //! A [`Monitor`] starts with every component HEALTHY, each given one timeout to send its first
 //! update, and the severity NONE. [`Monitor::report`] takes an update (sent by an active component
-//! or a poll's answer), [`Monitor::link`] a medium's link state, and [`Monitor::tick`] marks OFFLINE
-//! every timed component silent for its timeout and asks for the polls that are due (the first at
-//! once, then one each `poll`). The vehicle severity is the highest severity of the components'
-//! states. Each call returns what changed as [`Event`]s: component states, the severity, the
-//! emergency action (once per entry into EMERGENCY) and polls. Updates from components the rules
-//! do not name are ignored and counted. [`Monitor::snapshot`] is the datamap the monitor
-//! publishes.
+//! or a poll's answer), [`Monitor::link`] a medium's link state, [`Monitor::data`] a message on a
+//! watched topic, and [`Monitor::tick`] marks OFFLINE every timed component silent for its timeout,
+//! UNAVAILABLE or OFFLINE every data component whose topics have fallen silent, and asks for the
+//! polls that are due (the first at once, then one each `poll`). The vehicle severity is the
+//! highest severity of the components' states. Each call returns what changed as [`Event`]s:
+//! component states, the severity, the emergency action (once per entry into EMERGENCY) and polls.
+//! Updates from components the rules do not name are ignored and counted. [`Monitor::snapshot`] is
+//! the datamap the monitor publishes, with the reason of every component that is not HEALTHY
+//! (`nav.position silent for 4.2 s`).
 
 use seabus_medium::parse::{parse_duration, parse_field, split_words};
 use seabus_medium::xml::{self, Attr, Element, FileError, Pos};
@@ -282,14 +289,47 @@ pub enum Mode {
         /// The medium's name.
         medium: String,
     },
+    /// The component is the data it publishes: UNAVAILABLE or OFFLINE while a topic is silent.
+    Data {
+        /// The topics it publishes, in file order, each once.
+        topics: Vec<DataTopic>,
+    },
+}
+
+/// A topic a data component publishes, and how long it may be silent.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DataTopic {
+    /// The topic.
+    pub topic: Topic,
+    /// The expected time between two messages.
+    pub period: Duration,
+    /// The silence that makes the component UNAVAILABLE (longer than `period`).
+    pub unavailable_after: Duration,
+    /// The silence that makes the component OFFLINE (longer than `unavailable_after`).
+    pub timeout: Duration,
+}
+
+impl DataTopic {
+    /// The state a silence of `silent` on this topic puts its component in.
+    pub fn state_after(&self, silent: Duration) -> ComponentState {
+        if silent >= self.timeout {
+            ComponentState::Offline
+        } else if silent >= self.unavailable_after {
+            ComponentState::Unavailable
+        } else {
+            ComponentState::Healthy
+        }
+    }
 }
 
 impl Mode {
-    /// The longest silence the component is allowed, if it is timed.
+    /// The longest silence the component is allowed, if it is timed: for a data component, the
+    /// shortest timeout of its topics (any one of them silent that long makes it OFFLINE).
     pub fn timeout(&self) -> Option<Duration> {
         match self {
             Mode::Active { timeout } | Mode::Passive { timeout, .. } => Some(*timeout),
             Mode::Link { .. } => None,
+            Mode::Data { topics } => topics.iter().map(|t| t.timeout).min(),
         }
     }
 
@@ -299,6 +339,7 @@ impl Mode {
             Mode::Active { .. } => "active",
             Mode::Passive { .. } => "passive",
             Mode::Link { .. } => "link",
+            Mode::Data { .. } => "data",
         }
     }
 }
@@ -451,17 +492,27 @@ impl Rules {
 }
 
 fn component(el: &Element, defaults: &Defaults) -> Result<ComponentRule, FileError> {
-    el.only_attrs(&["name", "mode", "timeout", "poll", "medium"])?;
-    el.only_children(&["severity"])?;
+    el.only_attrs(&[
+        "name",
+        "mode",
+        "timeout",
+        "poll",
+        "medium",
+        "period",
+        "unavailable-after",
+    ])?;
+    el.only_children(&["severity", "data"])?;
     let name = check_name(el.required("name")?, "component")?;
     let timeout = duration(el, "timeout")?;
     let poll = duration(el, "poll")?;
     let kind = match el.attr("mode") {
         None => "active",
         Some(a) => match a.value.trim() {
-            m @ ("active" | "passive" | "link") => m,
+            m @ ("active" | "passive" | "link" | "data") => m,
             other => {
-                return Err(a.error(format!("`{other}` is not a mode: active, passive or link")));
+                return Err(a.error(format!(
+                    "`{other}` is not a mode: active, passive, link or data"
+                )));
             }
         },
     };
@@ -472,15 +523,32 @@ fn component(el: &Element, defaults: &Defaults) -> Result<ComponentRule, FileErr
             "only a `link` component follows a medium; this one is {kind}"
         )));
     }
-    let mode = match kind {
-        "active" => {
-            if let Some((_, a)) = poll {
-                return Err(a.error("only a passive component is polled; this one is active"));
-            }
-            Mode::Active {
-                timeout: timeout.map_or(defaults.timeout, |(d, _)| d),
-            }
+    if kind != "data" {
+        let why = format!("only a `data` component watches topics; this one is {kind}");
+        if let Some(a) = ["period", "unavailable-after"]
+            .into_iter()
+            .find_map(|a| el.attr(a))
+        {
+            return Err(a.error(why));
         }
+        if let Some(d) = el.children_named("data").next() {
+            return Err(d.error(format!("<data>: {why}")));
+        }
+    }
+    if let Some((_, a)) = poll
+        && matches!(kind, "active" | "data")
+    {
+        return Err(a.error(format!(
+            "only a passive component is polled; this one is {kind}"
+        )));
+    }
+    let mode = match kind {
+        "data" => Mode::Data {
+            topics: data_topics(el, timeout, defaults)?,
+        },
+        "active" => Mode::Active {
+            timeout: timeout.map_or(defaults.timeout, |(d, _)| d),
+        },
         "passive" => {
             let p = poll.map_or(defaults.poll, |(d, _)| d);
             let t = timeout.map_or(defaults.timeout, |(d, _)| d);
@@ -519,6 +587,76 @@ fn component(el: &Element, defaults: &Defaults) -> Result<ComponentRule, FileErr
     })
 }
 
+/// The `<data>` children of data component `el`: each a topic, unique in the component, with its
+/// `period`, `unavailable-after` (default four periods) and `timeout` (`timeout_attr`, the
+/// component's, or the root's); the component's `period` and `unavailable-after` fill what a
+/// child leaves out.
+fn data_topics(
+    el: &Element,
+    timeout_attr: Option<(Duration, &Attr)>,
+    defaults: &Defaults,
+) -> Result<Vec<DataTopic>, FileError> {
+    let period = duration(el, "period")?;
+    let unavailable = duration(el, "unavailable-after")?;
+    let mut topics: Vec<DataTopic> = Vec::new();
+    let mut lines: HashMap<String, u32> = HashMap::new();
+    for d in el.children_named("data") {
+        d.only_attrs(&["topic", "period", "unavailable-after", "timeout"])?;
+        d.only_children(&[])?;
+        let at = d.required("topic")?;
+        let topic = Topic::new(at.value.trim()).map_err(|e| at.error(e))?;
+        if let Some(line) = lines.get(topic.as_str()) {
+            return Err(at.error(format!(
+                "topic `{topic}` is already watched by this component at line {line}"
+            )));
+        }
+        lines.insert(topic.to_string(), d.pos.line);
+        let Some((p, p_attr)) = duration(d, "period")?.or(period) else {
+            return Err(d.error(
+                "<data> needs `period`, the expected time between two messages on its topic \
+                 (on it or on its <component>)",
+            ));
+        };
+        let ua = duration(d, "unavailable-after")?.or(unavailable);
+        let u = ua.map_or(p.saturating_mul(4), |(v, _)| v);
+        if let Some((_, a)) = ua
+            && u <= p
+        {
+            return Err(a.pos.error(format!(
+                "unavailable-after {u:?} must be longer than the period {p:?}, or the component \
+                 is UNAVAILABLE between two messages"
+            )));
+        }
+        let to = duration(d, "timeout")?.or(timeout_attr);
+        let t = to.map_or(defaults.timeout, |(v, _)| v);
+        if t <= u {
+            let (at, which) = match (to, ua) {
+                (Some((_, a)), _) => (&a.pos, "timeout"),
+                (None, Some((_, a))) => (&a.pos, "timeout (the default)"),
+                (None, None) => (&p_attr.pos, "timeout (the default)"),
+            };
+            let four = if ua.is_none() { " (four periods)" } else { "" };
+            return Err(at.error(format!(
+                "the {which} {t:?} must be longer than unavailable-after{four} {u:?}, or the \
+                 component goes OFFLINE before it is UNAVAILABLE"
+            )));
+        }
+        topics.push(DataTopic {
+            topic,
+            period: p,
+            unavailable_after: u,
+            timeout: t,
+        });
+    }
+    if topics.is_empty() {
+        return Err(el.error(
+            "a data component needs at least one <data topic=\"…\" period=\"…\"/>: the topics \
+             it publishes",
+        ));
+    }
+    Ok(topics)
+}
+
 /// Why a component's state changed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Cause {
@@ -528,6 +666,8 @@ pub enum Cause {
     Timeout,
     /// Its medium's link went up or down.
     Link,
+    /// A message arrived on one of its topics (a data component).
+    Data,
 }
 
 /// Something the monitor's owner should act on.
@@ -571,6 +711,17 @@ struct Entry {
     last: Instant,
     /// When the next poll is due (passive components).
     next_poll: Option<Instant>,
+    /// Why its link is down (link components, while it is).
+    link_down: Option<String>,
+    /// Each of its topics (data components), in file order.
+    heard: Vec<Heard>,
+}
+
+/// One topic of a data component: when it was last heard and the state its silence gives.
+#[derive(Debug, Clone, Copy)]
+struct Heard {
+    last: Option<Instant>,
+    state: ComponentState,
 }
 
 /// The health monitor's state machine: component states, the vehicle severity, and what changes.
@@ -579,13 +730,24 @@ pub struct Monitor {
     rules: Rules,
     entries: Vec<Entry>,
     index: HashMap<Arc<str>, usize>,
+    /// Each watched topic's (component, topic) places.
+    watchers: HashMap<String, Vec<(usize, usize)>>,
     severity: Severity,
     unknown: u64,
+    started: Instant,
+    /// The latest time the monitor has been given.
+    now: Instant,
+}
+
+/// Seconds with one decimal, as reasons give them.
+fn tenths(d: Duration) -> String {
+    format!("{:.1} s", d.as_secs_f64())
 }
 
 impl Monitor {
     /// A monitor starting at `now`: every component HEALTHY with one timeout to send its first
-    /// update, every passive component due a poll at once, the severity NONE.
+    /// update (a data component: each topic silent since `now`), every passive component due a
+    /// poll at once, the severity NONE.
     pub fn new(rules: Rules, now: Instant) -> Monitor {
         let entries = rules
             .components
@@ -594,6 +756,17 @@ impl Monitor {
                 state: ComponentState::Healthy,
                 last: now,
                 next_poll: matches!(c.mode, Mode::Passive { .. }).then_some(now),
+                link_down: None,
+                heard: match &c.mode {
+                    Mode::Data { topics } => vec![
+                        Heard {
+                            last: None,
+                            state: ComponentState::Healthy,
+                        };
+                        topics.len()
+                    ],
+                    _ => Vec::new(),
+                },
             })
             .collect();
         let index = rules
@@ -602,12 +775,26 @@ impl Monitor {
             .enumerate()
             .map(|(i, c)| (c.name.clone(), i))
             .collect();
+        let mut watchers: HashMap<String, Vec<(usize, usize)>> = HashMap::new();
+        for (i, c) in rules.components.iter().enumerate() {
+            if let Mode::Data { topics } = &c.mode {
+                for (j, t) in topics.iter().enumerate() {
+                    watchers
+                        .entry(t.topic.to_string())
+                        .or_default()
+                        .push((i, j));
+                }
+            }
+        }
         Monitor {
             rules,
             entries,
             index,
+            watchers,
             severity: Severity::None,
             unknown: 0,
+            started: now,
+            now,
         }
     }
 
@@ -635,6 +822,11 @@ impl Monitor {
             .map(|(c, e)| (&*c.name, e.state))
     }
 
+    /// Every topic the data components watch, each once.
+    pub fn watched_topics(&self) -> impl Iterator<Item = &str> + '_ {
+        self.watchers.keys().map(String::as_str)
+    }
+
     /// How many updates came from components the rules do not name.
     pub fn unknown_reports(&self) -> u64 {
         self.unknown
@@ -642,12 +834,16 @@ impl Monitor {
 
     /// Takes an update: component `name` is in `state` at `now` (sent by the component itself or
     /// answering a poll). An update from a component the rules do not name is counted and
-    /// otherwise ignored.
+    /// otherwise ignored; a data component takes none (its data tells its state).
     pub fn report(&mut self, name: &str, state: ComponentState, now: Instant) -> Vec<Event> {
+        self.now = self.now.max(now);
         let Some(&i) = self.index.get(name) else {
             self.unknown = self.unknown.saturating_add(1);
             return Vec::new();
         };
+        if matches!(self.rules.components[i].mode, Mode::Data { .. }) {
+            return Vec::new();
+        }
         let entry = &mut self.entries[i];
         entry.last = entry.last.max(now);
         let mut events = Vec::new();
@@ -659,6 +855,7 @@ impl Monitor {
     /// Takes the link state of medium `medium`: its link components become HEALTHY when it is up
     /// and OFFLINE when it is down.
     pub fn link(&mut self, medium: &str, link: &LinkState, now: Instant) -> Vec<Event> {
+        self.now = self.now.max(now);
         let state = match link {
             LinkState::Up => ComponentState::Healthy,
             LinkState::Down(_) => ComponentState::Offline,
@@ -668,6 +865,10 @@ impl Monitor {
             if matches!(&self.rules.components[i].mode, Mode::Link { medium: m } if m == medium) {
                 let entry = &mut self.entries[i];
                 entry.last = entry.last.max(now);
+                entry.link_down = match link {
+                    LinkState::Up => None,
+                    LinkState::Down(why) => Some(why.to_string()),
+                };
                 self.set(i, state, Cause::Link, &mut events);
             }
         }
@@ -675,32 +876,79 @@ impl Monitor {
         events
     }
 
+    /// Takes a message on `topic` at `now`: every data component watching it has heard it, and
+    /// is HEALTHY again unless another of its topics is still silent. A topic no component
+    /// watches changes nothing.
+    pub fn data(&mut self, topic: &str, now: Instant) -> Vec<Event> {
+        self.now = self.now.max(now);
+        let mut events = Vec::new();
+        let Some(places) = self.watchers.get(topic) else {
+            return events;
+        };
+        let mut touched = Vec::with_capacity(places.len());
+        for &(i, j) in places {
+            let heard = &mut self.entries[i].heard[j];
+            heard.last = Some(heard.last.map_or(now, |l| l.max(now)));
+            heard.state = ComponentState::Healthy;
+            touched.push(i);
+        }
+        for i in touched {
+            let worst = self.entries[i].heard.iter().map(|h| h.state).max();
+            self.set(
+                i,
+                worst.unwrap_or(ComponentState::Healthy),
+                Cause::Data,
+                &mut events,
+            );
+        }
+        self.update_severity(&mut events);
+        events
+    }
+
     /// Advances to `now`: every timed component silent for its timeout or longer becomes
-    /// OFFLINE, and every passive component whose poll is due is asked for (at most one poll each
-    /// per call; a late call does not catch up on missed polls).
+    /// OFFLINE, every data component takes the state of its most silent topic (UNAVAILABLE after
+    /// `unavailable-after`, OFFLINE after `timeout`), and every passive component whose poll is
+    /// due is asked for (at most one poll each per call; a late call does not catch up on missed
+    /// polls).
     pub fn tick(&mut self, now: Instant) -> Vec<Event> {
+        self.now = self.now.max(now);
         let mut events = Vec::new();
         let mut polls = Vec::new();
         for i in 0..self.entries.len() {
             let rule = &self.rules.components[i];
             let entry = &mut self.entries[i];
-            if let Mode::Passive { poll, .. } = rule.mode
-                && let Some(due) = entry.next_poll
-                && now >= due
-            {
-                polls.push(Event::Poll {
-                    component: rule.name.clone(),
-                });
-                let next = due.checked_add(poll).filter(|&n| n > now);
-                entry.next_poll = next.or_else(|| now.checked_add(poll));
-            }
-            let expired = rule
-                .mode
-                .timeout()
-                .and_then(|t| entry.last.checked_add(t))
-                .is_some_and(|deadline| now >= deadline);
-            if expired {
-                self.set(i, ComponentState::Offline, Cause::Timeout, &mut events);
+            let to = match &rule.mode {
+                Mode::Passive { poll, timeout } => {
+                    if let Some(due) = entry.next_poll
+                        && now >= due
+                    {
+                        polls.push(Event::Poll {
+                            component: rule.name.clone(),
+                        });
+                        let next = due.checked_add(*poll).filter(|&n| n > now);
+                        entry.next_poll = next.or_else(|| now.checked_add(*poll));
+                    }
+                    expired(entry.last, *timeout, now).then_some(ComponentState::Offline)
+                }
+                Mode::Active { timeout } => {
+                    expired(entry.last, *timeout, now).then_some(ComponentState::Offline)
+                }
+                Mode::Link { .. } => None,
+                Mode::Data { topics } => {
+                    for (t, h) in topics.iter().zip(&mut entry.heard) {
+                        let since = h.last.unwrap_or(self.started);
+                        h.state = t.state_after(now.saturating_duration_since(since));
+                    }
+                    entry.heard.iter().map(|h| h.state).max()
+                }
+            };
+            if let Some(to) = to {
+                let cause = if to > entry.state {
+                    Cause::Timeout
+                } else {
+                    Cause::Data
+                };
+                self.set(i, to, cause, &mut events);
             }
         }
         self.update_severity(&mut events);
@@ -709,33 +957,101 @@ impl Monitor {
     }
 
     /// The earliest time at which [`Monitor::tick`] would change something, if any: a timed
-    /// component not yet OFFLINE reaching its timeout, or a poll falling due.
+    /// component not yet OFFLINE reaching its timeout, a data component's topic reaching its next
+    /// limit, or a poll falling due.
     pub fn next_due(&self) -> Option<Instant> {
+        let data = |rule: &ComponentRule, entry: &Entry| -> Option<Instant> {
+            let Mode::Data { topics } = &rule.mode else {
+                return None;
+            };
+            topics
+                .iter()
+                .zip(&entry.heard)
+                .filter_map(|(t, h)| {
+                    let since = h.last.unwrap_or(self.started);
+                    match h.state {
+                        ComponentState::Healthy => since.checked_add(t.unavailable_after),
+                        ComponentState::Offline => None,
+                        _ => since.checked_add(t.timeout),
+                    }
+                })
+                .min()
+        };
         self.rules
             .components
             .iter()
             .zip(&self.entries)
             .flat_map(|(rule, entry)| {
-                let deadline = (entry.state != ComponentState::Offline)
-                    .then(|| rule.mode.timeout().and_then(|t| entry.last.checked_add(t)))
-                    .flatten();
+                let deadline = match rule.mode {
+                    Mode::Active { timeout } | Mode::Passive { timeout, .. } => (entry.state
+                        != ComponentState::Offline)
+                        .then(|| entry.last.checked_add(timeout))
+                        .flatten(),
+                    _ => data(rule, entry),
+                };
                 [deadline, entry.next_poll]
             })
             .flatten()
             .min()
     }
 
+    /// Why component `name` is not HEALTHY, as of the latest time the monitor was given: the
+    /// topics a data component has not heard for too long (`nav.position silent for 4.2 s`,
+    /// `nav.attitude never received`), a link component's medium that is down, a timed
+    /// component's silence. `None` for a HEALTHY component, and for a state its component reported
+    /// itself (the report gives no reason).
+    pub fn reason(&self, name: &str) -> Option<String> {
+        let i = *self.index.get(name)?;
+        let entry = &self.entries[i];
+        if entry.state == ComponentState::Healthy {
+            return None;
+        }
+        match &self.rules.components[i].mode {
+            Mode::Data { topics } => {
+                let silent: Vec<String> = topics
+                    .iter()
+                    .zip(&entry.heard)
+                    .filter(|(_, h)| h.state != ComponentState::Healthy)
+                    .map(|(t, h)| match h.last {
+                        None => format!("{} never received", t.topic),
+                        Some(at) => format!(
+                            "{} silent for {}",
+                            t.topic,
+                            tenths(self.now.saturating_duration_since(at))
+                        ),
+                    })
+                    .collect();
+                (!silent.is_empty()).then(|| silent.join("; "))
+            }
+            Mode::Link { medium } => entry.link_down.as_ref().map(|why| match why.trim() {
+                "" => format!("link {medium} down"),
+                why => format!("link {medium} down: {why}"),
+            }),
+            Mode::Active { timeout } | Mode::Passive { timeout, .. } => {
+                let silent = self.now.saturating_duration_since(entry.last);
+                (entry.state == ComponentState::Offline && silent >= *timeout)
+                    .then(|| format!("no update for {}", tenths(silent)))
+            }
+        }
+    }
+
     /// The health snapshot to publish: `severity` (its name), `components` (a map of each
-    /// component's name to its state's name, in file order) and `unknown` (updates from
-    /// components the rules do not name).
+    /// component's name to its state's name, in file order), `reasons` (a map of each component
+    /// that has a [reason](Monitor::reason) to it, in file order; empty when there is none) and
+    /// `unknown` (updates from components the rules do not name).
     pub fn snapshot(&self) -> DataMap {
         let mut components = DataMap::with_capacity(self.entries.len());
+        let mut reasons = DataMap::new();
         for (name, state) in self.components() {
             components.push(name.to_string(), Value::label(state.name()));
+            if let Some(why) = self.reason(name) {
+                reasons.push(name.to_string(), Value::from(why));
+            }
         }
         DataMap::new()
             .and("severity", Value::label(self.severity.name()))
             .and("components", Value::Map(components))
+            .and("reasons", Value::Map(reasons))
             .and(
                 "unknown",
                 Value::Int(i64::try_from(self.unknown).unwrap_or(i64::MAX)),
@@ -777,6 +1093,12 @@ impl Monitor {
             });
         }
     }
+}
+
+/// Whether a component last heard at `last` has been silent for `timeout` at `now`.
+fn expired(last: Instant, timeout: Duration, now: Instant) -> bool {
+    last.checked_add(timeout)
+        .is_some_and(|deadline| now >= deadline)
 }
 
 #[cfg(test)]
@@ -850,7 +1172,8 @@ mod tests {
             ),
             (
                 "<health>\n  <component name=\"A\" mode=\"sleepy\"/>\n</health>",
-                "health.xml:2:23: attribute `mode`: `sleepy` is not a mode: active, passive or link",
+                "health.xml:2:23: attribute `mode`: `sleepy` is not a mode: active, passive, link \
+                 or data",
             ),
             (
                 "<health>\n  <component name=\"A\" timeout=\"soon\"/>\n</health>",
@@ -1459,5 +1782,500 @@ mod tests {
                 .and_then(Value::as_str),
             Some("OFFLINE")
         );
+    }
+
+    #[test]
+    fn data_rule_errors_name_the_place_and_what_was_expected() {
+        let comp = |inner: &str| format!("<health>\n  {inner}\n</health>");
+        let cases = [
+            (
+                comp(r#"<component name="Nav" mode="data"/>"#),
+                "health.xml:2:3: a data component needs at least one <data topic=\"…\" \
+                 period=\"…\"/>: the topics it publishes",
+            ),
+            (
+                comp(r#"<component name="Nav" period="1s"/>"#),
+                "health.xml:2:25: attribute `period`: only a `data` component watches topics; \
+                 this one is active",
+            ),
+            (
+                comp(r#"<component name="Nav" mode="passive" unavailable-after="1s"/>"#),
+                "health.xml:2:40: attribute `unavailable-after`: only a `data` component watches \
+                 topics; this one is passive",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"link\" medium=\"serial\">\n    \
+                     <data topic=\"nav.position\" period=\"1s\"/>\n  </component>",
+                ),
+                "health.xml:3:5: <data>: only a `data` component watches topics; this one is link",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\" poll=\"1s\">\n    \
+                     <data topic=\"nav.position\" period=\"1s\"/>\n  </component>",
+                ),
+                "health.xml:2:37: attribute `poll`: only a passive component is polled; this one \
+                 is data",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\">\n    \
+                     <data topic=\"nav.position\"/>\n  </component>",
+                ),
+                "health.xml:3:5: <data> needs `period`, the expected time between two messages on \
+                 its topic (on it or on its <component>)",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\">\n    \
+                     <data topic=\"nav.position\" period=\"often\"/>\n  </component>",
+                ),
+                "health.xml:3:32: attribute `period`: `often` is not a duration above zero (250ms, \
+                 2s, 1min; a bare number is milliseconds)",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\">\n    \
+                     <data topic=\"nav.*\" period=\"1s\"/>\n  </component>",
+                ),
+                "health.xml:3:11: attribute `topic`: character '*' not allowed in \"nav.*\"",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\">\n    \
+                     <data topic=\"nav.position\" rate=\"4Hz\"/>\n  </component>",
+                ),
+                "health.xml:3:32: unknown attribute `rate` on <data>; expected one of: topic, \
+                 period, unavailable-after, timeout",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\" period=\"250ms\">\n    \
+                     <data topic=\"nav.position\"/>\n    <data topic=\"nav.position\"/>\n  \
+                     </component>",
+                ),
+                "health.xml:4:11: attribute `topic`: topic `nav.position` is already watched by \
+                 this component at line 3",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\">\n    \
+                     <data topic=\"nav.position\" period=\"1s\" unavailable-after=\"1s\"/>\n  \
+                     </component>",
+                ),
+                "health.xml:3:44: unavailable-after 1s must be longer than the period 1s, or the \
+                 component is UNAVAILABLE between two messages",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\">\n    \
+                     <data topic=\"vehicle.state\" period=\"1s\"/>\n  </component>",
+                ),
+                "health.xml:3:33: the timeout (the default) 3s must be longer than \
+                 unavailable-after (four periods) 4s, or the component goes OFFLINE before it is \
+                 UNAVAILABLE",
+            ),
+            (
+                comp(
+                    "<component name=\"Nav\" mode=\"data\" timeout=\"2s\">\n    \
+                     <data topic=\"nav.position\" period=\"250ms\" unavailable-after=\"2s\"/>\n  \
+                     </component>",
+                ),
+                "health.xml:2:37: the timeout 2s must be longer than unavailable-after 2s, or the \
+                 component goes OFFLINE before it is UNAVAILABLE",
+            ),
+        ];
+        let wrong: Vec<String> = cases
+            .iter()
+            .filter_map(|(text, expected)| {
+                let got = match Rules::parse("health.xml", text) {
+                    Ok(_) => "accepted".to_string(),
+                    Err(e) => e.to_string(),
+                };
+                (got != *expected)
+                    .then(|| format!("{text}\n  got:      {got}\n  expected: {expected}"))
+            })
+            .collect();
+        assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    }
+
+    const NAV: &str = r#"<health timeout="5s">
+  <component name="Navigation" mode="data" period="250ms" timeout="3s">
+    <data topic="nav.position"/>
+    <data topic="nav.attitude" unavailable-after="1500ms"/>
+  </component>
+  <component name="VehicleState" mode="data">
+    <data topic="vehicle.state" period="1s" unavailable-after="2s"/>
+  </component>
+  <component name="DVL" mode="data">
+    <data topic="nav.dvl" period="200ms" timeout="2s"/>
+    <severity state="OFFLINE" level="WARN"/>
+  </component>
+</health>"#;
+
+    fn data_topic(topic: &str, period: f64, unavailable: f64, timeout: f64) -> DataTopic {
+        DataTopic {
+            topic: Topic::new(topic).unwrap(),
+            period: secs(period),
+            unavailable_after: secs(unavailable),
+            timeout: secs(timeout),
+        }
+    }
+
+    #[test]
+    fn data_topics_take_their_component_s_limits_and_four_periods() {
+        let r = rules(NAV);
+        let modes: Vec<&Mode> = r.components.iter().map(|c| &c.mode).collect();
+        assert_eq!(
+            modes,
+            [
+                &Mode::Data {
+                    topics: vec![
+                        data_topic("nav.position", 0.25, 1.0, 3.0),
+                        data_topic("nav.attitude", 0.25, 1.5, 3.0),
+                    ]
+                },
+                &Mode::Data {
+                    topics: vec![data_topic("vehicle.state", 1.0, 2.0, 5.0)]
+                },
+                &Mode::Data {
+                    topics: vec![data_topic("nav.dvl", 0.2, 0.8, 2.0)]
+                },
+            ]
+        );
+        assert_eq!(r.components[0].mode.name(), "data");
+        assert_eq!(r.components[0].mode.timeout(), Some(secs(3.0)));
+        let m = Monitor::new(r, Instant::now());
+        let mut watched: Vec<&str> = m.watched_topics().collect();
+        watched.sort_unstable();
+        assert_eq!(
+            watched,
+            ["nav.attitude", "nav.dvl", "nav.position", "vehicle.state"]
+        );
+    }
+
+    /// Every watched topic heard at `at`.
+    fn all_data(m: &mut Monitor, at: Instant) {
+        for t in ["nav.position", "nav.attitude", "vehicle.state", "nav.dvl"] {
+            m.data(t, at);
+        }
+    }
+
+    fn reasons(m: &Monitor) -> Vec<(String, String)> {
+        let snap = m.snapshot();
+        let map = snap.get("reasons").and_then(Value::as_map).unwrap();
+        map.iter()
+            .map(|(k, v)| (k.to_string(), v.as_str().unwrap().to_string()))
+            .collect()
+    }
+
+    /// The state and the DVL heard at `at`: only the navigation is watched for silence.
+    fn others(m: &mut Monitor, at: Instant) {
+        assert_eq!(m.data("vehicle.state", at), []);
+        assert_eq!(m.data("nav.dvl", at), []);
+    }
+
+    #[test]
+    fn a_silent_topic_makes_its_component_unavailable_then_offline_and_data_brings_it_back() {
+        let t0 = Instant::now();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        let mut m = Monitor::new(rules(NAV), t0);
+        // everything flows for 2 s
+        for ms in (0..=2000).step_by(250) {
+            all_data(&mut m, at(ms));
+            assert_eq!(m.tick(at(ms)), [], "at {ms} ms");
+        }
+        assert_eq!(reasons(&m), []);
+        // the position stops at 2 s; the attitude goes on until 2.75 s
+        for ms in (2250..=2750).step_by(250) {
+            assert_eq!(m.data("nav.attitude", at(ms)), []);
+            others(&mut m, at(ms));
+        }
+        assert_eq!(m.next_due(), Some(at(3000)), "position: 1 s after 2 s");
+        assert_eq!(m.tick(at(2999)), []);
+        others(&mut m, at(3000));
+        assert_eq!(
+            m.tick(at(3000)),
+            [
+                state("Navigation", Healthy, Unavailable, Cause::Timeout),
+                severity(Severity::None, Severity::Warn),
+            ]
+        );
+        assert_eq!(
+            m.reason("Navigation").as_deref(),
+            Some("nav.position silent for 1.0 s")
+        );
+        // the reason measures the silence up to the latest step
+        others(&mut m, at(4000));
+        assert_eq!(m.data("nav.attitude", at(4230)), []);
+        assert_eq!(
+            reasons(&m),
+            [(
+                "Navigation".to_string(),
+                "nav.position silent for 2.2 s".to_string()
+            )]
+        );
+        assert_eq!(m.next_due(), Some(at(4800)), "the DVL, heard at 4 s");
+        others(&mut m, at(4900));
+        assert_eq!(m.next_due(), Some(at(5000)), "position: 3 s after 2 s");
+        assert_eq!(
+            m.tick(at(5000)),
+            [
+                state("Navigation", Unavailable, Offline, Cause::Timeout),
+                severity(Severity::Warn, Severity::Abort),
+            ]
+        );
+        let snap = m.snapshot();
+        assert_eq!(snap.get_str("severity"), Some("ABORT"));
+        assert_eq!(
+            snap.get_path("components.Navigation")
+                .and_then(Value::as_str),
+            Some("OFFLINE")
+        );
+        // the attitude stopped at 4.23 s: both are named, in file order
+        others(&mut m, at(5700));
+        assert_eq!(
+            m.tick(at(5730)),
+            [],
+            "the attitude is UNAVAILABLE, the component already OFFLINE"
+        );
+        assert_eq!(
+            m.reason("Navigation").as_deref(),
+            Some("nav.position silent for 3.7 s; nav.attitude silent for 1.5 s")
+        );
+        // the position is back: the attitude still keeps the component UNAVAILABLE
+        assert_eq!(
+            m.data("nav.position", at(5800)),
+            [
+                state("Navigation", Offline, Unavailable, Cause::Data),
+                severity(Severity::Abort, Severity::Warn),
+            ]
+        );
+        assert_eq!(
+            m.reason("Navigation").as_deref(),
+            Some("nav.attitude silent for 1.6 s")
+        );
+        assert_eq!(
+            m.data("nav.attitude", at(5900)),
+            [
+                state("Navigation", Unavailable, Healthy, Cause::Data),
+                severity(Severity::Warn, Severity::None),
+            ]
+        );
+        assert_eq!(reasons(&m), []);
+        assert_eq!(m.reason("Navigation"), None);
+        // a fresh limit from the new message
+        others(&mut m, at(6500));
+        assert_eq!(m.tick(at(6799)), []);
+        assert_eq!(
+            m.tick(at(6800)),
+            [
+                state("Navigation", Healthy, Unavailable, Cause::Timeout),
+                severity(Severity::None, Severity::Warn),
+            ],
+            "position: 1 s after 5.8 s"
+        );
+    }
+
+    #[test]
+    fn a_topic_never_heard_is_silent_since_the_start() {
+        let t0 = Instant::now();
+        let at = |ms: u64| t0 + Duration::from_millis(ms);
+        let mut m = Monitor::new(rules(NAV), t0);
+        assert_eq!(
+            m.next_due(),
+            Some(at(800)),
+            "the DVL: four periods of 200 ms"
+        );
+        for ms in (0..=700).step_by(100) {
+            assert_eq!(m.tick(at(ms)), [], "at {ms} ms");
+        }
+        assert_eq!(
+            m.tick(at(800)),
+            [
+                state("DVL", Healthy, Unavailable, Cause::Timeout),
+                severity(Severity::None, Severity::Warn),
+            ]
+        );
+        assert_eq!(m.reason("DVL").as_deref(), Some("nav.dvl never received"));
+        assert_eq!(
+            m.tick(at(1000)),
+            [state("Navigation", Healthy, Unavailable, Cause::Timeout)]
+        );
+        assert_eq!(
+            m.reason("Navigation").as_deref(),
+            Some("nav.position never received")
+        );
+        assert_eq!(
+            m.tick(at(1500)),
+            [],
+            "the attitude too, the component already UNAVAILABLE"
+        );
+        assert_eq!(
+            m.reason("Navigation").as_deref(),
+            Some("nav.position never received; nav.attitude never received")
+        );
+        // the DVL's OFFLINE is only a warning; the navigation's is an abort
+        assert_eq!(
+            m.tick(at(2000)),
+            [
+                state("VehicleState", Healthy, Unavailable, Cause::Timeout),
+                state("DVL", Unavailable, Offline, Cause::Timeout),
+            ]
+        );
+        assert_eq!(m.severity(), Severity::Warn);
+        assert_eq!(
+            m.tick(at(3000)),
+            [
+                state("Navigation", Unavailable, Offline, Cause::Timeout),
+                severity(Severity::Warn, Severity::Abort),
+            ]
+        );
+        assert_eq!(
+            reasons(&m),
+            [
+                (
+                    "Navigation".to_string(),
+                    "nav.position never received; nav.attitude never received".to_string()
+                ),
+                (
+                    "VehicleState".to_string(),
+                    "vehicle.state never received".to_string()
+                ),
+                ("DVL".to_string(), "nav.dvl never received".to_string()),
+            ]
+        );
+        // the first message of a topic is enough for it
+        assert_eq!(
+            m.data("nav.dvl", at(3100)),
+            [state("DVL", Offline, Healthy, Cause::Data)]
+        );
+    }
+
+    #[test]
+    fn a_data_component_takes_no_reports_and_topics_may_be_shared() {
+        let t0 = Instant::now();
+        let mut m = Monitor::new(
+            rules(
+                r#"<health>
+  <component name="Navigation" mode="data">
+    <data topic="nav.position" period="250ms"/>
+  </component>
+  <component name="Fix" mode="data">
+    <data topic="nav.position" period="500ms" unavailable-after="1s" timeout="2s"/>
+  </component>
+</health>"#,
+            ),
+            t0,
+        );
+        assert_eq!(m.report("Navigation", Offline, t0), []);
+        assert_eq!(m.state("Navigation"), Some(Healthy));
+        assert_eq!(m.unknown_reports(), 0, "a named component is not unknown");
+        assert_eq!(m.tick(t0 + secs(1.0)).len(), 3, "both UNAVAILABLE, WARN");
+        assert_eq!(
+            m.data("nav.position", t0 + secs(1.5)),
+            [
+                state("Navigation", Unavailable, Healthy, Cause::Data),
+                state("Fix", Unavailable, Healthy, Cause::Data),
+                severity(Severity::Warn, Severity::None),
+            ]
+        );
+        assert_eq!(m.data("nav.velocity", t0 + secs(1.5)), [], "not watched");
+    }
+
+    #[test]
+    fn links_and_timed_components_give_their_reasons_too() {
+        let t0 = Instant::now();
+        let mut m = Monitor::new(
+            rules(
+                r#"<health>
+  <component name="Frontseat" mode="link" medium="serial"/>
+  <component name="Sensors" mode="link" medium="sensors"/>
+  <component name="Depth" timeout="2s"/>
+  <component name="Sonar"/>
+</health>"#,
+            ),
+            t0,
+        );
+        m.link("serial", &LinkState::Down("no such device".into()), t0);
+        m.link("sensors", &LinkState::Down(String::new()), t0);
+        m.report("Sonar", Malfunction, t0);
+        m.tick(t0 + secs(2.34));
+        assert_eq!(
+            reasons(&m),
+            [
+                (
+                    "Frontseat".to_string(),
+                    "link serial down: no such device".to_string()
+                ),
+                ("Sensors".to_string(), "link sensors down".to_string()),
+                ("Depth".to_string(), "no update for 2.3 s".to_string()),
+            ],
+            "a reported state has no reason"
+        );
+        m.link("serial", &LinkState::Up, t0 + secs(3.0));
+        assert_eq!(m.reason("Frontseat"), None);
+    }
+
+    #[test]
+    fn the_shipped_rules_watch_the_frontseat_s_data() {
+        for (file, text, link) in [
+            (
+                "demo-health.xml",
+                include_str!("../../../configs/demo-health.xml"),
+                "serial",
+            ),
+            (
+                "iver2-backseat-health.xml",
+                include_str!("../../../configs/iver2-backseat-health.xml"),
+                "frontseat",
+            ),
+        ] {
+            let r = Rules::parse(file, text).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(
+                r.component("Frontseat").map(|c| &c.mode),
+                Some(&Mode::Link {
+                    medium: link.to_string()
+                }),
+                "{file}"
+            );
+            let topics = |name: &str| -> Vec<(String, Duration)> {
+                match r.component(name).map(|c| &c.mode) {
+                    Some(Mode::Data { topics }) => topics
+                        .iter()
+                        .map(|t| (t.topic.to_string(), t.period))
+                        .collect(),
+                    other => panic!("{file}: {name} is {other:?}"),
+                }
+            };
+            assert_eq!(
+                topics("Navigation"),
+                [
+                    ("nav.position".to_string(), secs(0.25)),
+                    ("nav.attitude".to_string(), secs(0.25))
+                ],
+                "{file}"
+            );
+            assert_eq!(
+                topics("VehicleState"),
+                [("vehicle.state".to_string(), secs(1.0))],
+                "{file}"
+            );
+            // the driver asks every 250 ms: a second without navigation is a warning, three
+            // an abort
+            let nav = r.component("Navigation").unwrap();
+            let Mode::Data { topics } = &nav.mode else {
+                unreachable!()
+            };
+            assert!(
+                topics
+                    .iter()
+                    .all(|t| t.unavailable_after == secs(1.0) && t.timeout == secs(3.0)),
+                "{file}"
+            );
+            assert_eq!(nav.levels.get(Unavailable), Severity::Warn, "{file}");
+            assert_eq!(nav.levels.get(Offline), Severity::Abort, "{file}");
+        }
     }
 }

@@ -10,11 +10,14 @@
 //! - `seabus.health.<COMPONENT>` — reports a component sends itself (`state` = HEALTHY,
 //!   UNAVAILABLE, MALFUNCTION or OFFLINE, or its number): active components send them regularly,
 //!   passive ones answer the command `seabus.health.poll` (`component` = its name);
+//! - the topics of its `data` components: each message is heard, and a topic silent too long
+//!   makes its component UNAVAILABLE, then OFFLINE (a frontseat whose serial line is open but
+//!   sends no navigation);
 //!
-//! and publishes the health snapshot (`severity`, `components`) on the rules' topic at their
-//! period and at once on every change of severity, and the emergency action as a command on entry
-//! into EMERGENCY. Its other media are watched for `link` components: a link that goes down makes
-//! the component OFFLINE (a serial driver whose device is unplugged).
+//! and publishes the health snapshot (`severity`, `components`, `reasons`) on the rules' topic at
+//! their period and at once on every change of a component's state, and the emergency action as a
+//! command on entry into EMERGENCY. Its other media are watched for `link` components: a link that
+//! goes down makes the component OFFLINE (a serial driver whose device is unplugged).
 //!
 //! With `dsaav`, DSAAV components report by RPC too, and a passive component whose section in the
 //! DSAAV configuration has a `Server` key is polled there with the health call (the others by the
@@ -103,10 +106,19 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
             Some((i, p.parse("port", "a port 0–65535")?.unwrap_or(1)))
         }
     };
-    let decl = Declaration::new(ModuleKind::Service)
+    let mut decl = Declaration::new(ModuleKind::Service)
         .consumes(TopicDecl::topic("seabus.module.*"))
         .consumes(TopicDecl::topic("seabus.health.*"))
         .produces(TopicDecl::topic(rules.publish.as_str()));
+    for c in &rules.components {
+        if let Mode::Data { topics } = &c.mode {
+            for t in topics {
+                if !decl.consumes.iter().any(|d| d.topic == t.topic.as_str()) {
+                    decl = decl.consumes(TopicDecl::topic(t.topic.as_str()));
+                }
+            }
+        }
+    }
     Ok(Built {
         decl,
         module: Box::new(HealthMonitor {
@@ -130,8 +142,9 @@ fn module_state(state: &str) -> Option<ComponentState> {
 }
 
 impl HealthMonitor {
-    /// Acts on what the monitor said: snapshots on severity changes, the emergency action, polls.
-    async fn act(&mut self, ctx: &mut Context, events: Vec<Event>) -> Result<(), ModuleError> {
+    /// Acts on what the monitor said: a snapshot on state changes, the emergency action, polls.
+    /// True when it published the snapshot.
+    async fn act(&mut self, ctx: &mut Context, events: Vec<Event>) -> Result<bool, ModuleError> {
         let mut publish = false;
         for e in events {
             match e {
@@ -140,7 +153,12 @@ impl HealthMonitor {
                     from,
                     to,
                     ..
-                } => tracing::info!(component = %component, "health {from} -> {to}"),
+                } => {
+                    let why = self.monitor.as_ref().and_then(|m| m.reason(&component));
+                    let why = why.map(|w| format!(": {w}")).unwrap_or_default();
+                    tracing::info!(component = %component, "health {from} -> {to}{why}");
+                    publish = true;
+                }
                 Event::Severity { from, to } => {
                     tracing::warn!("vehicle severity {} -> {}", from.name(), to.name());
                     publish = true;
@@ -176,7 +194,34 @@ impl HealthMonitor {
         if publish {
             self.publish(ctx).await?;
         }
-        Ok(())
+        Ok(publish)
+    }
+
+    /// Looks at the links, the DSAAV updates, the timeouts and the polls due now, and acts on
+    /// what changed. True when it published the snapshot.
+    async fn check(&mut self, ctx: &mut Context) -> Result<bool, ModuleError> {
+        let Some(monitor) = self.monitor.as_mut() else {
+            return Ok(false);
+        };
+        let now = Instant::now();
+        let mut events = Vec::new();
+        for i in 1..ctx.ports() {
+            if let Some(port) = ctx.port(i) {
+                let medium = port.medium();
+                events.extend(monitor.link(medium.name(), &medium.link_state(), now));
+            }
+        }
+        if let Some(service) = self.service.as_mut() {
+            while let Ok((component, state)) = service.updates.try_recv() {
+                events.extend(monitor.report(&component, state, now));
+            }
+        }
+        events.extend(monitor.tick(now));
+        if let Some(service) = &self.service {
+            *service.status.lock().unwrap_or_else(|p| p.into_inner()) =
+                health_service::status(monitor.severity(), monitor.components());
+        }
+        self.act(ctx, events).await
     }
 
     async fn publish(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
@@ -298,16 +343,25 @@ impl Module for HealthMonitor {
     async fn on_message(
         &mut self,
         ctx: &mut Context,
-        _port: usize,
+        port: usize,
         msg: Message,
     ) -> Result<(), ModuleError> {
+        let topic = msg.topic.as_str();
+        if port == 0
+            && let Some(monitor) = self.monitor.as_mut()
+        {
+            let events = monitor.data(topic, Instant::now());
+            if !events.is_empty() {
+                self.act(ctx, events).await?;
+                return Ok(());
+            }
+        }
         let Some(monitor) = self.monitor.as_mut() else {
             return Ok(());
         };
         let Some(map) = msg.payload.as_map() else {
             return Ok(());
         };
-        let topic = msg.topic.as_str();
         let report = if let Some(module) = topic.strip_prefix("seabus.module.") {
             map.get_str("state")
                 .and_then(module_state)
@@ -332,31 +386,12 @@ impl Module for HealthMonitor {
     }
 
     async fn on_timer(&mut self, ctx: &mut Context, timer: TimerId) -> Result<(), ModuleError> {
-        if timer == PUBLISH {
-            return self.publish(ctx).await;
+        // the snapshot published at the period measures the silences up to now
+        let published = self.check(ctx).await?;
+        if timer == PUBLISH && !published {
+            self.publish(ctx).await?;
         }
-        let Some(monitor) = self.monitor.as_mut() else {
-            return Ok(());
-        };
-        let now = Instant::now();
-        let mut events = Vec::new();
-        for i in 1..ctx.ports() {
-            if let Some(port) = ctx.port(i) {
-                let medium = port.medium();
-                events.extend(monitor.link(medium.name(), &medium.link_state(), now));
-            }
-        }
-        if let Some(service) = self.service.as_mut() {
-            while let Ok((component, state)) = service.updates.try_recv() {
-                events.extend(monitor.report(&component, state, now));
-            }
-        }
-        events.extend(monitor.tick(now));
-        if let Some(service) = &self.service {
-            *service.status.lock().unwrap_or_else(|p| p.into_inner()) =
-                health_service::status(monitor.severity(), monitor.components());
-        }
-        self.act(ctx, events).await
+        Ok(())
     }
 }
 

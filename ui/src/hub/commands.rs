@@ -307,9 +307,13 @@ impl Hub {
         let checked = self.checked(client, layout, command, set, confirmed);
         match checked {
             Ok((topic, fields)) => {
-                client.values.insert(command.to_string(), fields.clone());
-                self.publish(&client.session.user, command, &topic, fields)
-                    .await
+                let sent = self
+                    .publish(&client.session.user, command, &topic, fields.clone())
+                    .await;
+                if let (Ok((_, seq)), Ok(decl)) = (&sent, Hub::decl(client, layout, command)) {
+                    self.sent(&client.session.user, decl, &fields, *seq);
+                }
+                sent.map(|(id, _)| id)
             }
             Err(reason) => {
                 // a command the layout declares is refused in everyone's history; anything
@@ -346,36 +350,42 @@ impl Hub {
                 .arms
                 .confirm(id, sender, hold, Instant::now())?;
         }
-        let current = client.values.get(command).unwrap_or(&decl.fields);
-        let fields = decl.build(current, set).map_err(CommandError::Fields)?;
+        let chosen = client
+            .offers
+            .get(command)
+            .map(|o| o.free.clone())
+            .unwrap_or_default();
+        let fields = decl
+            .build(&self.current(decl), set, &chosen)
+            .map_err(CommandError::Fields)?;
         Ok((decl.topic.clone(), fields))
     }
 
-    /// Publishes a command and records it as pending (or, when the bus refuses it, refused).
-    async fn publish(
+    /// Publishes a command and records it as pending (or, when the bus refuses it, refused):
+    /// its id in the history and its sequence number on the bus.
+    pub(super) async fn publish(
         &self,
         user: &str,
         command: &str,
         topic: &Topic,
         fields: DataMap,
-    ) -> Result<u64, CommandError> {
+    ) -> Result<(u64, u64), CommandError> {
         let seq = self
             .port
             .publish_numbered(Kind::Command, topic.clone(), fields.clone())
             .await
             .map_err(CommandError::NotSent);
         let entry = Entry::new(user, command, topic.as_str(), &fields);
-        let (entry, refused) = match seq {
-            Ok(s) => (entry.pending(s), None),
-            Err(e) => (entry.refused(&e.to_string()), Some(e)),
+        let entry = match &seq {
+            Ok(s) => entry.pending(*s),
+            Err(e) => entry.refused(&e.to_string()),
         };
         let (state, reason) = (entry.state.clone(), entry.reason.clone());
         let id = self.record(entry);
         tracing::info!(component = "console", user, command, topic = %topic, "command {id}: {state} {reason}");
-        match refused {
-            Some(e) => Err(e),
-            None => Ok(id),
-        }
+        let seq = seq?;
+        self.commanded(topic, &fields);
+        Ok((id, seq))
     }
 
     /// A dead-man command's re-send (`drive`).
@@ -409,7 +419,6 @@ impl Hub {
         for (k, v) in decl.neutral.iter() {
             neutral.insert(k.to_string(), v.clone());
         }
-        client.values.insert(command.to_string(), fields.clone());
         let now = Instant::now();
         let drive = Drive {
             user: client.session.user.clone(),
@@ -441,14 +450,17 @@ impl Hub {
         due: bool,
     ) -> Result<(), CommandError> {
         if first {
+            self.unkeep(&drive.topic, &format!("{} driven", drive.name));
             self.publish(&drive.user, &drive.name, &drive.topic, fields)
                 .await
                 .map(|_| ())
         } else if due {
             self.port
-                .command(drive.topic.clone(), fields)
+                .command(drive.topic.clone(), fields.clone())
                 .await
-                .map_err(CommandError::NotSent)
+                .map_err(CommandError::NotSent)?;
+            self.commanded(&drive.topic, &fields);
+            Ok(())
         } else {
             Ok(())
         }
@@ -734,20 +746,33 @@ mod tests {
     }
 
     #[tokio::test]
-    async fn a_command_keeps_the_fields_last_set() {
+    async fn a_field_not_set_goes_as_last_commanded_never_as_the_layouts_value() {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut ana = f.pilot("ana").await;
-        send(&f, &mut ana, "course", set("heading", 90), None)
-            .await
-            .unwrap();
-        send(&f, &mut ana, "course", set("speed", 2), None)
+        // nothing commanded yet: the speed is unknown, and the layout's 0 does not stand in
+        let refused = send(&f, &mut ana, "course", set("heading", 90), None).await;
+        assert_eq!(
+            refused.unwrap_err().to_string(),
+            "`speed` has no known value (nothing commanded yet): set it"
+        );
+        assert!(waiting(&mut driver).is_empty());
+        let both = DataMap::new().with("heading", 90).with("speed", 2);
+        send(&f, &mut ana, "course", both, None).await.unwrap();
+        // another page of another pilot starts from what was commanded, not from its layout
+        f.hub.lease(&f.session("ana"), false).await.unwrap();
+        let mut bo = f.pilot("bo").await;
+        send(&f, &mut bo, "course", set("heading", 45), None)
             .await
             .unwrap();
         let sent = waiting(&mut driver);
-        assert_eq!(sent.len(), 2);
-        assert_eq!(field(&sent[1], "heading"), Some(Value::Int(90)));
-        assert_eq!(field(&sent[1], "speed"), Some(Value::Int(2)));
+        let courses: Vec<_> = sent
+            .iter()
+            .filter(|m| m.topic.as_str() == "cmd.course")
+            .collect();
+        assert_eq!(courses.len(), 2);
+        assert_eq!(field(courses[1], "heading"), Some(Value::Int(45)));
+        assert_eq!(field(courses[1], "speed"), Some(Value::Int(2)));
     }
 
     #[tokio::test(start_paused = true)]
@@ -786,22 +811,17 @@ mod tests {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut ana = f.pilot("ana").await;
-        drive(&f, &mut ana, "course", set("speed", 2))
-            .await
-            .unwrap();
+        let ahead = || DataMap::new().with("heading", 1).with("speed", 2);
+        drive(&f, &mut ana, "course", ahead()).await.unwrap();
         f.hub.release(&ana, "pilot", "course").await;
         f.hub.release(&ana, "pilot", "course").await;
         assert_eq!(neutrals(&waiting(&mut driver)), 1);
-        drive(&f, &mut ana, "course", set("speed", 2))
-            .await
-            .unwrap();
+        drive(&f, &mut ana, "course", ahead()).await.unwrap();
         f.hub.lease(&ana.session, false).await.unwrap();
         f.hub.release(&ana, "pilot", "course").await;
         assert_eq!(neutrals(&waiting(&mut driver)), 1);
         f.hub.lease(&ana.session, true).await.unwrap();
-        drive(&f, &mut ana, "course", set("speed", 2))
-            .await
-            .unwrap();
+        drive(&f, &mut ana, "course", ahead()).await.unwrap();
         f.hub.disconnect(&ana).await;
         f.hub.release(&ana, "pilot", "course").await;
         assert_eq!(neutrals(&waiting(&mut driver)), 1);
@@ -816,9 +836,8 @@ mod tests {
             stop.unwrap_err().to_string(),
             "`stop` is not a dead-man command (no rate)"
         );
-        drive(&f, &mut ana, "course", set("speed", 2))
-            .await
-            .unwrap();
+        let ahead = DataMap::new().with("heading", 10).with("speed", 2);
+        drive(&f, &mut ana, "course", ahead).await.unwrap();
         let before = history(&f).len();
         let too_fast = drive(&f, &mut ana, "course", set("speed", 9)).await;
         assert_eq!(

@@ -109,11 +109,11 @@ impl Entry {
 #[derive(Debug, Clone, PartialEq)]
 pub(super) struct Ack {
     /// The command's sequence number (`request_seq`).
-    seq: i64,
+    pub(super) seq: i64,
     /// Its state: `acknowledged`, `refused`, `timed-out`, or a step on the way.
-    state: String,
+    pub(super) state: String,
     /// The driver's reason (`reason`, or else `error`).
-    reason: String,
+    pub(super) reason: String,
 }
 
 impl Ack {
@@ -536,7 +536,8 @@ mod tests {
         let answer = status(&f.hub.origin, seq, "acknowledged");
         f.hub.observe(&cmd_status(), Stamp::now(), &answer);
         let shown: Vec<Json> = std::iter::from_fn(|| events.try_recv().ok())
-            .map(|t| serde_json::from_str(&t).unwrap())
+            .map(|t| serde_json::from_str::<Json>(&t).unwrap())
+            .filter(|e| e["type"] == "command")
             .collect();
         let states: Vec<(u64, &str)> = shown
             .iter()

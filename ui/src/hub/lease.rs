@@ -145,6 +145,10 @@ impl Hub {
         );
         self.lease_changed().await;
         self.neutral(stopped, "control released").await;
+        if !take {
+            let user = &session.user;
+            self.end_kept(|k| &k.user == user, "control released").await;
+        }
         Ok(())
     }
 

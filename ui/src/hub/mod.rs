@@ -11,25 +11,31 @@
 //! CSV command log), `pages` (what each page is sent: layouts, data) and `save` (the designer's
 //! saves).
 
+mod backlog;
 mod commands;
 mod history;
+mod keep;
 mod lease;
 mod pages;
 mod save;
 
+pub use backlog::{SAMPLES, TOPICS};
 pub use commands::{ARM_LIFETIME, ARMS_PER_CONNECTION, CommandError, DRIVE_PERIODS};
 pub use history::{HISTORY, MAX_TEXT};
+pub use keep::COMMANDED_TOPICS;
 pub use lease::{CONTROL_TOPIC, LEASE_GRACE, LeaseError};
 pub use save::SaveError;
 
 use crate::auth::{Limiter, Session, Sessions};
 use crate::layout::{Layout, Offers};
 use crate::users::Users;
+use backlog::Backlog;
 use commands::{Arms, Drives};
 use history::{Ack, History};
+use keep::{Commanded, Keeps};
 use lease::Lease;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Interface, Pattern, Stamp, Topic};
+use seabus_medium::{DataMap, Interface, Kind, Pattern, Stamp, Topic};
 use serde_json::{Value as Json, json};
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -57,6 +63,8 @@ pub struct Settings {
     pub log: Option<PathBuf>,
     /// The layout files.
     pub layouts: Vec<PathBuf>,
+    /// How far back the plotted and tracked variables are kept for pages that open a layout.
+    pub history: Duration,
 }
 
 /// The latest message of a topic.
@@ -76,6 +84,9 @@ struct State {
     history: History,
     arms: Arms,
     drives: Drives,
+    commanded: Commanded,
+    keeps: Keeps,
+    backlog: Backlog,
     next_conn: u64,
 }
 
@@ -103,7 +114,7 @@ pub struct Hub {
 /// Layouts read, by file: when the file was modified, and what reading it gave.
 type LayoutCache = HashMap<PathBuf, (Option<SystemTime>, Result<Layout, FileError>)>;
 
-/// One connection's view: its user, the layout it opened and the values its inputs set.
+/// One connection's view: its user, the layout it opened and what its controls offer.
 pub struct Client {
     /// The connection's number.
     pub conn: u64,
@@ -111,8 +122,6 @@ pub struct Client {
     pub session: Session,
     /// The layout opened, as the server sent it.
     pub layout: Option<Layout>,
-    /// The fields of each command as last set.
-    values: HashMap<String, DataMap>,
     /// What the layout's controls let a page put in each command (made when it is opened).
     offers: HashMap<String, Offers>,
     /// What the layout binds: topic patterns and the fields wanted (`None`: all).
@@ -130,6 +139,7 @@ impl Hub {
     /// topics the system's modules declare.
     pub fn new(settings: Settings, users: Users, port: Interface, produced: Vec<Pattern>) -> Hub {
         let origin = port.medium().origin().to_string();
+        let backlog = Backlog::new(settings.history);
         Hub {
             settings,
             users,
@@ -139,7 +149,10 @@ impl Hub {
             port,
             origin,
             produced,
-            state: Mutex::new(State::default()),
+            state: Mutex::new(State {
+                backlog,
+                ..State::default()
+            }),
             events: broadcast::channel(1024).0,
             layouts: Mutex::new(HashMap::new()),
         }
@@ -167,7 +180,6 @@ impl Hub {
             conn: st.next_conn,
             session,
             layout: None,
-            values: HashMap::new(),
             offers: HashMap::new(),
             interest: Vec::new(),
             seen: 0,
@@ -193,6 +205,7 @@ impl Hub {
             let stale = st.drives.stale(now);
             let timed_out = st.history.time_out(now, self.settings.ack_timeout);
             let released = st.lease.expire(now).map(|user| {
+                // its kept commands end in `keep` below, which sees no holder
                 let released = st.drives.take(|_, d| d.user == user);
                 tracing::info!(component = "console", user = %user, "control released: disconnected");
                 released
@@ -207,16 +220,21 @@ impl Hub {
             self.lease_changed().await;
             self.neutral(released, "control released").await;
         }
+        self.keep(now).await;
     }
 
     /// Takes in a message read from the bus.
     pub fn observe(&self, topic: &Topic, stamp: Stamp, map: &DataMap) {
+        let ack = Ack::from_status(topic, map, &self.origin);
+        if let Some(ack) = &ack {
+            self.kept_answered(ack);
+        }
         let changed = {
             let mut st = self.state();
-            let changed = Ack::from_status(topic, map, &self.origin)
-                .and_then(|ack| st.history.acknowledge(&ack));
+            let changed = ack.and_then(|ack| st.history.acknowledge(&ack));
             st.version += 1;
             let version = st.version;
+            st.backlog.record(topic, stamp.as_secs_f64(), map);
             st.latest.insert(
                 topic.clone(),
                 Latest {
@@ -236,6 +254,9 @@ impl Hub {
     pub async fn read(&self, mut port: Interface) {
         while let Some(msg) = port.recv().await {
             if let Some(map) = msg.payload.as_map() {
+                if msg.kind == Kind::Command {
+                    self.commanded(&msg.topic, map);
+                }
                 self.observe(&msg.topic, msg.stamp, map);
             }
         }

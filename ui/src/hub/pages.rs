@@ -120,28 +120,44 @@ impl Hub {
                 break;
             }
             let (interest, producers) = self.interest(&layout);
-            let message = json!({
-                "type": "layout",
-                "name": name,
-                "layout": layout.to_json(),
-                "producers": producers,
-            });
-            client.values = layout
-                .commands
-                .iter()
-                .map(|(n, c)| (n.clone(), c.fields.clone()))
-                .collect();
             client.offers = layout
                 .commands
                 .keys()
                 .map(|n| (n.clone(), layout.offers(n)))
                 .collect();
+            let chosen: Map<String, Json> = client
+                .offers
+                .iter()
+                .map(|(n, o)| (n.clone(), json!(o.free)))
+                .collect();
+            let message = json!({
+                "type": "layout",
+                "name": name,
+                "layout": layout.to_json(),
+                "producers": producers,
+                "chosen": chosen,
+                "commanded": self.commanded_for(&layout),
+                "kept": self.state().keeps.json(),
+            });
             client.interest = interest;
             client.seen = 0;
             client.layout = Some(layout);
             return message;
         }
         json!({"type": "error", "message": format!("no layout `{name}` for you")})
+    }
+
+    /// The values last commanded on the topics of `layout`'s commands, by topic.
+    fn commanded_for(&self, layout: &Layout) -> Map<String, Json> {
+        let st = self.state();
+        layout
+            .commands
+            .values()
+            .filter_map(|c| {
+                let fields = st.commanded.get(&c.topic)?;
+                Some((c.topic.to_string(), json!(fields)))
+            })
+            .collect()
     }
 
     /// The `data` message with what changed since the client's last one, if anything did.

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 /// The layout the tests open: a dead-man command, a held one, a confirmed one, one that needs no
-/// control and one only a `captain` may send.
+/// control, one only a `captain` may send and one the console keeps (its depth measured).
 pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot observer">
   <command name="course" topic="cmd.course" fields="heading=0, speed=0" rate="5Hz"
            neutral="speed=0" max.speed="3"/>
@@ -17,6 +17,8 @@ pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot obser
   <command name="stop" topic="cmd.mission" fields="action=stop" confirm="dialog"/>
   <command name="camera" topic="cmd.camera" fields="on=false, note=x" lease="false"/>
   <command name="anchor" topic="cmd.anchor" fields="drop=true" role="captain"/>
+  <command name="helm" topic="cmd.helm" fields="heading=0, depth=0.0, speed=0.0" keep="1s"
+           neutral="speed=0" from.depth="nav.depth.depth" min.depth="0"/>
   <column>
     <readout bind="nav.depth.depth"/>
     <slider command="course.heading" min="0" max="360"/>
@@ -25,6 +27,10 @@ pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot obser
     <button command="stop"/>
     <toggle command="camera.on"/>
     <button command="anchor"/>
+    <slider command="helm.heading" min="0" max="360"/>
+    <slider command="helm.depth" min="0" max="50"/>
+    <slider command="helm.speed" min="0" max="2"/>
+    <plot><series bind="nav.depth.depth"/></plot>
   </column>
 </layout>
 "#;
@@ -56,6 +62,7 @@ impl Fixture {
             designer_role: "designer".into(),
             log: Some(d.join("commands.csv")),
             layouts: vec![d.join("pilot.xml")],
+            history: Duration::from_secs(600),
         };
         let hub = Hub::new(
             settings,

@@ -4,31 +4,76 @@
 
 use super::model::{CommandDecl, Confirm, DEFAULT_HOLD};
 use super::read::Reader;
-use super::values::{duration, field_list, finite, name_attr, no_children, topic};
+use super::values::{bind, duration, field_list, finite, name_attr, no_children, topic};
 use seabus_medium::parse::parse_rate;
 use seabus_medium::xml::{Attr, Element, FileError};
 use seabus_medium::{DataMap, Value};
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::Duration;
 
-/// The attributes of `<command>` besides `min.FIELD` and `max.FIELD`.
-const KNOWN: [&str; 9] = [
-    "name", "topic", "fields", "role", "confirm", "hold", "rate", "neutral", "lease",
+/// The attributes of `<command>` besides `min.FIELD`, `max.FIELD` and `from.FIELD`.
+const KNOWN: [&str; 11] = [
+    "name", "topic", "fields", "role", "confirm", "hold", "rate", "neutral", "lease", "keep",
+    "resume",
 ];
 
+/// The shortest and longest `keep` period.
+const KEEP_RANGE: (Duration, Duration) = (Duration::from_millis(100), Duration::from_secs(60));
+
 impl CommandDecl {
-    /// Checks a proposed set of field values (types as the defaults', ranges) and returns the full
-    /// datamap to send: the defaults, overridden by `current` (the values last set, where they
-    /// fit) and then by `set`; or the reason it cannot be sent.
-    pub fn build(&self, current: &DataMap, set: &DataMap) -> Result<DataMap, String> {
-        let mut out = self.fields.clone();
-        for (name, value) in current.iter() {
-            if let Ok(v) = self.fit(name, value) {
-                out.insert(name.to_string(), v);
-            }
+    /// Checks a proposed set of field values (types as the declared values', ranges) and returns
+    /// the full datamap to send, or the reason it cannot be sent. A field in `chosen` (one the
+    /// layout's controls let the pilot choose) is the value in `set`, else its current value in
+    /// `current` (last commanded or measured): never the value the layout declares, which for
+    /// such a field only gives its type. Any other field is the layout's: the value in `set`
+    /// (already checked against what the controls offer), else the declared value.
+    pub fn build(
+        &self,
+        current: &DataMap,
+        set: &DataMap,
+        chosen: &BTreeSet<String>,
+    ) -> Result<DataMap, String> {
+        let mut out = DataMap::new();
+        let mut unknown = Vec::new();
+        for (name, declared) in self.fields.iter() {
+            let value = match set.get(name) {
+                Some(v) => self.fit(name, v)?,
+                None if chosen.contains(name) => {
+                    match current.get(name).and_then(|v| self.fit(name, v).ok()) {
+                        Some(v) => v,
+                        None => {
+                            unknown.push(name);
+                            continue;
+                        }
+                    }
+                }
+                None => declared.clone(),
+            };
+            out.insert(name.to_string(), value);
         }
         for (name, value) in set.iter() {
-            let v = self.fit(name, value)?;
-            out.insert(name.to_string(), v);
+            self.fit(name, value)?;
+        }
+        if !unknown.is_empty() {
+            return Err(format!(
+                "{} no known value (nothing commanded{} yet): set {}",
+                match unknown.as_slice() {
+                    [one] => format!("`{one}` has"),
+                    many => format!(
+                        "{} have",
+                        many.iter()
+                            .map(|f| format!("`{f}`"))
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                },
+                if self.from.is_empty() {
+                    ""
+                } else {
+                    " or measured"
+                },
+                if unknown.len() == 1 { "it" } else { "them" }
+            ));
         }
         Ok(out)
     }
@@ -125,9 +170,13 @@ pub(super) fn read_command(el: &Element) -> Result<CommandDecl, FileError> {
         lease: el.flag("lease")?.unwrap_or(true),
         min: BTreeMap::new(),
         max: BTreeMap::new(),
+        from: BTreeMap::new(),
+        keep: el.attr("keep").map(keep).transpose()?,
+        resume: el.attr("resume").map(|a| a.value.trim().to_string()),
         pos: el.pos.clone(),
     };
     bounds(&mut decl, el)?;
+    measured(&mut decl, el)?;
     // where a contradiction between attributes is shown when the one to blame is not written
     let fallback = el.attrs.first().unwrap_or(t);
     bounds_ordered(&decl, el, fallback)?;
@@ -141,14 +190,13 @@ pub(super) fn read_command(el: &Element) -> Result<CommandDecl, FileError> {
 /// Refuses an attribute `<command>` does not take.
 fn known_attrs(el: &Element) -> Result<(), FileError> {
     for a in &el.attrs {
-        let bound = a
-            .name
-            .strip_prefix("min.")
-            .or_else(|| a.name.strip_prefix("max."))
-            .is_some();
+        let bound = ["min.", "max.", "from."]
+            .iter()
+            .any(|p| a.name.starts_with(p));
         if !bound && !KNOWN.contains(&a.name.as_str()) {
             return Err(a.pos.error(format!(
-                "unknown attribute `{}` on <command>; expected one of: {}, min.FIELD, max.FIELD",
+                "unknown attribute `{}` on <command>; expected one of: {}, min.FIELD, max.FIELD, \
+                 from.FIELD",
                 a.name,
                 KNOWN.join(", ")
             )));
@@ -227,6 +275,41 @@ fn bounds(decl: &mut CommandDecl, el: &Element) -> Result<(), FileError> {
     Ok(())
 }
 
+/// How often a kept command is sent again: a period within [`KEEP_RANGE`].
+fn keep(a: &Attr) -> Result<Duration, FileError> {
+    let d = duration(a)?;
+    let (lo, hi) = KEEP_RANGE;
+    if d < lo || d > hi {
+        return Err(a.error(format!(
+            "`keep` is how often the command is sent again while control is held: from {} ms \
+             to {} s",
+            lo.as_millis(),
+            hi.as_secs()
+        )));
+    }
+    Ok(d)
+}
+
+/// Reads the `from.FIELD="topic.field"` attributes: the variable a field's current value is
+/// measured by.
+fn measured(decl: &mut CommandDecl, el: &Element) -> Result<(), FileError> {
+    for a in &el.attrs {
+        let Some(field) = a.name.strip_prefix("from.") else {
+            continue;
+        };
+        if decl.fields.get(field).is_none() {
+            return Err(a.error(format!(
+                "command `{}` has no field `{field}`; fields: {}",
+                decl.name,
+                field_names(&decl.fields)
+            )));
+        }
+        let (topic, f) = bind(a)?;
+        decl.from.insert(field.to_string(), (topic, f));
+    }
+    Ok(())
+}
+
 /// Refuses a field whose maximum is not above its minimum.
 fn bounds_ordered(decl: &CommandDecl, el: &Element, fallback: &Attr) -> Result<(), FileError> {
     for (f, lo) in &decl.min {
@@ -252,10 +335,11 @@ fn initial_values_fit(decl: &CommandDecl, at: &Attr) -> Result<(), FileError> {
 
 /// The `neutral` fields of a dead-man command, each fitting its field.
 fn neutral(decl: &CommandDecl, a: &Attr) -> Result<DataMap, FileError> {
-    if decl.rate_hz.is_none() {
-        return Err(
-            a.error("`neutral` is sent when a dead-man command stops; give the command a `rate`")
-        );
+    if decl.rate_hz.is_none() && decl.keep.is_none() {
+        return Err(a.error(
+            "`neutral` is sent when a dead-man or kept command stops; give the command a `rate` \
+             or `keep`",
+        ));
     }
     let mut out = DataMap::new();
     for (f, v) in field_list(&a.value).map_err(|e| a.error(e))?.iter() {
@@ -325,43 +409,63 @@ impl Reader {
 mod tests {
     use super::super::testing::{example, with, wrong_errors};
     use seabus_medium::{DataMap, Value};
+    use std::collections::BTreeSet;
 
     #[test]
     fn build_checks_types_ranges_and_names() {
         let l = example();
         let course = &l.commands["course"];
+        let none = BTreeSet::new();
         let set = DataMap::new().with("heading", 90.0);
-        let sent = course.build(&DataMap::new(), &set).unwrap();
+        let sent = course.build(&DataMap::new(), &set, &none).unwrap();
         assert_eq!(sent.get("heading"), Some(&Value::Int(90)));
         assert_eq!(sent.get("depth"), Some(&Value::Int(0)));
         assert_eq!(sent.len(), 3);
-        let current = DataMap::new().with("depth", 12).with("bogus", 1);
+        // fields the pilot chooses come from the current values, never the declared ones
+        let chosen: BTreeSet<String> = ["heading", "depth", "speed"].map(String::from).into();
+        let current = DataMap::new()
+            .with("depth", 12)
+            .with("heading", 45)
+            .with("bogus", 1);
         let sent = course
-            .build(&current, &DataMap::new().with("speed", 2))
+            .build(&current, &DataMap::new().with("speed", 2), &chosen)
             .unwrap();
+        assert_eq!(sent.get("heading"), Some(&Value::Int(45)));
         assert_eq!(sent.get("depth"), Some(&Value::Int(12)));
         assert_eq!(sent.get("speed"), Some(&Value::Float(2.0)));
         assert_eq!(sent.get("bogus"), None);
         assert_eq!(
-            course.build(&DataMap::new(), &DataMap::new().with("speed", 3.0)),
+            course.build(&DataMap::new().with("depth", 3), &set, &chosen),
+            Err("`speed` has no known value (nothing commanded yet): set it".to_string())
+        );
+        assert_eq!(
+            course.build(&DataMap::new(), &set, &chosen),
+            Err(
+                "`depth`, `speed` have no known value (nothing commanded yet): set them"
+                    .to_string()
+            )
+        );
+        let build = |set: DataMap| course.build(&DataMap::new(), &set, &none);
+        assert_eq!(
+            build(DataMap::new().with("speed", 3.0)),
             Err("field `speed`: 3 is above the maximum 2.5".to_string())
         );
         assert_eq!(
-            course.build(&DataMap::new(), &DataMap::new().with("speed", "fast")),
+            build(DataMap::new().with("speed", "fast")),
             Err("field `speed` is a float, not a string `\"fast\"`".to_string())
         );
         assert_eq!(
-            course.build(&DataMap::new(), &DataMap::new().with("hdg", 1)),
+            build(DataMap::new().with("hdg", 1)),
             Err("command `course` has no field `hdg`; fields: heading, depth, speed".to_string())
         );
         assert_eq!(
-            course.build(&DataMap::new(), &DataMap::new().with("heading", f64::NAN)),
+            build(DataMap::new().with("heading", f64::NAN)),
             Err("field `heading` is an int, not a float `NaN`".to_string())
         );
         let start = &l.commands["start"];
         assert!(
             start
-                .build(&DataMap::new(), &DataMap::new().with("name", true))
+                .build(&DataMap::new(), &DataMap::new().with("name", true), &none)
                 .is_err()
         );
     }
@@ -379,7 +483,19 @@ mod tests {
             ),
             (
                 "<command name=\"c\" topic=\"a\" fields=\"x=1\" neutral=\"x=0\"/>",
-                "4:42: attribute `neutral`: `neutral` is sent when a dead-man command stops; give the command a `rate`",
+                "4:42: attribute `neutral`: `neutral` is sent when a dead-man or kept command stops; give the command a `rate` or `keep`",
+            ),
+            (
+                "<command name=\"c\" topic=\"a\" fields=\"x=1\" keep=\"10ms\"/>",
+                "4:42: attribute `keep`: `keep` is how often the command is sent again while control is held: from 100 ms to 60 s",
+            ),
+            (
+                "<command name=\"c\" topic=\"a\" fields=\"x=1\" from.y=\"nav.depth.depth\"/>",
+                "4:42: attribute `from.y`: command `c` has no field `y`; fields: x",
+            ),
+            (
+                "<command name=\"c\" topic=\"a\" fields=\"x=1\" from.x=\"depth\"/>",
+                "4:42: attribute `from.x`: `depth` is not topic.field (the field is after the last dot: nav.depth.depth)",
             ),
             (
                 "<command name=\"c\" topic=\"a\" fields=\"x=1\" rate=\"5\" neutral=\"y=0\"/>",
@@ -419,7 +535,7 @@ mod tests {
             ),
             (
                 "<command name=\"c\" topic=\"a\" colour=\"red\"/>",
-                "4:29: unknown attribute `colour` on <command>; expected one of: name, topic, fields, role, confirm, hold, rate, neutral, lease, min.FIELD, max.FIELD",
+                "4:29: unknown attribute `colour` on <command>; expected one of: name, topic, fields, role, confirm, hold, rate, neutral, lease, keep, resume, min.FIELD, max.FIELD, from.FIELD",
             ),
             (
                 "<command name=\"stop\" topic=\"a\"/>",

@@ -60,6 +60,9 @@ fn command_json(c: &CommandDecl) -> Json {
         "lease": c.lease,
         "min": bounds(&c.min),
         "max": bounds(&c.max),
+        "from": c.from.iter().map(|(k, (t, f))| (k.clone(), json!({"topic": t.as_str(), "field": f}))).collect::<Map<String, Json>>(),
+        "keep_ms": c.keep.map(|d| d.as_millis() as u64),
+        "resume": c.resume,
     })
 }
 
@@ -277,6 +280,9 @@ mod tests {
                 "lease": true,
                 "min": {},
                 "max": {"speed": 2.5},
+                "from": {},
+                "keep_ms": null,
+                "resume": null,
             })
         );
         assert_eq!(j["commands"]["start"]["confirm"], "hold");

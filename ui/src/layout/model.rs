@@ -74,6 +74,16 @@ pub struct CommandDecl {
     pub min: BTreeMap<String, f64>,
     /// Highest values of fields.
     pub max: BTreeMap<String, f64>,
+    /// The variables that give fields their current value while nothing has been commanded on
+    /// the command's topic (`from.FIELD="topic.field"`).
+    pub from: BTreeMap<String, (Topic, String)>,
+    /// How often the console sends the command again while its sender holds control
+    /// (`keep`): the vehicle holds it until another is sent, control ends or the vehicle
+    /// refuses it.
+    pub keep: Option<Duration>,
+    /// The command a page offers when the vehicle refuses this one (`resume`: a mission's start
+    /// after the vehicle stopped).
+    pub resume: Option<String>,
     /// Where it is declared.
     pub pos: Pos,
 }
@@ -267,6 +277,50 @@ impl Layout {
                     widget: format!("axis-{}", a.index),
                     pos: a.pos.clone(),
                 });
+            }
+        }
+        for c in self.commands.values() {
+            for (topic, field) in c.from.values() {
+                out.push(Binding {
+                    topic: topic.to_string(),
+                    field: Some(field.clone()),
+                    fresh: DEFAULT_FRESH,
+                    widget: format!("command-{}", c.name),
+                    pos: c.pos.clone(),
+                });
+            }
+        }
+        out
+    }
+}
+
+impl Layout {
+    /// What the plots and tracks bind: each topic (or pattern) with the fields drawn (a track's
+    /// position: `lat` and `lon`).
+    pub fn plotted(&self) -> Vec<(String, Vec<String>)> {
+        let mut out: Vec<(String, Vec<String>)> = Vec::new();
+        let mut add = |topic: &str, field: &str| match out.iter_mut().find(|(t, _)| t == topic) {
+            Some((_, fields)) if fields.iter().any(|f| f == field) => {}
+            Some((_, fields)) => fields.push(field.to_string()),
+            None => out.push((topic.to_string(), vec![field.to_string()])),
+        };
+        for node in self.root.walk() {
+            match node.kind.as_str() {
+                "plot" => {
+                    for (t, f) in node.children.iter().filter_map(|s| s.bound("bind")) {
+                        add(t, f);
+                    }
+                }
+                "track" => {
+                    if let Some(p) = node.attrs.get("position") {
+                        add(p.trim(), "lat");
+                        add(p.trim(), "lon");
+                    }
+                    if let Some((t, f)) = node.bound("heading") {
+                        add(t, f);
+                    }
+                }
+                _ => {}
             }
         }
         out

@@ -118,6 +118,11 @@ impl Reader {
             }
             self.commands.insert(c.name.clone(), c);
         }
+        for el in children.iter().filter(|e| e.name == "command") {
+            if let Some(a) = el.attr("resume") {
+                self.command_ref(a, Some(false))?;
+            }
+        }
         Ok(())
     }
 

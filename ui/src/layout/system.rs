@@ -1,10 +1,13 @@
-//! A layout against a system ([`Layout::check`], `seabus layout check LAYOUT SYSTEM`): what puts
-//! each topic on the console's medium ([`producers`]) and what accepts each command, directly or
-//! through a bridge route.
+//! A layout against a system ([`Layout::check`], `seabus layout check LAYOUT SYSTEM`, and
+//! [`Layout::check_on`] for each console `seabus check` and `seabus run` read): what puts each
+//! topic on the console's medium ([`producers`]), what accepts each command, directly or through a
+//! bridge route, whether the command carries the fields those modules require, and whether the
+//! input widgets' ranges fit the fields' limits.
 
-use super::model::{Binding, CommandDecl, Layout};
-use seabus_medium::xml::FileError;
+use super::model::{Binding, CommandDecl, Layout, Node};
+use seabus_medium::xml::{FileError, Pos};
 use seabus_medium::{Kind, Pattern};
+use seabus_modules::datasets::Dataset;
 use seabus_modules::system::RouteSpec;
 use seabus_modules::{Catalogue, Registry, SystemSpec};
 use std::collections::BTreeSet;
@@ -18,31 +21,80 @@ pub struct Producer {
     pub fields: Option<BTreeSet<String>>,
 }
 
-/// What a system's modules accept: (medium, topics).
-type Accepted<'a> = Vec<(&'a str, Pattern)>;
+/// A command topic a module of the system accepts.
+struct Accepting<'a> {
+    /// The medium it accepts it on.
+    medium: &'a str,
+    /// The topics.
+    pattern: Pattern,
+    /// The module.
+    module: &'a str,
+    /// The standard dataset it takes, when it names one.
+    dataset: Option<&'a Dataset>,
+}
+
+/// A module that accepts a layout's command, and the bridge route the command crosses to reach
+/// it (`None`: it accepts it on the console's medium).
+struct Acceptor<'a> {
+    /// The module.
+    module: &'a str,
+    /// The standard dataset it takes, when it names one.
+    dataset: Option<&'a Dataset>,
+    /// The route crossed, whose field renames apply.
+    route: Option<&'a RouteSpec>,
+}
+
+impl Acceptor<'_> {
+    /// The name field `field` of the command has when it reaches the module; `None` when the route
+    /// leaves it out (`keep="false"` without it).
+    fn arrives_as<'f>(&'f self, field: &'f str) -> Option<&'f str> {
+        let Some(route) = self.route else {
+            return Some(field);
+        };
+        match route.fields.iter().find(|(from, _)| from == field) {
+            Some((_, to)) => Some(to),
+            None => route.keep.then_some(field),
+        }
+    }
+}
 
 impl Layout {
-    /// Compares the layout with a system: a warning (`warning: …`) for each binding whose topic no
-    /// module produces on the console's medium (directly, or through a bridge route into it) or
-    /// whose field no producer declares, and for each command no module accepts (on that medium,
-    /// or one route away). The console's medium is the `<console medium>` of the system, or its
-    /// first medium.
+    /// Compares the layout with a system (see [`Layout::check_on`]) for the console of the system:
+    /// on the medium of its first `<console>`, or its first medium.
     pub fn check(
         &self,
         spec: &SystemSpec,
         registry: &Registry,
         catalogue: &Catalogue,
     ) -> Vec<FileError> {
-        let console = console_medium(spec);
-        let produced = producers(spec, registry, catalogue, console);
+        self.check_on(spec, registry, catalogue, console_medium(spec))
+    }
+
+    /// Compares the layout with a system for a console on `medium`: a warning (`warning: …`) for
+    /// each binding whose topic no module produces on the medium (directly, or through a bridge
+    /// route into it) or whose field no producer declares; for each command no module accepts (on
+    /// that medium, or one route away); for each widget or input sending a command that lacks a
+    /// field the accepting module's dataset requires (the command declares no such field, so no
+    /// control can set it); and for each slider or number whose range goes beyond the `min.F` and
+    /// `max.F` of its command or the limits of the accepting module's dataset.
+    pub fn check_on(
+        &self,
+        spec: &SystemSpec,
+        registry: &Registry,
+        catalogue: &Catalogue,
+        medium: &str,
+    ) -> Vec<FileError> {
+        let produced = producers(spec, registry, catalogue, medium);
         let accepted = accepted(spec, registry, catalogue);
         let mut warnings: Vec<FileError> = self
             .bindings()
             .iter()
-            .filter_map(|b| binding_warning(b, &produced, spec, console))
+            .filter_map(|b| binding_warning(b, &produced, spec, medium))
             .collect();
+        let mut ranges = Vec::new();
         for c in self.commands.values() {
-            if !accepted_from(c, &accepted, spec, console) {
+            let acceptors = acceptors(c, &accepted, spec, medium);
+            if acceptors.is_empty() {
                 warnings.push(c.pos.error(format!(
                     "warning: no module of {} accepts command `{}` on `{}`",
                     spec.file,
@@ -50,7 +102,12 @@ impl Layout {
                     c.topic.as_str()
                 )));
             }
+            for a in &acceptors {
+                warnings.extend(self.missing_fields(c, a));
+            }
+            ranges.extend(self.range_warnings(c, &acceptors));
         }
+        warnings.extend(ranges);
         warnings
     }
 }
@@ -64,22 +121,30 @@ fn console_medium(spec: &SystemSpec) -> &str {
         .unwrap_or_default()
 }
 
-/// The topics each module of the system accepts, with the medium it accepts them on.
-fn accepted<'a>(spec: &'a SystemSpec, registry: &Registry, catalogue: &Catalogue) -> Accepted<'a> {
+/// The command topics each module of the system accepts, with the medium it accepts them on.
+fn accepted<'a>(
+    spec: &'a SystemSpec,
+    registry: &Registry,
+    catalogue: &'a Catalogue,
+) -> Vec<Accepting<'a>> {
     let mut accepted = Vec::new();
     for m in &spec.modules {
         let Ok(built) = registry.build_module(m, catalogue) else {
             continue;
         };
         for t in &built.decl.accepts {
-            if let (Some(medium), Ok(p)) = (m.media.get(t.port), Pattern::new(&t.topic)) {
-                accepted.push((medium.as_str(), p));
+            if let (Some(medium), Ok(pattern)) = (m.media.get(t.port), Pattern::new(&t.topic)) {
+                accepted.push(Accepting {
+                    medium: medium.as_str(),
+                    pattern,
+                    module: m.name.as_str(),
+                    dataset: t.dataset.as_deref().and_then(|d| catalogue.get(d)),
+                });
             }
         }
     }
     accepted
 }
-
 /// The warning for a binding whose topic nothing produces on `console`, or whose field no
 /// producer declares (when they all say what they declare).
 fn binding_warning(
@@ -120,29 +185,238 @@ fn binding_warning(
     )))
 }
 
-/// Whether a module accepts command `c` sent on `console`: there, or through a bridge route that
+/// The modules that accept command `c` sent on `console`: there, or through a bridge route that
 /// carries commands from `console` to the module's medium.
-fn accepted_from(c: &CommandDecl, accepted: &Accepted, spec: &SystemSpec, console: &str) -> bool {
-    let accepts = |medium: &str, topic: &str| {
+fn acceptors<'a>(
+    c: &CommandDecl,
+    accepted: &[Accepting<'a>],
+    spec: &'a SystemSpec,
+    console: &str,
+) -> Vec<Acceptor<'a>> {
+    let on = |medium: &str, topic: &str, route: Option<&'a RouteSpec>| -> Vec<Acceptor<'a>> {
         accepted
             .iter()
-            .any(|(m, p)| *m == medium && p.matches(topic))
+            .filter(|a| a.medium == medium && a.pattern.matches(topic))
+            .map(|a| Acceptor {
+                module: a.module,
+                dataset: a.dataset,
+                route,
+            })
+            .collect()
     };
     let topic = c.topic.as_str();
-    if accepts(console, topic) {
-        return true;
-    }
-    route_legs(spec).any(|(from, to, r)| {
+    let mut out = on(console, topic, None);
+    for (from, to, r) in route_legs(spec) {
         if from != console || r.kind == Some(Kind::Data) || !r.topics.matches(topic) {
-            return false;
+            continue;
         }
-        let out = match &r.rename {
+        let crossed = match &r.rename {
             Some(rename) => r.topics.captures(topic).and_then(|c| rename.fill(&c)),
             None => Some(topic.to_string()),
         };
-        out.is_some_and(|t| accepts(to, &t))
-    })
+        if let Some(t) = crossed {
+            out.extend(on(to, &t, Some(r)));
+        }
+    }
+    out
 }
+
+/// A widget or input that sends a command: what it is called in a warning, and where it is.
+struct Sender<'a> {
+    what: String,
+    pos: &'a Pos,
+}
+
+impl Layout {
+    /// Every widget and input that sends command `name`.
+    fn senders(&self, name: &str) -> Vec<Sender<'_>> {
+        let mut out: Vec<Sender> = self
+            .root
+            .walk()
+            .into_iter()
+            .filter(|n| n.command().is_some_and(|(c, _)| c == name))
+            .map(|n| Sender {
+                what: format!("{} `{}`", n.kind, n.id),
+                pos: &n.pos,
+            })
+            .collect();
+        let keys = self.keys.iter().filter(|k| k.command == name);
+        out.extend(keys.map(|k| Sender {
+            what: format!("key `{}`", k.key),
+            pos: &k.pos,
+        }));
+        let axes = self.axes.iter().filter(|a| a.command == name);
+        out.extend(axes.map(|a| Sender {
+            what: format!("gamepad axis {}", a.index),
+            pos: &a.pos,
+        }));
+        let buttons = self.buttons.iter().filter(|b| b.command == name);
+        out.extend(buttons.map(|b| Sender {
+            what: format!("gamepad button {}", b.index),
+            pos: &b.pos,
+        }));
+        out
+    }
+
+    /// A warning at each widget and input sending `c` when `a` requires fields `c` does not carry
+    /// to it: a field the command does not declare is one no control can set, and the command is
+    /// sent without it.
+    fn missing_fields(&self, c: &CommandDecl, a: &Acceptor) -> Vec<FileError> {
+        let Some(dataset) = a.dataset else {
+            return Vec::new();
+        };
+        let carried: BTreeSet<&str> = c
+            .fields
+            .iter()
+            .filter_map(|(f, _)| a.arrives_as(f))
+            .collect();
+        let missing: Vec<String> = dataset
+            .required()
+            .filter(|f| !carried.contains(f.name.as_str()))
+            .map(|f| format!("`{}`", f.name))
+            .collect();
+        if missing.is_empty() {
+            return Vec::new();
+        }
+        let them = if missing.len() == 1 { "it" } else { "them" };
+        let (crossing, carry) = match a.route {
+            None => (String::new(), String::new()),
+            Some(r) => (
+                format!(" once it crosses the route at {}", r.pos),
+                format!(" or let the route carry {them}"),
+            ),
+        };
+        self.senders(&c.name)
+            .into_iter()
+            .map(|s| {
+                s.pos.error(format!(
+                    "warning: {} sends command `{}` without {}{crossing}, which module `{}` \
+                     requires (dataset `{}`); declare {them} in the command's `fields`{carry}",
+                    s.what,
+                    c.name,
+                    missing.join(", "),
+                    a.module,
+                    dataset.name,
+                ))
+            })
+            .collect()
+    }
+
+    /// A warning for each slider or number setting a field of `c` whose range goes beyond the
+    /// field's `min.F`/`max.F` or the limits of an accepting module's dataset.
+    fn range_warnings(&self, c: &CommandDecl, acceptors: &[Acceptor]) -> Vec<FileError> {
+        let mut out = Vec::new();
+        for node in self.root.walk() {
+            let Some((name, Some(field))) = node.command() else {
+                continue;
+            };
+            if name != c.name || !matches!(node.kind.as_str(), "slider" | "number") {
+                continue;
+            }
+            let mut limits = vec![Limits {
+                min: c.min.get(field).copied(),
+                max: c.max.get(field).copied(),
+                of: format!("`{}.{field}`", c.name),
+                consequence: "the server refuses values beyond them".to_string(),
+            }];
+            for a in acceptors {
+                let declared = a
+                    .dataset
+                    .zip(a.arrives_as(field))
+                    .and_then(|(d, f)| d.field(f).map(|f| (d, f)));
+                if let Some((d, f)) = declared {
+                    limits.push(Limits {
+                        min: f.min,
+                        max: f.max,
+                        of: format!("field `{}` of dataset `{}`", f.name, d.name),
+                        consequence: format!(
+                            "values beyond them are not valid for module `{}`",
+                            a.module
+                        ),
+                    });
+                }
+            }
+            let range = Range::of(node);
+            out.extend(limits.iter().filter_map(|l| range.beyond(node, l)));
+        }
+        out
+    }
+}
+
+/// A field's limits, whose they are and what becomes of values beyond them (for the warning).
+struct Limits {
+    min: Option<f64>,
+    max: Option<f64>,
+    of: String,
+    consequence: String,
+}
+
+impl Limits {
+    /// The limits as words: `0 to 360`, `at least 0`, `at most 2.5`.
+    fn describe(&self) -> String {
+        match (self.min, self.max) {
+            (Some(lo), Some(hi)) => format!("{lo} to {hi}"),
+            (Some(lo), None) => format!("at least {lo}"),
+            (None, Some(hi)) => format!("at most {hi}"),
+            (None, None) => "none".to_string(),
+        }
+    }
+}
+
+/// The values a slider or number lets the user pick: its `min` and `max`, or where they are not
+/// written a slider's 0 and 100 (as the page draws it) and no limit for a number.
+struct Range {
+    min: Option<f64>,
+    max: Option<f64>,
+}
+
+impl Range {
+    /// The range of `node`.
+    fn of(node: &Node) -> Range {
+        let written = |name: &str| {
+            node.attrs
+                .get(name)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+        };
+        let slider = node.kind == "slider";
+        Range {
+            min: written("min").or(slider.then_some(SLIDER_MIN)),
+            max: written("max").or(slider.then_some(SLIDER_MAX)),
+        }
+    }
+
+    /// The warning when this range goes below `l.min` or above `l.max`.
+    fn beyond(&self, node: &Node, l: &Limits) -> Option<FileError> {
+        let below = l.min.is_some_and(|m| self.min.is_none_or(|lo| lo < m));
+        let above = l.max.is_some_and(|m| self.max.is_none_or(|hi| hi > m));
+        if !below && !above {
+            return None;
+        }
+        let end = |value: Option<f64>, attr: &str| {
+            let value = value.map_or_else(|| "no limit".to_string(), |v| v.to_string());
+            if node.attrs.contains_key(attr) {
+                value
+            } else {
+                format!("{value} (no `{attr}`)")
+            }
+        };
+        Some(node.pos.error(format!(
+            "warning: {} `{}` goes from {} to {}, beyond the limits of {} ({}): {}",
+            node.kind,
+            node.id,
+            end(self.min, "min"),
+            end(self.max, "max"),
+            l.of,
+            l.describe(),
+            l.consequence
+        )))
+    }
+}
+
+/// The range a slider without `min` or `max` has on the page.
+const SLIDER_MIN: f64 = 0.0;
+/// See [`SLIDER_MIN`].
+const SLIDER_MAX: f64 = 100.0;
 
 /// Every route leg of a system's bridges: (from medium, to medium, route).
 fn route_legs(spec: &SystemSpec) -> impl Iterator<Item = (&str, &str, &RouteSpec)> {
@@ -200,7 +474,91 @@ pub fn producers(
 #[cfg(test)]
 mod tests {
     use super::super::testing::{parse, with};
-    use seabus_modules::{Catalogue, SystemSpec};
+    use seabus_modules::{
+        Built, Catalogue, Declaration, Module, ModuleKind, ModuleType, SystemSpec, TopicDecl,
+    };
+
+    /// A module that accepts course commands (dataset `course-command`) and does nothing.
+    struct Helm;
+    impl Module for Helm {}
+
+    const HELM: ModuleType = ModuleType {
+        name: "helm",
+        kind: ModuleKind::Driver,
+        summary: "accepts course commands",
+        build: |_, _| {
+            Ok(Built {
+                decl: Declaration::new(ModuleKind::Driver)
+                    .accepts(TopicDecl::dataset("cmd.course", "course-command")),
+                module: Box::new(Helm),
+            })
+        },
+    };
+
+    #[test]
+    fn check_warns_of_fields_the_acceptor_requires_and_ranges_beyond_its_limits() {
+        let spec = SystemSpec::parse(
+            "sys.xml",
+            r#"<seabus>
+  <medium name="bus" url="inproc://"/>
+  <medium name="vehicle" url="inproc://"/>
+  <module name="helm" type="helm" medium="vehicle"/>
+  <bridge name="b" media="bus vehicle">
+    <route from="bus" to="vehicle" topics="ui.cmd.*" rename="cmd.*" kind="command" keep="false">
+      <field name="hdg" rename="heading"/><field name="depth"/><field name="speed"/>
+    </route>
+  </bridge>
+</seabus>"#,
+        )
+        .unwrap();
+        let mut registry = seabus_support::registry();
+        registry.add_module(HELM);
+        let catalogue = Catalogue::built_in();
+        let l = parse(
+            r#"<layout name="t">
+<command name="course" topic="ui.cmd.course" fields="hdg=0.0, depth=0.0, speed=0.0, x=1" max.hdg="400"/>
+<command name="bare" topic="ui.cmd.course" fields="heading=0.0, depth=0.0, speed=0.0"/>
+<command name="part" topic="ui.cmd.course" fields="hdg=0.0, speed=0.0" min.speed="0"/>
+<slider command="course.hdg" min="0" max="400"/>
+<number command="course.depth"/>
+<button command="bare"/>
+<slider command="part.speed" max="2"/>
+<keys><key key="s" command="part.speed" value="1"/></keys>
+</layout>"#,
+        )
+        .unwrap();
+        let got: Vec<String> = l
+            .check_on(&spec, &registry, &catalogue, "bus")
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert_eq!(
+            got,
+            [
+                "l.xml:7:1: warning: button `button-1` sends command `bare` without `heading` once \
+                 it crosses the route at sys.xml:6:5, which module `helm` requires (dataset \
+                 `course-command`); declare it in the command's `fields` or let the route carry it",
+                "l.xml:8:1: warning: slider `slider-2` sends command `part` without `depth` once \
+                 it crosses the route at sys.xml:6:5, which module `helm` requires (dataset \
+                 `course-command`); declare it in the command's `fields` or let the route carry it",
+                "l.xml:9:7: warning: key `s` sends command `part` without `depth` once it crosses \
+                 the route at sys.xml:6:5, which module `helm` requires (dataset \
+                 `course-command`); declare it in the command's `fields` or let the route carry it",
+                "l.xml:5:1: warning: slider `slider-1` goes from 0 to 400, beyond the limits of \
+                 field `heading` of dataset `course-command` (0 to 360): values beyond them are \
+                 not valid for module `helm`",
+            ]
+        );
+        // the same layout straight on the vehicle's medium: no module accepts `ui.cmd.course`
+        let direct = l.check_on(&spec, &registry, &catalogue, "vehicle");
+        assert_eq!(direct.len(), 3, "{direct:?}");
+        assert!(
+            direct.iter().all(|w| w
+                .message
+                .starts_with("warning: no module of sys.xml accepts command")),
+            "{direct:?}"
+        );
+    }
 
     #[test]
     fn check_warns_of_missing_producers_and_acceptors() {

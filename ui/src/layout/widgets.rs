@@ -20,10 +20,18 @@ fn kind_attrs(kind: &str) -> Option<&'static [&'static str]> {
         "tabs" => &[],
         "tab" => &["title"],
         "grid" => &["columns"],
-        "readout" => &["bind", "unit", "precision", "fresh"],
+        "readout" => &[
+            "bind",
+            "unit",
+            "precision",
+            "angle",
+            "true",
+            "false",
+            "fresh",
+        ],
         "gauge" => &["bind", "min", "max", "unit", "precision", "ranges", "fresh"],
         "plot" => &["window", "min", "max", "fresh"],
-        "series" => &["bind", "colour"],
+        "series" => &["bind", "colour", "unit", "angle"],
         "track" => &["position", "heading", "trail", "waypoints", "grid", "fresh"],
         "health" => &["bind", "fresh"],
         "log" => &["topics", "lines", "fresh"],
@@ -34,6 +42,15 @@ fn kind_attrs(kind: &str) -> Option<&'static [&'static str]> {
         "toggle" => &["command", "on", "off"],
         _ => return None,
     })
+}
+
+/// A flag: `true` or `false`.
+fn flag(a: &Attr) -> Result<bool, FileError> {
+    match a.value.trim() {
+        "true" => Ok(true),
+        "false" => Ok(false),
+        v => Err(a.error(format!("`{v}` is not true or false"))),
+    }
 }
 
 /// A finite number in a list item, as `ranges` and `waypoints` write them.
@@ -304,12 +321,16 @@ impl Reader {
     }
 }
 
-/// `<readout>` and `<gauge>`: a binding, precision, range and coloured ranges.
+/// `<readout>` and `<gauge>`: a binding, precision, range and coloured ranges; whether a
+/// readout's value is an angle.
 fn readout(el: &Element) -> Result<(), FileError> {
     no_children(el)?;
     bind(el.required("bind")?)?;
     if let Some(a) = el.attr("precision") {
         count(a, 0, 15)?;
+    }
+    if let Some(a) = el.attr("angle") {
+        flag(a)?;
     }
     let (min, max) = min_max(el)?;
     if let Some(a) = el.attr("ranges") {
@@ -318,12 +339,15 @@ fn readout(el: &Element) -> Result<(), FileError> {
     Ok(())
 }
 
-/// `<series>` of a plot: a binding and a colour.
+/// `<series>` of a plot: a binding, a colour, and whether its values are angles.
 fn series(el: &Element) -> Result<(), FileError> {
     no_children(el)?;
     bind(el.required("bind")?)?;
     if let Some(a) = el.attr("colour") {
         colour(a, &a.value)?;
+    }
+    if let Some(a) = el.attr("angle") {
+        flag(a)?;
     }
     Ok(())
 }
@@ -380,7 +404,7 @@ mod tests {
         let cases = [
             (
                 "<layout name=\"t\">\n  <readout bind=\"a.b\" colour=\"red\"/>\n</layout>",
-                "2:23: unknown attribute `colour` on <readout>; expected one of: id, label, role, bind, unit, precision, fresh",
+                "2:23: unknown attribute `colour` on <readout>; expected one of: id, label, role, bind, unit, precision, angle, true, false, fresh",
             ),
             (
                 "<layout name=\"t\">\n  <column><dial/></column>\n</layout>",
@@ -425,6 +449,14 @@ mod tests {
             (
                 "<layout name=\"t\">\n  <readout bind=\"a.b\" fresh=\"soon\"/>\n</layout>",
                 "2:23: attribute `fresh`: `soon` is not a duration (250ms, 2s, 1min)",
+            ),
+            (
+                "<layout name=\"t\">\n  <readout bind=\"a.b\" angle=\"yes\"/>\n</layout>",
+                "2:23: attribute `angle`: `yes` is not true or false",
+            ),
+            (
+                "<layout name=\"t\">\n  <plot><series bind=\"a.b\" angle=\"1\"/></plot>\n</layout>",
+                "2:28: attribute `angle`: `1` is not true or false",
             ),
             (
                 "<layout name=\"t\">\n  <plot/>\n</layout>",
