@@ -209,6 +209,18 @@ fn cases() -> Vec<Case> {
              4 listens on 0.0.0.0:47001 already; give each console a port of its own",
         ),
         error(
+            "two consoles keeping their sessions in one file",
+            &[(
+                r#"  <console medium="bus" listen="127.0.0.1:0""#,
+                "  <console medium=\"bus\" listen=\"127.0.0.1:0\" users=\"users.xml\" \
+                 layouts=\"pilot.xml\"/>\n  <console medium=\"bus\" listen=\"127.0.0.1:0\"",
+            )],
+            &[],
+            &[],
+            "{dir}/system.xml:5:3: the console at line 4 keeps its sessions in \
+             {dir}/users.sessions already; give each console a `sessions` file of its own",
+        ),
+        error(
             "the layout file is missing",
             &[(r#"layouts="pilot.xml""#, r#"layouts="pilot.xml helm.xml""#)],
             &[],

@@ -10,6 +10,7 @@ use common::{Running, group, seabus, spy_json, wait_for_line};
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value as Json, json};
 use std::io::{BufRead, Write};
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::sync::mpsc;
@@ -145,6 +146,17 @@ fn start_with(modules: &str, layouts: &[PathBuf]) -> System {
 struct Driver {
     _child: Running,
     url: String,
+    /// chromedriver's process group: the browsers it starts are in it, and go with it.
+    group: u32,
+}
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = std::process::Command::new("kill")
+            .args(["-KILL", "--", &format!("-{}", self.group)])
+            .stderr(Stdio::null())
+            .status();
+    }
 }
 
 fn chromedriver() -> Driver {
@@ -156,11 +168,13 @@ fn chromedriver() -> Driver {
     let child = Running(
         std::process::Command::new(CHROMEDRIVER)
             .arg(format!("--port={port}"))
+            .process_group(0)
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
             .expect("chromedriver starts"),
     );
+    let group = child.0.id();
     let deadline = Instant::now() + Duration::from_secs(20);
     while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
         assert!(Instant::now() < deadline, "chromedriver does not listen");
@@ -169,6 +183,7 @@ fn chromedriver() -> Driver {
     Driver {
         _child: child,
         url: format!("http://127.0.0.1:{port}"),
+        group,
     }
 }
 
@@ -1445,7 +1460,15 @@ async fn a_course_changed_in_one_field_keeps_the_others_and_is_held_until_contro
             .count();
         controls.push(js(&c, CONTROL).await);
     }
-    assert!(resent >= 50, "{resent} courses in a minute");
+    let kept = js(
+        &c,
+        "const k = document.querySelector('[data-testid=kept-commands]'); return k && k.innerText;",
+    )
+    .await;
+    assert!(
+        resent >= 50,
+        "{resent} courses in a minute; the page: {kept}"
+    );
     assert!(
         controls.iter().all(|s| s == "in-control"),
         "the vehicle left backseat control: {controls:?}"
@@ -1474,29 +1497,51 @@ async fn a_course_changed_in_one_field_keeps_the_others_and_is_held_until_contro
     );
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_course_the_stopped_vehicle_refuses_says_why_and_offers_start() {
-    let sys = start(&[repo("configs/console/pilot.xml")]);
-    let (_driver, c) = pilot_in_control(&sys).await;
-    slide(&c, "heading", 90.0).await;
-    let (_, answer) = course_and_answer(&sys.spy, "a course to 90°", |p| p["heading"] == 90.0);
-    assert_eq!(answer["payload"]["state"], "acknowledged", "{answer}");
-    // the mission stops: the next time the course goes, the vehicle refuses it
-    c.find(Locator::Css("body"))
-        .await
-        .expect("the page")
-        .send_keys("\u{E00C}")
-        .await
-        .expect("Escape pressed");
-    let reason = until_text(
-        &c,
+/// The Iver2 system, with a route for mission commands from its network (another operator).
+fn iver_with_remote_missions() -> String {
+    format!(
+        r#"{IVER}
+  <bridge name="remote" media="bus net">
+    <route from="net" to="bus" topics="cmd.mission" kind="command"/>
+  </bridge>"#
+    )
+}
+
+/// The kept-command reason the page shows, once it shows one.
+async fn kept_reason(c: &Client) -> String {
+    until_text(
+        c,
         Duration::from_secs(10),
         "why the course is no longer held",
         "const r = document.querySelector('[data-testid=kept-reason]'); return r && r.innerText;",
     )
-    .await;
+    .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_course_the_stopped_vehicle_refuses_says_why_and_offers_start() {
+    let sys = start_with(
+        &iver_with_remote_missions(),
+        &[repo("configs/console/pilot.xml")],
+    );
+    let (_driver, c) = pilot_in_control(&sys).await;
+    slide(&c, "heading", 90.0).await;
+    let (_, answer) = course_and_answer(&sys.spy, "a course to 90°", |p| p["heading"] == 90.0);
+    assert_eq!(answer["payload"]["state"], "acknowledged", "{answer}");
+    // someone else stops the mission: the next time the course goes, the vehicle refuses it
+    let net = common::schemes()
+        .open("net", &sys.net, &seabus_medium::Node::new("shore"))
+        .expect("the network opens");
+    let shore = net.attach("shore");
+    shore
+        .command(
+            "cmd.mission",
+            seabus_medium::DataMap::new().with("action", "stop"),
+        )
+        .await
+        .expect("sent");
     assert_eq!(
-        reason,
+        kept_reason(&c).await,
         "the vehicle refused it: the frontseat is stopped (mode S)"
     );
     // what was on its way before is passed over; after it, nothing
@@ -1507,9 +1552,9 @@ async fn a_course_the_stopped_vehicle_refuses_says_why_and_offers_start() {
     // the page offers the start, held as the layout asks
     js(
         &c,
-        "const b = document.querySelector('[data-testid=kept-resume]');
-         b.dispatchEvent(new PointerEvent('pointerdown', {bubbles: true, button: 0}));
-         setTimeout(() => b.dispatchEvent(new PointerEvent('pointerup', {bubbles: true})), 1600);
+        "const b = document.querySelector('[data-testid=kept-resume] button');
+         b.dispatchEvent(new KeyboardEvent('keydown', {bubbles: true, key: ' '}));
+         setTimeout(() => b.dispatchEvent(new KeyboardEvent('keyup', {bubbles: true, key: ' '})), 1600);
          return b.innerText;",
     )
     .await;
@@ -1519,9 +1564,9 @@ async fn a_course_the_stopped_vehicle_refuses_says_why_and_offers_start() {
         &mut seen,
         Duration::from_secs(5),
         "the mission's start",
-        |v| v["topic"] == "cmd.mission",
+        |v| v["topic"] == "cmd.mission" && v["payload"]["action"] == "start",
     );
-    assert_eq!(start["payload"]["action"], "start", "{start}");
+    assert_eq!(start["payload"]["name"], "survey", "{start}");
     until_eq(
         &c,
         Duration::from_secs(10),
@@ -1530,6 +1575,26 @@ async fn a_course_the_stopped_vehicle_refuses_says_why_and_offers_start() {
         json!("accepting"),
     )
     .await;
+    // the pilot's own stop ends the kept course before it goes: no course follows it
+    slide(&c, "heading", 120.0).await;
+    course_and_answer(&sys.spy, "a course to 120°", |p| p["heading"] == 120.0);
+    c.find(Locator::Css("body"))
+        .await
+        .expect("the page")
+        .send_keys("\u{E00C}")
+        .await
+        .expect("Escape pressed");
+    let mut seen = Vec::new();
+    wait_for_line(
+        &sys.spy,
+        &mut seen,
+        Duration::from_secs(5),
+        "the stop",
+        |v| v["topic"] == "cmd.mission" && v["payload"]["action"] == "stop",
+    );
+    let after = commands_on(&sys.spy, "cmd.course", Duration::from_secs(3));
+    assert!(after.is_empty(), "courses after the stop: {after:?}");
+    assert_eq!(kept_reason(&c).await, "stop sent instead");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

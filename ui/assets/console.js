@@ -6,6 +6,7 @@ import { createDesigner } from './designer.js';
 
 const HOLD_MARGIN_MS = 100; // a held command is sent a little after its hold time, never before
 const PENDING_MS = 3000; // a value sent shows until the bus has it, or this long
+const MEASURED_FRESH_S = 5; // an older measurement is not a current value (as on the server)
 const ARM_TIMEOUT_MS = 5000;
 
 // what the page's content policy blocked (an inline style or script, another origin): counted, so
@@ -330,13 +331,13 @@ function consolePage() {
     S.layout = L;
     S.layoutName = L.name || S.layoutName;
     S.producers = normaliseProducers(m.producers);
-    if (!same) S.fields = {};
+    // values changed and not sent do not outlive the page's view of the layout
+    S.fields = {};
     S.pending = {};
     S.chosen = m.chosen && typeof m.chosen === 'object' ? m.chosen : {};
     S.commanded = m.commanded && typeof m.commanded === 'object' ? m.commanded : {};
     S.kept = {};
     for (const k of Array.isArray(m.kept) ? m.kept : []) if (k && k.topic) S.kept[k.topic] = k;
-    showKept();
     if (!S.layouts.some((l) => l.name === L.name)) {
       S.layouts.push({ name: L.name, title: L.title || L.name });
       ui.select.append(el('option', { value: L.name, text: L.title || L.name }));
@@ -452,7 +453,8 @@ function consolePage() {
     if (from) {
       const t = S.topics[from.topic];
       const v = t && t.fields ? t.fields[from.field] : undefined;
-      if (typeof v === 'number' && Number.isFinite(v)) return { value: ctx.clamp(n, f, v), source: 'measured' };
+      const fresh = t && ctx.serverNow() - Number(t.stamp) <= MEASURED_FRESH_S;
+      if (fresh && typeof v === 'number' && Number.isFinite(v)) return { value: ctx.clamp(n, f, v), source: 'measured' };
       return { value: undefined, source: 'unknown' };
     }
     const chosen = S.chosen[n] || [];
@@ -491,53 +493,53 @@ function consolePage() {
 
   /** The kept commands: "holding course since …" with its values and the vehicle's mode, or
    * why it is no longer held, with the command that resumes it. */
-  let keptShown = '';
-  function showKept() {
+  // the rows shown, by topic: rebuilt only when what is kept changes (a hold on the resume button
+  // is never cut short by an update of the vehicle's mode)
+  const keptRows = new Map();
+  function showKept(rebuild) {
     const box = ui.kept;
     if (!box) return;
+    if (rebuild) keptRows.clear();
     const state = S.topics['vehicle.state'];
-    const shown = JSON.stringify([S.kept, state && state.fields && [state.fields.mode, state.fields.control]]);
-    if (shown === keptShown) return;
-    keptShown = shown;
-    const rows = [];
-    for (const k of Object.values(S.kept)) {
-      const c = ctx.command(k.command);
-      if (!c) continue;
-      const since = fmtTime(k.since);
-      if (k.reason === undefined) {
-        const mode = state && state.fields ? [state.fields.mode, state.fields.control].filter((x) => x !== undefined && x !== '').join(' · ') : '';
-        rows.push(el('div', { class: 'kept-row holding', 'data-testid': 'kept', 'data-command': k.command },
-          el('strong', { text: `holding ${k.command} since ${since}` }),
-          el('span', { class: 'kept-values', text: fmtFields(k.fields || {}) }),
-          mode ? el('span', { class: 'kept-mode', 'data-testid': 'vehicle-mode', text: `vehicle: ${mode}` }) : null));
-      } else {
-        const resume = c.resume && ctx.command(c.resume) ? c.resume : null;
-        const row = el('div', { class: 'kept-row ended', 'data-testid': 'kept', 'data-command': k.command },
-          el('strong', { text: `${k.command} no longer held` }),
-          el('span', { class: 'kept-reason', 'data-testid': 'kept-reason', text: k.reason }));
-        if (resume) {
-          const b = el('button', { type: 'button', class: 'btn btn-small', 'data-testid': 'kept-resume', text: `Send ${resume}` });
-          const rc = ctx.command(resume);
-          if (rc.confirm === 'hold') {
-            let h = null;
-            b.title = `hold for ${(ctx.holdMs(resume) / 1000).toFixed(1)} s`;
-            b.addEventListener('pointerdown', (ev) => {
-              ev.preventDefault();
-              if (!h) h = holdCommand(resume, {}, { end() { h = null; } });
-            });
-            const let_go = () => { if (h) { h.cancel(); h = null; } };
-            b.addEventListener('pointerup', let_go);
-            b.addEventListener('pointerleave', let_go);
-          } else {
-            b.addEventListener('click', () => sendCommand(resume, {}));
-          }
-          row.append(b);
-        }
-        rows.push(row);
+    const mode = state && state.fields ? [state.fields.mode, state.fields.control].filter((x) => x !== undefined && x !== '').join(' · ') : '';
+    const kept = Object.values(S.kept).filter((k) => k && ctx.command(k.command));
+    for (const t of [...keptRows.keys()]) if (!S.kept[t]) keptRows.delete(t);
+    for (const k of kept) {
+      const key = JSON.stringify(k);
+      let r = keptRows.get(k.topic);
+      if (!r || r.key !== key) {
+        r = { key, row: keptRow(k), mode: null };
+        r.mode = r.row.querySelector('.kept-mode');
+        keptRows.set(k.topic, r);
+      }
+      if (r.mode && r.mode.textContent !== (mode ? `vehicle: ${mode}` : '')) r.mode.textContent = mode ? `vehicle: ${mode}` : '';
+    }
+    const rows = [...keptRows.values()].map((r) => r.row);
+    if (rows.length !== box.childElementCount || rows.some((row, i) => box.children[i] !== row)) box.replaceChildren(...rows);
+    box.hidden = rows.length === 0;
+  }
+
+  /** A kept command's row: held since when, with what; or why it ended, and the button (the
+   * layout's own, with its confirmation) of the command that resumes it. */
+  function keptRow(k) {
+    const c = ctx.command(k.command);
+    if (k.reason === undefined) {
+      return el('div', { class: 'kept-row holding', 'data-testid': 'kept', 'data-command': k.command },
+        el('strong', { text: `holding ${k.command} since ${fmtTime(k.since)}` }),
+        el('span', { class: 'kept-values', text: fmtFields(k.fields || {}) }),
+        el('span', { class: 'kept-mode', 'data-testid': 'vehicle-mode' }));
+    }
+    const row = el('div', { class: 'kept-row ended', 'data-testid': 'kept', 'data-command': k.command },
+      el('strong', { text: `${k.command} no longer held` }),
+      el('span', { class: 'kept-reason', 'data-testid': 'kept-reason', text: k.reason }));
+    if (c.resume && ctx.command(c.resume)) {
+      const b = renderNode(ctx, { kind: 'button', id: `resume-${c.resume}`, command: c.resume, label: `Send ${c.resume}` });
+      if (b) {
+        b.dataset.testid = 'kept-resume';
+        row.append(b);
       }
     }
-    box.replaceChildren(...rows);
-    box.hidden = rows.length === 0;
+    return row;
   }
 
   function onArmed(m) {
@@ -590,6 +592,7 @@ function consolePage() {
     const e = tree ? renderNode(ctx, tree) : null;
     ui.root.replaceChildren(e || el('p', { class: 'placeholder', text: S.layout ? 'This layout shows nothing for your roles.' : 'Waiting for the layout…' }));
     inputs.attach(S.layout);
+    showKept(true);
     for (const w of widgets) w.tick();
     ctx.redrawSoon();
   }
@@ -642,6 +645,13 @@ function consolePage() {
     return { c, fields };
   }
 
+  /** What the pilot changed in `name` and did not send is forgotten (a cancelled or failed send):
+   * nothing changed once goes out later with something else. */
+  function dropChanges(name) {
+    delete S.fields[name];
+    syncInputs();
+  }
+
   /** `fields` of `name` went out: they show as sent until the bus has them. */
   function wentOut(name, fields) {
     S.pending[name] = { fields, at: performance.now() };
@@ -660,6 +670,7 @@ function consolePage() {
     }
     const ok = sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields });
     if (ok) wentOut(name, fields);
+    else dropChanges(name);
     return ok;
   }
 
@@ -667,7 +678,9 @@ function consolePage() {
     try {
       const id = await arm(name);
       if (sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: id })) wentOut(name, fields);
+      else dropChanges(name);
     } catch (e) {
+      dropChanges(name);
       toast(`${name} not sent: ${e.message}`, 'error');
     }
   }
@@ -692,6 +705,7 @@ function consolePage() {
       if (done || cancelled) return;
       if (armErr) {
         done = true; clearInterval(ticking); end();
+        dropChanges(name);
         toast(`${name} not sent: ${armErr.message}`, 'error');
         return;
       }
@@ -700,6 +714,7 @@ function consolePage() {
       clearInterval(ticking);
       const fields = S.fields[name] || p.fields;
       if (sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: armId })) wentOut(name, fields);
+      else dropChanges(name);
       end();
     }
     return {
@@ -707,6 +722,7 @@ function consolePage() {
         if (done || cancelled) return;
         cancelled = true;
         clearInterval(ticking);
+        dropChanges(name);
         end();
       },
       get done() { return done; },
@@ -733,8 +749,11 @@ function consolePage() {
     ui.dialogText.textContent = hold
       ? `Press and hold Send for ${(ctx.holdMs(name) / 1000).toFixed(1)} s to send ${c.topic || name}.`
       : `This sends ${c.topic || name} to the vehicle.`;
-    // exactly what goes out: every field, the ones the pilot changed marked
-    ui.dialogFields.textContent = outgoing(name, fields).values
+    // exactly what goes out: every field, the ones the pilot changed marked; what is confirmed
+    // is sent whole, so nothing changed meanwhile on the bus slips in
+    const out = outgoing(name, fields);
+    const full = Object.fromEntries(out.values.map((v) => [v.field, v.value]));
+    ui.dialogFields.textContent = out.values
       .map((v) => `${v.field} = ${fmtValue(v.value)}${v.changed ? '   (changed)' : ''}`)
       .join('\n');
     okBtn.textContent = hold ? 'Hold to send' : 'Send';
@@ -745,7 +764,7 @@ function consolePage() {
     const down = (ev) => {
       if (!hold || h) return;
       ev.preventDefault();
-      h = holdCommand(name, {}, {
+      h = holdCommand(name, full, {
         progress(f) { fill.style.width = `${(f * 100).toFixed(1)}%`; },
         end() { fill.style.width = '0'; if (h && h.done) d.close('held'); h = null; },
       });
@@ -771,7 +790,8 @@ function consolePage() {
       fill.remove();
       if (h) h.cancel();
       dialogBusy = false;
-      if (d.returnValue === 'ok' && !hold) armAndSend(name, S.fields[name] || fields);
+      if (d.returnValue === 'ok' && !hold) armAndSend(name, full);
+      else if (d.returnValue !== 'held') dropChanges(name);
     });
     d.returnValue = '';
     d.showModal();

@@ -1319,7 +1319,11 @@ function input(ctx, node, kind) {
     update() {},
     tick() {},
     permissions() {
-      const a = ctx.access(ref.name);
+      let a = ctx.access(ref.name);
+      // a slider with no known value would send wherever the browser put its knob
+      if (a.ok && kind === 'slider' && ref.field && ctx.fieldSource && ctx.fieldSource(ref.name, ref.field) === 'unknown') {
+        a = { ok: false, why: 'no value yet: nothing commanded or measured' };
+      }
       const dis = !a.ok;
       for (const c of controls) {
         c.disabled = dis;
@@ -1332,13 +1336,13 @@ function input(ctx, node, kind) {
     },
     sync() {
       if (sync) sync();
+      if (kind === 'slider') w.permissions();
       if (!ref.field || !ctx.fieldSource) return;
       // where the value shown comes from; a field the pilot changed is marked until it is sent
       const src = ctx.fieldSource(ref.name, ref.field);
       e.dataset.source = src;
       e.classList.toggle('changed', src === 'changed');
       e.classList.toggle('no-value', src === 'unknown');
-      e.title = src === 'unknown' ? 'no value yet: nothing commanded or measured' : e.title;
     },
   };
   ctx.register(w);

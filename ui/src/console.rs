@@ -195,6 +195,7 @@ pub fn check(
     let report = system::check(spec, registry, catalogue)?;
     let specs = specs(spec)?;
     distinct_addresses(&specs)?;
+    distinct_sessions(&specs)?;
     let mut consoles = Vec::new();
     let mut warnings = Vec::new();
     for cs in specs {
@@ -266,6 +267,32 @@ fn distinct_addresses(specs: &[ConsoleSpec]) -> Result<(), FileError> {
     Ok(())
 }
 
+/// Refuses a console whose session file is an earlier one's (two consoles would overwrite each
+/// other's sessions).
+fn distinct_sessions(specs: &[ConsoleSpec]) -> Result<(), FileError> {
+    for (i, b) in specs.iter().enumerate() {
+        let Some(path) = &b.sessions else {
+            continue;
+        };
+        if let Some(a) = specs[..i]
+            .iter()
+            .find(|a| a.sessions.as_ref() == Some(path))
+        {
+            let msg = format!(
+                "the console at line {} keeps its sessions in {} already; give each console a \
+                 `sessions` file of its own",
+                a.element.pos.line,
+                path.display()
+            );
+            return Err(match b.element.attr("sessions") {
+                Some(attr) => attr.error(msg),
+                None => b.element.error(msg),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// A running console.
 pub struct Console {
     addr: SocketAddr,
@@ -286,13 +313,6 @@ impl Console {
             .await
             .map_err(|e| format!("console: cannot listen on {}: {e}", spec.settings.listen))?;
         let addr = listener.local_addr().map_err(|e| e.to_string())?;
-        let mut reader = medium.attach_with("console", 1 << 14, 256);
-        // data, and the commands others send (what pages' inputs start from)
-        for kind in [Kind::Data, Kind::Command] {
-            reader
-                .subscribe_kind("**", Some(kind))
-                .map_err(|e| e.to_string())?;
-        }
         let mut hub = Hub::new(
             spec.settings.clone(),
             users,
@@ -302,7 +322,18 @@ impl Console {
         if let Some(path) = &spec.sessions {
             hub.sessions = Sessions::open(path, &hub.users);
         }
-        hub.follow_layouts();
+        let commanded = hub.follow_layouts();
+        let mut reader = medium.attach_with("console", 1 << 14, 256);
+        reader
+            .subscribe_kind("**", Some(Kind::Data))
+            .map_err(|e| e.to_string())?;
+        // the commands others send on the layouts' command topics: what pages' inputs start
+        // from, and what ends a command the console keeps
+        for topic in &commanded {
+            reader
+                .subscribe_kind(topic.as_str(), Some(Kind::Command))
+                .map_err(|e| e.to_string())?;
+        }
         let hub = Arc::new(hub);
         let mut tasks = Vec::new();
         tasks.push(tokio::spawn({
@@ -320,6 +351,19 @@ impl Console {
                 loop {
                     every.tick().await;
                     hub.watch().await;
+                }
+            }
+        }));
+        // kept commands in a task of their own: a publish waiting for room on the bus never
+        // holds up the watchdog
+        tasks.push(tokio::spawn({
+            let hub = hub.clone();
+            async move {
+                let mut every = tokio::time::interval(WATCH_EVERY);
+                every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+                loop {
+                    every.tick().await;
+                    hub.keep(tokio::time::Instant::now()).await;
                 }
             }
         }));

@@ -412,7 +412,9 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
                 })
                 .unwrap_or_default();
             let opened = hub.open(client, &s("layout"), &vars);
-            std::iter::once(opened).chain(hub.backlog(client)).collect()
+            let loaded = opened["type"] == "layout" && opened.get("layout").is_some();
+            let backlog = loaded.then(|| hub.backlog(client)).flatten();
+            std::iter::once(opened).chain(backlog).collect()
         }
         "lease" => {
             let take = match s("action").as_str() {

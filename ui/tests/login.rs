@@ -75,7 +75,7 @@ async fn twelve_right_log_ins_at_once_all_get_a_working_session() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn twenty_wrong_log_ins_are_limited_and_the_right_password_waits_too() {
+async fn twenty_wrong_log_ins_are_limited_and_while_limited_the_right_password_is_refused_too() {
     let s = setup().await;
     for i in 0..20 {
         let (status, cookie, head) = login(s.addr, "bo", "guess").await;

@@ -4,15 +4,16 @@
 //! The variables are those the plots and tracks of the console's layouts bind (read when the
 //! console starts, and when a page opens a layout with variables of its own). For each topic the
 //! backlog keeps only the bound fields, over the console's `history` window (default 10 min), at
-//! most one sample per [`window`](Backlog::new) / [`SAMPLES`] (faster data is thinned), and at
-//! most [`TOPICS`] topics: at most `TOPICS × SAMPLES` samples of a few numbers each. With the
-//! default window that is one sample per 200 ms per topic.
+//! most one sample per window / [`SAMPLES`] (faster data is thinned), and at most [`TOPICS`]
+//! topics: at most `TOPICS × SAMPLES` samples of a few numbers each. With the default window that
+//! is one sample per 200 ms per topic. A page is sent what its widgets draw: a plot's window, a
+//! track's trail.
 
-use super::{Client, Hub};
-use crate::layout::Layout;
+use super::{Client, Hub, now_s};
+use crate::layout::{Horizon, Layout, Plotted};
 use seabus_medium::{DataMap, Pattern, Topic, Value};
 use serde_json::{Map, Value as Json, json};
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::time::Duration;
 
 /// Samples kept per topic, at most.
@@ -21,12 +22,22 @@ pub const SAMPLES: usize = 3000;
 pub const TOPICS: usize = 32;
 /// Patterns of plotted or tracked variables followed, at most.
 const PATTERNS: usize = 256;
+/// Topics remembered as not followed (so most messages cost one lookup), at most.
+const IGNORED: usize = 4096;
+/// A stamp further ahead of the console's clock than this is not kept.
+const AHEAD: f64 = 5.0;
+
+/// A sample: its stamp and the values of its series' fields.
+type Sample = (f64, Box<[Option<Value>]>);
+
+/// What a page is sent of one topic: the fields (with their place in a sample) and the samples.
+type Part = (Topic, Vec<(String, usize)>, Vec<Sample>);
 
 /// One topic's samples: the bound fields, and each sample's stamp with their values.
 #[derive(Debug, Default)]
 struct Series {
     fields: Vec<String>,
-    samples: VecDeque<(f64, Box<[Option<Value>]>)>,
+    samples: VecDeque<Sample>,
 }
 
 /// The recent samples of the plotted and tracked variables.
@@ -38,6 +49,7 @@ pub(super) struct Backlog {
     /// What is followed: topic patterns and their fields.
     wanted: Vec<(Pattern, Vec<String>)>,
     series: HashMap<Topic, Series>,
+    ignored: HashSet<Topic>,
 }
 
 impl Default for Backlog {
@@ -55,30 +67,37 @@ impl Backlog {
             gap: window / SAMPLES as f64,
             wanted: Vec::new(),
             series: HashMap::new(),
+            ignored: HashSet::new(),
         }
     }
 
-    /// Follows what `layout`'s plots and tracks bind.
+    /// Follows what `layout`'s plots and tracks bind. A topic that gains a field starts again.
     pub(super) fn follow(&mut self, layout: &Layout) {
-        for (topic, fields) in layout.plotted() {
+        for Plotted { topic, fields, .. } in layout.plotted() {
             let Ok(p) = Pattern::new(&topic) else {
                 continue;
             };
             let full = self.wanted.len() >= PATTERNS;
-            match self
+            let changed = match self
                 .wanted
                 .iter_mut()
                 .find(|(q, _)| q.as_str() == p.as_str())
             {
                 Some((_, have)) => {
-                    for f in fields {
-                        if !have.contains(&f) {
-                            have.push(f);
-                        }
-                    }
+                    let new: Vec<String> =
+                        fields.into_iter().filter(|f| !have.contains(f)).collect();
+                    have.extend(new.iter().cloned());
+                    !new.is_empty()
                 }
-                None if !full => self.wanted.push((p, fields)),
-                None => {}
+                None if !full => {
+                    self.wanted.push((p.clone(), fields));
+                    true
+                }
+                None => false,
+            };
+            if changed {
+                self.ignored.clear();
+                self.series.retain(|t, _| !p.matches(t.as_str()));
             }
         }
     }
@@ -86,33 +105,23 @@ impl Backlog {
     /// Takes in a message: kept when a plot or track binds it and the last one kept of its
     /// topic is old enough.
     pub(super) fn record(&mut self, topic: &Topic, stamp: f64, map: &DataMap) {
-        if self.wanted.is_empty() || !stamp.is_finite() {
+        if self.wanted.is_empty() || !stamp.is_finite() || self.ignored.contains(topic) {
             return;
         }
-        if !self.series.contains_key(topic) {
-            let fields: Vec<String> = self
-                .wanted
-                .iter()
-                .filter(|(p, _)| p.matches(topic.as_str()))
-                .flat_map(|(_, f)| f.iter().cloned())
-                .collect();
-            if fields.is_empty() || self.series.len() >= TOPICS {
-                return;
-            }
-            let series = Series {
-                fields,
-                samples: VecDeque::new(),
-            };
-            self.series.insert(topic.clone(), series);
+        if !self.series.contains_key(topic) && !self.start(topic) {
+            return;
         }
         let Some(s) = self.series.get_mut(topic) else {
             return;
         };
-        if s.samples
-            .back()
-            .is_some_and(|(t, _)| stamp < t + self.gap * 0.95)
-        {
+        if stamp > now_s() + AHEAD {
             return;
+        }
+        match s.samples.back() {
+            // a source whose clock went back starts again
+            Some((t, _)) if stamp < t - 1.0 => s.samples.clear(),
+            Some((t, _)) if stamp < t + self.gap * 0.95 => return,
+            _ => {}
         }
         let values: Box<[Option<Value>]> = s.fields.iter().map(|f| map.get(f).cloned()).collect();
         if values.iter().all(Option::is_none) {
@@ -129,57 +138,124 @@ impl Backlog {
         }
     }
 
-    /// The `backlog` message for a page whose layout binds `interest`: each wanted topic's
-    /// samples, oldest first, with the fields the layout binds.
-    fn json(&self, layout: &Layout) -> Option<Json> {
-        let plotted = layout.plotted();
-        let mut topics = Map::new();
+    /// Starts a series for `topic` when something binds it (and there is room); else remembers
+    /// it is not followed.
+    fn start(&mut self, topic: &Topic) -> bool {
+        let fields: Vec<String> = self
+            .wanted
+            .iter()
+            .filter(|(p, _)| p.matches(topic.as_str()))
+            .flat_map(|(_, f)| f.iter().cloned())
+            .collect();
+        if fields.is_empty() || self.series.len() >= TOPICS {
+            if self.ignored.len() >= IGNORED {
+                self.ignored.clear();
+            }
+            self.ignored.insert(topic.clone());
+            return false;
+        }
+        let series = Series {
+            fields,
+            samples: VecDeque::new(),
+        };
+        self.series.insert(topic.clone(), series);
+        true
+    }
+
+    /// What a layout's widgets draw of each followed topic: the topic, its fields (name, index
+    /// in the series) and the samples within the widest horizon, oldest first.
+    fn snapshot(&self, plotted: &[Plotted]) -> Vec<Part> {
+        let mut out = Vec::new();
         for (topic, s) in &self.series {
-            let wanted: Vec<&str> = plotted
+            let mine: Vec<&Plotted> = plotted
                 .iter()
-                .filter(|(t, _)| Pattern::new(t).is_ok_and(|p| p.matches(topic.as_str())))
-                .flat_map(|(_, f)| f.iter().map(String::as_str))
+                .filter(|p| Pattern::new(&p.topic).is_ok_and(|q| q.matches(topic.as_str())))
                 .collect();
-            if wanted.is_empty() || s.samples.is_empty() {
+            let Some(last) = s.samples.back().map(|(t, _)| *t) else {
+                continue;
+            };
+            let fields: Vec<(String, usize)> = s
+                .fields
+                .iter()
+                .enumerate()
+                .filter(|(_, f)| mine.iter().any(|p| p.fields.contains(f)))
+                .map(|(i, f)| (f.clone(), i))
+                .collect();
+            if fields.is_empty() {
                 continue;
             }
-            let samples: Vec<Json> = s
+            let (mut secs, mut points) = (0.0_f64, 0_usize);
+            for h in mine.iter().flat_map(|p| &p.horizons) {
+                match h {
+                    Horizon::Seconds(w) => secs = secs.max(*w),
+                    Horizon::Points(n) => points = points.max(*n),
+                }
+            }
+            let skip = s.samples.len().saturating_sub(points);
+            let samples: Vec<Sample> = s
                 .samples
                 .iter()
-                .map(|(stamp, values)| {
-                    let fields: Map<String, Json> = s
-                        .fields
-                        .iter()
-                        .zip(values.iter())
-                        .filter(|(f, _)| wanted.contains(&f.as_str()))
-                        .filter_map(|(f, v)| Some((f.clone(), json!(v.as_ref()?))))
-                        .collect();
-                    json!({"stamp": stamp, "fields": fields})
-                })
+                .enumerate()
+                .filter(|(i, (t, _))| *i >= skip || *t >= last - secs)
+                .map(|(_, x)| x.clone())
                 .collect();
+            out.push((topic.clone(), fields, samples));
+        }
+        out
+    }
+}
+
+/// The `backlog` message of a snapshot: `{TOPIC: [{stamp, fields}]}`.
+fn backlog_json(snapshot: Vec<Part>) -> Option<Json> {
+    let mut topics = Map::new();
+    for (topic, fields, samples) in snapshot {
+        let samples: Vec<Json> = samples
+            .iter()
+            .map(|(stamp, values)| {
+                let fields: Map<String, Json> = fields
+                    .iter()
+                    .filter_map(|(f, i)| Some((f.clone(), json!(values.get(*i)?.as_ref()?))))
+                    .collect();
+                json!({"stamp": stamp, "fields": fields})
+            })
+            .collect();
+        if !samples.is_empty() {
             topics.insert(topic.to_string(), Json::Array(samples));
         }
-        (!topics.is_empty()).then(|| json!({"type": "backlog", "topics": topics}))
     }
+    (!topics.is_empty()).then(|| json!({"type": "backlog", "topics": topics}))
 }
 
 impl Hub {
     /// Follows the plotted and tracked variables of every layout the console has (read without
-    /// variables), so that their past is there for the first page.
-    pub fn follow_layouts(&self) {
+    /// variables), so that their past is there for the first page; returns the topics their
+    /// commands go on.
+    pub fn follow_layouts(&self) -> Vec<Topic> {
+        let mut commanded: Vec<Topic> = Vec::new();
         for path in &self.settings.layouts {
             if let Ok(layout) = self.load(path, &Default::default()) {
                 self.state().backlog.follow(&layout);
+                for c in layout.commands.values() {
+                    if !commanded.contains(&c.topic) {
+                        commanded.push(c.topic.clone());
+                    }
+                }
             }
         }
+        commanded
     }
 
-    /// The `backlog` message for the layout `client` opened, when there is anything in it.
+    /// The `backlog` message for the layout `client` opened, when there is anything in it: what
+    /// its plots and tracks draw (copied under the hub's lock, written out after).
     pub fn backlog(&self, client: &Client) -> Option<Json> {
         let layout = client.layout.as_ref()?;
-        let mut st = self.state();
-        st.backlog.follow(layout);
-        st.backlog.json(layout)
+        let plotted = layout.plotted();
+        let snapshot = {
+            let mut st = self.state();
+            st.backlog.follow(layout);
+            st.backlog.snapshot(&plotted)
+        };
+        backlog_json(snapshot)
     }
 }
 
@@ -230,6 +306,13 @@ mod tests {
             ["depth"]
         );
         assert!(b["topics"].get("nav.other").is_none());
+        // a stamp from a clock far ahead is not kept
+        let ahead = now_s() + 60.0;
+        f.hub
+            .observe(&depth, at(ahead), &DataMap::new().with("depth", -1.0));
+        let b = f.hub.backlog(&page).unwrap();
+        let samples = b["topics"]["nav.depth"].as_array().unwrap();
+        assert!(samples.iter().all(|s| s["fields"]["depth"] != -1.0));
         // a layout with no plot gets none
         page.layout = None;
         assert!(f.hub.backlog(&page).is_none());

@@ -7,7 +7,7 @@ use super::history::Entry;
 use super::{Client, Hub};
 use crate::auth::Session;
 use crate::layout::{CommandDecl, Confirm};
-use seabus_medium::{DataMap, Kind, SendError, Topic};
+use seabus_medium::{DataMap, SendError, Topic};
 use std::collections::HashMap;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -186,6 +186,11 @@ impl Drives {
         self.running.contains_key(key)
     }
 
+    /// Whether a dead-man command is being driven on `topic`.
+    pub(super) fn driving(&self, topic: &Topic) -> bool {
+        self.running.values().any(|d| &d.topic == topic)
+    }
+
     /// Records a re-send (`drive.last`): whether it is the first, and whether it is due to be
     /// published (re-sends faster than the command's rate keep it alive but are not all
     /// published).
@@ -307,13 +312,13 @@ impl Hub {
         let checked = self.checked(client, layout, command, set, confirmed);
         match checked {
             Ok((topic, fields)) => {
-                let sent = self
-                    .publish(&client.session.user, command, &topic, fields.clone())
-                    .await;
-                if let (Ok((_, seq)), Ok(decl)) = (&sent, Hub::decl(client, layout, command)) {
-                    self.sent(&client.session.user, decl, &fields, *seq);
-                }
-                sent.map(|(id, _)| id)
+                let decl = Hub::decl(client, layout, command)?;
+                let _sending = self.sending.lock().await;
+                self.sending_instead(decl);
+                let user = &client.session.user;
+                let (id, seq) = self.publish(user, command, &topic, fields.clone()).await?;
+                self.sent(user, decl, &fields, seq);
+                Ok(id)
             }
             Err(reason) => {
                 // a command the layout declares is refused in everyone's history; anything
@@ -362,7 +367,8 @@ impl Hub {
     }
 
     /// Publishes a command and records it as pending (or, when the bus refuses it, refused):
-    /// its id in the history and its sequence number on the bus.
+    /// its id in the history and its sequence number on the bus. Callers hold
+    /// [`Hub::sending`].
     pub(super) async fn publish(
         &self,
         user: &str,
@@ -371,8 +377,7 @@ impl Hub {
         fields: DataMap,
     ) -> Result<(u64, u64), CommandError> {
         let seq = self
-            .port
-            .publish_numbered(Kind::Command, topic.clone(), fields.clone())
+            .emit(topic, &fields)
             .await
             .map_err(CommandError::NotSent);
         let entry = Entry::new(user, command, topic.as_str(), &fields);
@@ -383,9 +388,7 @@ impl Hub {
         let (state, reason) = (entry.state.clone(), entry.reason.clone());
         let id = self.record(entry);
         tracing::info!(component = "console", user, command, topic = %topic, "command {id}: {state} {reason}");
-        let seq = seq?;
-        self.commanded(topic, &fields);
-        Ok((id, seq))
+        Ok((id, seq?))
     }
 
     /// A dead-man command's re-send (`drive`).
@@ -415,10 +418,7 @@ impl Hub {
                 return Err(reason);
             }
         };
-        let mut neutral = fields.clone();
-        for (k, v) in decl.neutral.iter() {
-            neutral.insert(k.to_string(), v.clone());
-        }
+        let neutral = super::keep::overlay(&fields, &decl.neutral);
         let now = Instant::now();
         let drive = Drive {
             user: client.session.user.clone(),
@@ -449,20 +449,24 @@ impl Hub {
         first: bool,
         due: bool,
     ) -> Result<(), CommandError> {
+        if !first && !due {
+            return Ok(());
+        }
+        let _sending = self.sending.lock().await;
         if first {
-            self.unkeep(&drive.topic, &format!("{} driven", drive.name));
+            // the stick takes the topic over from a kept command
+            self.stop_keeping(
+                |k| k.topic == drive.topic,
+                &format!("{} driven", drive.name),
+            );
             self.publish(&drive.user, &drive.name, &drive.topic, fields)
                 .await
                 .map(|_| ())
-        } else if due {
-            self.port
-                .command(drive.topic.clone(), fields.clone())
-                .await
-                .map_err(CommandError::NotSent)?;
-            self.commanded(&drive.topic, &fields);
-            Ok(())
         } else {
-            Ok(())
+            self.emit(&drive.topic, &fields)
+                .await
+                .map(|_| ())
+                .map_err(CommandError::NotSent)
         }
     }
 
@@ -475,8 +479,14 @@ impl Hub {
 
     /// Sends each stopped drive's neutral command once.
     pub(super) async fn neutral(&self, stopped: Vec<Drive>, why: &str) {
+        if stopped.is_empty() {
+            return;
+        }
+        let _sending = self.sending.lock().await;
         for d in stopped {
             tracing::info!(component = "console", user = %d.user, command = %d.name, "neutral: {why}");
+            // nothing kept on the topic goes on after the neutral
+            self.stop_keeping(|k| k.topic == d.topic, &format!("{} stopped", d.name));
             let _ = self.publish(&d.user, &d.name, &d.topic, d.neutral).await;
         }
     }

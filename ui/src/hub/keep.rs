@@ -1,35 +1,51 @@
 //! What the vehicle was last commanded, and commands the console keeps for their sender.
 //!
-//! The values last commanded on each command topic (by the console, or seen on the bus from
-//! another console or a module) are what a page's inputs start from, and what a command's
-//! unchosen fields are sent as: a layout's declared value never stands in for the vehicle's.
+//! The values last commanded on each command topic (by this console, or read from the bus: another
+//! console or a module) are what a page's inputs start from, and what a command's unchosen fields
+//! are sent as: a layout's declared value never stands in for the vehicle's.
 //!
 //! A command declared with `keep` is sent again every `keep` period while its sender holds
-//! control, so that the vehicle holds it (a frontseat's keep-alive never lapses) until another
-//! command goes on its topic, the vehicle refuses it (every page is told why), or control ends:
-//! released, taken over, or its holder gone for the lease's grace time. Then its `neutral` goes
-//! once, when it declares one; without one the re-sends stop and the vehicle's own time-out
-//! applies (an Iver2 stops).
+//! control, so that the vehicle holds it (a frontseat's keep-alive never lapses). It ends when
+//! another command goes on its topic (from this console or anyone else on the bus; a dead-man
+//! command driven on it takes over), when the layout's safe action (`safe`, a stop) is sent, when
+//! the vehicle refuses it (every page is told why), or when control ends: released, or its holder
+//! gone for the lease's grace time. Ending with control sends its `neutral` once, when it declares
+//! one; without one the re-sends stop and the vehicle's own time-out applies (an Iver2 stops).
+//!
+//! Every command the console publishes goes out under one lock ([`Hub::sending`]), so a re-send
+//! decided before a command ended can never follow what ended it.
 
 use super::history::Ack;
 use super::{Hub, now_s};
 use crate::layout::CommandDecl;
-use seabus_medium::{DataMap, Kind, Topic, Value};
+use seabus_medium::{DataMap, Kind, SendError, Topic, Value};
 use serde_json::{Value as Json, json};
 use std::collections::{HashMap, VecDeque};
 use std::time::Duration;
 use tokio::time::Instant;
 
-/// Command topics whose last values are kept, at most (the oldest is forgotten first).
+/// Command topics whose last values are kept, at most (the first recorded is forgotten first).
 pub const COMMANDED_TOPICS: usize = 256;
+/// A measurement older than this is not a current value.
+pub const MEASURED_FRESH: Duration = Duration::from_secs(5);
 /// Sequence numbers of a kept command's sends remembered for matching the vehicle's answers.
 const SENDS_REMEMBERED: usize = 8;
+/// Sequence numbers of the console's own commands remembered (to tell its own from others').
+const OWN_REMEMBERED: usize = 256;
+/// Commands heard from the console's own medium waiting to be told from its own, at most.
+const HEARD: usize = 64;
 
-/// The values last commanded on each topic, with the order they were last changed in.
+/// A command read from the bus: topic, origin, sequence number and fields.
+type Heard = (Topic, String, u64, DataMap);
+
+/// The values last commanded on each topic, and the console's own recent commands.
 #[derive(Debug, Default)]
 pub(super) struct Commanded {
     values: HashMap<Topic, DataMap>,
     order: VecDeque<Topic>,
+    own: VecDeque<u64>,
+    /// Commands of the console's own origin, told from its own once no send is under way.
+    heard: VecDeque<Heard>,
 }
 
 impl Commanded {
@@ -53,6 +69,18 @@ impl Commanded {
     pub(super) fn get(&self, topic: &Topic) -> Option<&DataMap> {
         self.values.get(topic)
     }
+
+    /// Whether bus message `seq` is one of the console's own commands.
+    pub(super) fn own(&self, seq: u64) -> bool {
+        self.own.contains(&seq)
+    }
+
+    fn sent(&mut self, seq: u64) {
+        if self.own.len() == OWN_REMEMBERED {
+            self.own.pop_front();
+        }
+        self.own.push_back(seq);
+    }
 }
 
 /// A command being kept.
@@ -60,10 +88,12 @@ impl Commanded {
 pub(super) struct Kept {
     pub(super) user: String,
     name: String,
-    topic: Topic,
+    pub(super) topic: Topic,
     fields: DataMap,
     neutral: DataMap,
     period: Duration,
+    /// Which keeping this is: a re-send decided for an earlier one is not sent.
+    generation: u64,
     /// When it was first sent (seconds since the epoch).
     since: f64,
     /// When it was last sent.
@@ -73,16 +103,23 @@ pub(super) struct Kept {
 }
 
 impl Kept {
-    /// What pages are shown of it.
-    fn json(&self) -> Json {
-        json!({
+    /// What pages are shown of it: while kept its values, once ended when and why.
+    fn json(&self, ended: Option<&str>) -> Json {
+        let mut m = json!({
             "type": "kept",
             "topic": self.topic.as_str(),
             "command": self.name,
             "user": self.user,
             "since": self.since,
-            "fields": &self.fields,
-        })
+        });
+        match ended {
+            None => m["fields"] = json!(&self.fields),
+            Some(why) => {
+                m["ended"] = json!(now_s());
+                m["reason"] = json!(why);
+            }
+        }
+        m
     }
 
     fn sent_as(&mut self, seq: u64, at: Instant) {
@@ -92,6 +129,20 @@ impl Kept {
         }
         self.seqs.push_back(seq);
     }
+
+    /// Its neutral over its values, when it declares one.
+    fn neutral(&self) -> Option<DataMap> {
+        (!self.neutral.is_empty()).then(|| overlay(&self.fields, &self.neutral))
+    }
+}
+
+/// `fields` with `over`'s values in place of theirs.
+pub(super) fn overlay(fields: &DataMap, over: &DataMap) -> DataMap {
+    let mut out = fields.clone();
+    for (k, v) in over.iter() {
+        out.insert(k.to_string(), v.clone());
+    }
+    out
 }
 
 /// The commands being kept, by topic, and why the last one on each ended.
@@ -99,41 +150,35 @@ impl Kept {
 pub(super) struct Keeps {
     kept: HashMap<Topic, Kept>,
     ended: HashMap<Topic, Json>,
+    generations: u64,
 }
 
 impl Keeps {
-    /// Removes and returns the kept commands `stop` picks.
-    pub(super) fn take(&mut self, stop: impl Fn(&Kept) -> bool) -> Vec<Kept> {
+    /// Removes the kept commands `stop` picks; returns each with the message pages are shown.
+    fn end(&mut self, stop: impl Fn(&Kept) -> bool, why: &str) -> Vec<(Kept, Json)> {
         let topics: Vec<Topic> = self
             .kept
             .values()
             .filter(|k| stop(k))
             .map(|k| k.topic.clone())
             .collect();
-        topics
-            .into_iter()
-            .filter_map(|t| self.kept.remove(&t))
-            .collect()
-    }
-
-    /// The kept command a vehicle's refusal `ack` answers, removed.
-    fn refused(&mut self, ack: &Ack) -> Option<Kept> {
-        if ack.state != "refused" || ack.seq < 0 {
-            return None;
+        let mut out = Vec::new();
+        for k in topics.into_iter().filter_map(|t| self.kept.remove(&t)) {
+            let m = k.json(Some(why));
+            if self.ended.len() >= COMMANDED_TOPICS {
+                self.ended.clear();
+            }
+            self.ended.insert(k.topic.clone(), m.clone());
+            tracing::info!(component = "console", user = %k.user, command = %k.name, "no longer kept: {why}");
+            out.push((k, m));
         }
-        let topic = self
-            .kept
-            .values()
-            .find(|k| k.seqs.contains(&(ack.seq as u64)))?
-            .topic
-            .clone();
-        self.kept.remove(&topic)
+        out
     }
 
     /// What pages are shown when they open a layout: each kept command, and how the last one
     /// on each other topic ended.
     pub(super) fn json(&self) -> Vec<Json> {
-        let mut out: Vec<Json> = self.kept.values().map(Kept::json).collect();
+        let mut out: Vec<Json> = self.kept.values().map(|k| k.json(None)).collect();
         out.extend(
             self.ended
                 .iter()
@@ -142,27 +187,22 @@ impl Keeps {
         );
         out
     }
-
-    /// Records why `k` ended: the message every page is shown.
-    fn end(&mut self, k: &Kept, why: &str) -> Json {
-        let m = json!({
-            "type": "kept",
-            "topic": k.topic.as_str(),
-            "command": k.name,
-            "user": k.user,
-            "since": k.since,
-            "ended": now_s(),
-            "reason": why,
-        });
-        self.ended.insert(k.topic.clone(), m.clone());
-        if self.ended.len() > COMMANDED_TOPICS {
-            self.ended.clear();
-        }
-        m
-    }
 }
 
 impl Hub {
+    /// Publishes a command as the console's own (recorded as last commanded on its topic, and
+    /// known as the console's when the bus brings it back); its bus sequence number. Callers
+    /// hold [`Hub::sending`].
+    pub(super) async fn emit(&self, topic: &Topic, fields: &DataMap) -> Result<u64, SendError> {
+        let seq = self
+            .port
+            .publish_numbered(Kind::Command, topic.clone(), fields.clone())
+            .await?;
+        self.state().commanded.sent(seq);
+        self.commanded(topic, fields);
+        Ok(seq)
+    }
+
     /// Records `fields` as the values last commanded on `topic`, and tells every page when they
     /// changed.
     pub(super) fn commanded(&self, topic: &Topic, fields: &DataMap) {
@@ -176,17 +216,68 @@ impl Hub {
         }
     }
 
+    /// A command read from the bus: unless it is the console's own, it is the topic's last
+    /// commanded value and ends the keeping of the console's command on that topic. One from the
+    /// console's own medium (the console, or a module beside it) may arrive before the send that
+    /// made it has noted its number: it waits for [`Hub::keep`], which tells them apart with no
+    /// send under way.
+    pub(super) fn heard_command(&self, topic: &Topic, origin: &str, seq: u64, fields: &DataMap) {
+        if origin == self.origin {
+            let mut st = self.state();
+            if !st.commanded.own(seq) {
+                if st.commanded.heard.len() == HEARD {
+                    st.commanded.heard.pop_front();
+                }
+                let heard = (topic.clone(), origin.to_string(), seq, fields.clone());
+                st.commanded.heard.push_back(heard);
+            }
+            return;
+        }
+        self.others_command(topic, origin, fields);
+    }
+
+    /// Another sender's command on `topic`: the last commanded, and the end of keeping there.
+    fn others_command(&self, topic: &Topic, origin: &str, fields: &DataMap) {
+        self.commanded(topic, fields);
+        self.stop_keeping(
+            |k| &k.topic == topic,
+            &format!("{topic} commanded by {origin}"),
+        );
+    }
+
+    /// The commands heard from the console's own medium that were not its own (with no send
+    /// under way, every one of its own has its number noted).
+    async fn sort_heard(&self) {
+        let _sending = self.sending.lock().await;
+        let heard: Vec<Heard> = {
+            let mut st = self.state();
+            let heard = std::mem::take(&mut st.commanded.heard);
+            heard
+                .into_iter()
+                .filter(|(_, _, seq, _)| !st.commanded.own(*seq))
+                .collect()
+        };
+        for (topic, origin, _, fields) in heard {
+            self.others_command(&topic, &origin, &fields);
+        }
+    }
+
     /// The current value of each field of `decl`: last commanded on its topic; for a field the
-    /// layout measures (`from.FIELD`) and nothing commanded, the measured value, brought within
-    /// the field's bounds.
+    /// layout measures (`from.FIELD`) and nothing commanded, the measured value if it is fresh
+    /// ([`MEASURED_FRESH`]), brought within the field's bounds.
     pub(super) fn current(&self, decl: &CommandDecl) -> DataMap {
         let st = self.state();
         let mut out = st.commanded.get(&decl.topic).cloned().unwrap_or_default();
+        let oldest = now_s() - MEASURED_FRESH.as_secs_f64();
         for (field, (topic, f)) in &decl.from {
             if out.get(field).is_some() {
                 continue;
             }
-            let measured = st.latest.get(topic).and_then(|l| l.map.get(f)?.as_f64());
+            let measured = st
+                .latest
+                .get(topic)
+                .filter(|l| l.stamp >= oldest)
+                .and_then(|l| l.map.get(f)?.as_f64());
             if let Some(x) = measured.filter(|x| x.is_finite()) {
                 let lo = decl.min.get(field).copied().unwrap_or(f64::NEG_INFINITY);
                 let hi = decl.max.get(field).copied().unwrap_or(f64::INFINITY);
@@ -196,131 +287,129 @@ impl Hub {
         out
     }
 
-    /// After `user` sent `decl` as bus message `seq` with `fields`: a kept command starts (or
-    /// takes the new values); any other command on a kept topic ends the keeping.
-    pub(super) fn sent(&self, user: &str, decl: &CommandDecl, fields: &DataMap, seq: u64) {
-        let now = Instant::now();
-        let message = {
-            let mut st = self.state();
-            match decl.keep {
-                Some(period) => {
-                    let since = st
-                        .keeps
-                        .kept
-                        .get(&decl.topic)
-                        .filter(|k| k.user == user && k.name == decl.name)
-                        .map_or_else(now_s, |k| k.since);
-                    let mut k = Kept {
-                        user: user.to_string(),
-                        name: decl.name.clone(),
-                        topic: decl.topic.clone(),
-                        fields: fields.clone(),
-                        neutral: decl.neutral.clone(),
-                        period,
-                        since,
-                        sent: now,
-                        seqs: VecDeque::new(),
-                    };
-                    k.sent_as(seq, now);
-                    let m = k.json();
-                    st.keeps.kept.insert(decl.topic.clone(), k);
-                    Some(m)
-                }
-                None => {
-                    drop(st);
-                    return self.unkeep(&decl.topic, &format!("{} sent instead", decl.name));
-                }
-            }
-        };
-        if let Some(m) = message {
-            self.broadcast(&m);
+    /// Before `decl` is published (with [`Hub::sending`] held): the safe action ends every kept
+    /// command; any command ends the one kept on its topic. No neutral goes: `decl` is what
+    /// follows.
+    pub(super) fn sending_instead(&self, decl: &CommandDecl) {
+        let why = format!("{} sent instead", decl.name);
+        if decl.safe {
+            self.stop_keeping(|_| true, &why);
+        } else {
+            self.stop_keeping(|k| k.topic == decl.topic, &why);
         }
     }
 
-    /// Stops keeping the command on `topic` (another command took its place): no neutral.
-    pub(super) fn unkeep(&self, topic: &Topic, why: &str) {
+    /// After `user` sent `decl` as bus message `seq` with `fields`: a kept command starts,
+    /// unless a dead-man command is driving its topic (which then owns it).
+    pub(super) fn sent(&self, user: &str, decl: &CommandDecl, fields: &DataMap, seq: u64) {
+        let Some(period) = decl.keep else {
+            return;
+        };
+        let now = Instant::now();
         let message = {
             let mut st = self.state();
-            let replaced = st.keeps.take(|k| &k.topic == topic);
-            replaced.first().map(|k| st.keeps.end(k, why))
+            if st.drives.driving(&decl.topic) {
+                return;
+            }
+            st.keeps.generations += 1;
+            let mut k = Kept {
+                user: user.to_string(),
+                name: decl.name.clone(),
+                topic: decl.topic.clone(),
+                fields: fields.clone(),
+                neutral: decl.neutral.clone(),
+                period,
+                generation: st.keeps.generations,
+                since: now_s(),
+                sent: now,
+                seqs: VecDeque::new(),
+            };
+            k.sent_as(seq, now);
+            let m = k.json(None);
+            st.keeps.kept.insert(decl.topic.clone(), k);
+            m
         };
-        if let Some(m) = message {
-            self.broadcast(&m);
+        self.broadcast(&message);
+    }
+
+    /// Ends the kept commands `stop` picks, without their neutral (something else follows).
+    pub(super) fn stop_keeping(&self, stop: impl Fn(&Kept) -> bool, why: &str) {
+        let ended = self.state().keeps.end(stop, why);
+        for (_, m) in &ended {
+            self.broadcast(m);
         }
     }
 
     /// A vehicle's answer: a refusal of a kept command ends it, with the vehicle's reason.
     pub(super) fn kept_answered(&self, ack: &Ack) {
-        let message = {
-            let mut st = self.state();
-            st.keeps.refused(ack).map(|k| {
-                let why = format!("the vehicle refused it: {}", ack.reason);
-                tracing::warn!(component = "console", user = %k.user, command = %k.name, "no longer kept: {why}");
-                st.keeps.end(&k, &why)
-            })
-        };
-        if let Some(m) = message {
-            self.broadcast(&m);
+        if ack.state != "refused" || ack.seq < 0 {
+            return;
         }
+        let seq = ack.seq as u64;
+        let why = format!("the vehicle refused it: {}", ack.reason);
+        self.stop_keeping(|k| k.seqs.contains(&seq), &why);
     }
 
-    /// Ends the kept commands `stop` picks: each one's neutral goes once (when it declares one).
+    /// Ends the kept commands `stop` picks, each one's neutral going once (when it declares
+    /// one): the end of control.
     pub(super) async fn end_kept(&self, stop: impl Fn(&Kept) -> bool, why: &str) {
-        let (ended, messages) = {
-            let mut st = self.state();
-            let ended = st.keeps.take(stop);
-            let messages: Vec<Json> = ended.iter().map(|k| st.keeps.end(k, why)).collect();
-            (ended, messages)
-        };
-        for m in &messages {
-            self.broadcast(m);
-        }
-        for k in ended {
-            tracing::info!(component = "console", user = %k.user, command = %k.name, "no longer kept: {why}");
-            if k.neutral.is_empty() {
-                continue;
+        let _sending = self.sending.lock().await;
+        let ended = self.state().keeps.end(stop, why);
+        for (k, m) in ended {
+            self.broadcast(&m);
+            if let Some(neutral) = k.neutral() {
+                let _ = self.publish(&k.user, &k.name, &k.topic, neutral).await;
             }
-            let mut neutral = k.fields.clone();
-            for (f, v) in k.neutral.iter() {
-                neutral.insert(f.to_string(), v.clone());
-            }
-            let _ = self.publish(&k.user, &k.name, &k.topic, neutral).await;
         }
     }
 
     /// Sends again each kept command whose period has passed; ends those whose sender no longer
-    /// holds control.
-    pub(super) async fn keep(&self, now: Instant) {
+    /// holds control. Runs in a task of its own (a full queue on the bus never holds up the
+    /// watchdog).
+    pub async fn keep(&self, now: Instant) {
+        self.sort_heard().await;
         let holder = self.state().lease.holder().map(str::to_string);
         self.end_kept(
             |k| holder.as_deref() != Some(k.user.as_str()),
             "control ended",
         )
         .await;
-        let due: Vec<Kept> = self
+        let due: Vec<(Topic, u64)> = self
             .state()
             .keeps
             .kept
             .values()
             .filter(|k| now.duration_since(k.sent) >= k.period)
-            .cloned()
+            .map(|k| (k.topic.clone(), k.generation))
             .collect();
-        for k in due {
-            let seq = self
-                .port
-                .publish_numbered(Kind::Command, k.topic.clone(), k.fields.clone())
-                .await;
-            match seq {
+        for (topic, generation) in due {
+            let _sending = self.sending.lock().await;
+            // still the same keeping, its sender still in control: it may have ended meanwhile
+            let fields = {
+                let st = self.state();
+                let holder = st.lease.holder();
+                st.keeps
+                    .kept
+                    .get(&topic)
+                    .filter(|k| k.generation == generation && holder == Some(k.user.as_str()))
+                    .map(|k| k.fields.clone())
+            };
+            let Some(fields) = fields else {
+                continue;
+            };
+            match self.emit(&topic, &fields).await {
                 Ok(seq) => {
-                    self.commanded(&k.topic, &k.fields);
-                    if let Some(kept) = self.state().keeps.kept.get_mut(&k.topic) {
-                        kept.sent_as(seq, now);
+                    let mut st = self.state();
+                    if let Some(k) = st.keeps.kept.get_mut(&topic)
+                        && k.generation == generation
+                    {
+                        k.sent_as(seq, now);
                     }
                 }
-                Err(e) => {
-                    self.end_kept(|x| x.topic == k.topic, &format!("not sent: {e}"))
-                        .await;
-                }
+                Err(e) => self.stop_keeping(
+                    |k| k.topic == topic && k.generation == generation,
+                    &format!("not sent: {e}"),
+                ),
             }
         }
     }
@@ -344,6 +433,7 @@ mod tests {
         for _ in 0..secs * 20 {
             tokio::time::advance(Duration::from_millis(50)).await;
             f.hub.watch().await;
+            f.hub.keep(Instant::now()).await;
         }
     }
 
@@ -477,5 +567,95 @@ mod tests {
             .hub
             .current(&ana.layout.as_ref().unwrap().commands["helm"]);
         assert_eq!(fresh.get("depth"), Some(&Value::Float(0.0)));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_stick_takes_the_topic_over_and_nothing_kept_follows_its_neutral() {
+        let f = Fixture::new();
+        let mut driver = f.driver();
+        let mut ana = f.pilot("ana").await;
+        f.hub
+            .send(&mut ana, "pilot", "helm", &course(), None)
+            .await
+            .unwrap();
+        let fast = DataMap::new().with("speed", 1.9);
+        f.hub.drive(&mut ana, "pilot", "helm", &fast).await.unwrap();
+        // a step sent while the stick drives is not kept: the stick owns the topic
+        let step = DataMap::new().with("heading", 95);
+        f.hub
+            .send(&mut ana, "pilot", "helm", &step, None)
+            .await
+            .unwrap();
+        f.hub.release(&ana, "pilot", "helm").await;
+        let sent = waiting(&mut driver);
+        let speeds: Vec<_> = helms(&sent).iter().map(|m| field(m, "speed")).collect();
+        let want = [1.5, 1.9, 1.9, 0.0].map(|x| Some(Value::Float(x)));
+        assert_eq!(speeds, want);
+        run_for(&f, 5).await;
+        assert!(helms(&waiting(&mut driver)).is_empty());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn the_safe_action_ends_every_kept_command_before_it_goes() {
+        let f = Fixture::new();
+        let mut driver = f.driver();
+        let mut events = f.hub.events();
+        let mut ana = f.pilot("ana").await;
+        f.hub
+            .send(&mut ana, "pilot", "helm", &course(), None)
+            .await
+            .unwrap();
+        run_for(&f, 2).await;
+        let arm = f.hub.arm(&ana, "pilot", "stop").unwrap();
+        f.hub
+            .send(&mut ana, "pilot", "stop", &DataMap::new(), Some(arm))
+            .await
+            .unwrap();
+        let ended = kept_events(&mut events).pop().unwrap();
+        assert_eq!(ended["reason"], "stop sent instead");
+        let sent = waiting(&mut driver);
+        assert_eq!(sent.last().map(|m| m.topic.as_str()), Some("cmd.mission"));
+        run_for(&f, 5).await;
+        assert!(helms(&waiting(&mut driver)).is_empty());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn another_senders_command_on_the_topic_ends_the_keeping_and_its_own_do_not() {
+        let f = Fixture::new();
+        let mut driver = f.driver();
+        let mut events = f.hub.events();
+        let mut reader = f.bus.attach("console");
+        reader
+            .subscribe_kind("cmd.helm", Some(seabus_medium::Kind::Command))
+            .unwrap();
+        let other = f.bus.attach("autopilot");
+        let test = async {
+            let mut ana = f.pilot("ana").await;
+            f.hub
+                .send(&mut ana, "pilot", "helm", &course(), None)
+                .await
+                .unwrap();
+            // its own commands, read back from the bus, change nothing
+            run_for(&f, 3).await;
+            assert_eq!(kept_events(&mut events).len(), 1);
+            let theirs = DataMap::new()
+                .with("heading", 10)
+                .with("depth", 2.0)
+                .with("speed", 0.5);
+            other.command("cmd.helm", theirs.clone()).await.unwrap();
+            run_for(&f, 1).await;
+            let ended = kept_events(&mut events).pop().unwrap();
+            assert_eq!(ended["reason"], "cmd.helm commanded by t/bus");
+            waiting(&mut driver);
+            run_for(&f, 5).await;
+            assert!(helms(&waiting(&mut driver)).is_empty());
+            // and what they commanded is what the next command starts from
+            let helm = &ana.layout.as_ref().unwrap().commands["helm"];
+            assert_eq!(f.hub.current(helm), theirs);
+        };
+        tokio::select! {
+            _ = f.hub.read(reader) => panic!("the bus closed"),
+            _ = test => {}
+        }
     }
 }

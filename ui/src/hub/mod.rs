@@ -106,6 +106,9 @@ pub struct Hub {
     origin: String,
     produced: Vec<Pattern>,
     state: Mutex<State>,
+    /// Held while a command is decided and published: one at a time, so that nothing decided
+    /// before a command ended goes out after what ended it.
+    sending: tokio::sync::Mutex<()>,
     events: broadcast::Sender<Arc<str>>,
     /// Layout files as last read without variables, with the time they were modified.
     layouts: Mutex<LayoutCache>,
@@ -153,6 +156,7 @@ impl Hub {
                 backlog,
                 ..State::default()
             }),
+            sending: tokio::sync::Mutex::new(()),
             events: broadcast::channel(1024).0,
             layouts: Mutex::new(HashMap::new()),
         }
@@ -205,7 +209,7 @@ impl Hub {
             let stale = st.drives.stale(now);
             let timed_out = st.history.time_out(now, self.settings.ack_timeout);
             let released = st.lease.expire(now).map(|user| {
-                // its kept commands end in `keep` below, which sees no holder
+                // its kept commands end in `keep`, which sees no holder
                 let released = st.drives.take(|_, d| d.user == user);
                 tracing::info!(component = "console", user = %user, "control released: disconnected");
                 released
@@ -220,7 +224,6 @@ impl Hub {
             self.lease_changed().await;
             self.neutral(released, "control released").await;
         }
-        self.keep(now).await;
     }
 
     /// Takes in a message read from the bus.
@@ -255,7 +258,7 @@ impl Hub {
         while let Some(msg) = port.recv().await {
             if let Some(map) = msg.payload.as_map() {
                 if msg.kind == Kind::Command {
-                    self.commanded(&msg.topic, map);
+                    self.heard_command(&msg.topic, &msg.origin().to_string(), msg.seq(), map);
                 }
                 self.observe(&msg.topic, msg.stamp, map);
             }

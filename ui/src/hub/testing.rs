@@ -14,11 +14,11 @@ pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot obser
   <command name="course" topic="cmd.course" fields="heading=0, speed=0" rate="5Hz"
            neutral="speed=0" max.speed="3"/>
   <command name="start" topic="cmd.mission" fields="action=start" confirm="hold" hold="300ms"/>
-  <command name="stop" topic="cmd.mission" fields="action=stop" confirm="dialog"/>
+  <command name="stop" topic="cmd.mission" fields="action=stop" confirm="dialog" safe="true"/>
   <command name="camera" topic="cmd.camera" fields="on=false, note=x" lease="false"/>
   <command name="anchor" topic="cmd.anchor" fields="drop=true" role="captain"/>
   <command name="helm" topic="cmd.helm" fields="heading=0, depth=0.0, speed=0.0" keep="1s"
-           neutral="speed=0" from.depth="nav.depth.depth" min.depth="0"/>
+           rate="5Hz" neutral="speed=0" from.depth="nav.depth.depth" min.depth="0"/>
   <column>
     <readout bind="nav.depth.depth"/>
     <slider command="course.heading" min="0" max="360"/>
@@ -30,7 +30,7 @@ pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot obser
     <slider command="helm.heading" min="0" max="360"/>
     <slider command="helm.depth" min="0" max="50"/>
     <slider command="helm.speed" min="0" max="2"/>
-    <plot><series bind="nav.depth.depth"/></plot>
+    <plot window="15min"><series bind="nav.depth.depth"/></plot>
   </column>
 </layout>
 "#;

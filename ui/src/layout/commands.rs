@@ -12,9 +12,9 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 /// The attributes of `<command>` besides `min.FIELD`, `max.FIELD` and `from.FIELD`.
-const KNOWN: [&str; 11] = [
+const KNOWN: [&str; 12] = [
     "name", "topic", "fields", "role", "confirm", "hold", "rate", "neutral", "lease", "keep",
-    "resume",
+    "resume", "safe",
 ];
 
 /// The shortest and longest `keep` period.
@@ -173,10 +173,17 @@ pub(super) fn read_command(el: &Element) -> Result<CommandDecl, FileError> {
         from: BTreeMap::new(),
         keep: el.attr("keep").map(keep).transpose()?,
         resume: el.attr("resume").map(|a| a.value.trim().to_string()),
+        safe: el.flag("safe")?.unwrap_or(false),
         pos: el.pos.clone(),
     };
     bounds(&mut decl, el)?;
     measured(&mut decl, el)?;
+    if let (Some(_), false, Some(a)) = (decl.keep, decl.lease, el.attr("keep")) {
+        return Err(a.error(
+            "a kept command is sent again while its sender holds control: it needs control \
+             (remove lease=\"false\")",
+        ));
+    }
     // where a contradiction between attributes is shown when the one to blame is not written
     let fallback = el.attrs.first().unwrap_or(t);
     bounds_ordered(&decl, el, fallback)?;
@@ -490,6 +497,10 @@ mod tests {
                 "4:42: attribute `keep`: `keep` is how often the command is sent again while control is held: from 100 ms to 60 s",
             ),
             (
+                "<command name=\"c\" topic=\"a\" fields=\"x=1\" lease=\"false\" keep=\"1s\"/>",
+                "4:56: attribute `keep`: a kept command is sent again while its sender holds control: it needs control (remove lease=\"false\")",
+            ),
+            (
                 "<command name=\"c\" topic=\"a\" fields=\"x=1\" from.y=\"nav.depth.depth\"/>",
                 "4:42: attribute `from.y`: command `c` has no field `y`; fields: x",
             ),
@@ -535,7 +546,7 @@ mod tests {
             ),
             (
                 "<command name=\"c\" topic=\"a\" colour=\"red\"/>",
-                "4:29: unknown attribute `colour` on <command>; expected one of: name, topic, fields, role, confirm, hold, rate, neutral, lease, keep, resume, min.FIELD, max.FIELD, from.FIELD",
+                "4:29: unknown attribute `colour` on <command>; expected one of: name, topic, fields, role, confirm, hold, rate, neutral, lease, keep, resume, safe, min.FIELD, max.FIELD, from.FIELD",
             ),
             (
                 "<command name=\"stop\" topic=\"a\"/>",

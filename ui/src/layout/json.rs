@@ -63,6 +63,7 @@ fn command_json(c: &CommandDecl) -> Json {
         "from": c.from.iter().map(|(k, (t, f))| (k.clone(), json!({"topic": t.as_str(), "field": f}))).collect::<Map<String, Json>>(),
         "keep_ms": c.keep.map(|d| d.as_millis() as u64),
         "resume": c.resume,
+        "safe": c.safe,
     })
 }
 
@@ -283,6 +284,7 @@ mod tests {
                 "from": {},
                 "keep_ms": null,
                 "resume": null,
+                "safe": false,
             })
         );
         assert_eq!(j["commands"]["start"]["confirm"], "hold");

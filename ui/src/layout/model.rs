@@ -84,6 +84,9 @@ pub struct CommandDecl {
     /// The command a page offers when the vehicle refuses this one (`resume`: a mission's start
     /// after the vehicle stopped).
     pub resume: Option<String>,
+    /// Whether it is the layout's safe action (`safe`: a stop): sending it first ends every
+    /// kept command.
+    pub safe: bool,
     /// Where it is declared.
     pub pos: Pos,
 }
@@ -294,30 +297,79 @@ impl Layout {
     }
 }
 
+/// How much of a variable's past a plot or track draws.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Horizon {
+    /// A plot: its window, in seconds.
+    Seconds(f64),
+    /// A track: its trail, in points.
+    Points(usize),
+}
+
+/// What a plot or track binds: a topic (or pattern), the fields it draws and how far back.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plotted {
+    /// The topic or pattern.
+    pub topic: String,
+    /// The fields drawn (a track's position: `lat` and `lon`).
+    pub fields: Vec<String>,
+    /// How far back, the widest of the widgets drawing it.
+    pub horizons: Vec<Horizon>,
+}
+
+/// A plot's window when it gives none, as the page draws it.
+const PLOT_WINDOW: f64 = 60.0;
+/// A track's trail when it gives none, as the page draws it.
+const TRAIL: usize = 600;
+
 impl Layout {
-    /// What the plots and tracks bind: each topic (or pattern) with the fields drawn (a track's
-    /// position: `lat` and `lon`).
-    pub fn plotted(&self) -> Vec<(String, Vec<String>)> {
-        let mut out: Vec<(String, Vec<String>)> = Vec::new();
-        let mut add = |topic: &str, field: &str| match out.iter_mut().find(|(t, _)| t == topic) {
-            Some((_, fields)) if fields.iter().any(|f| f == field) => {}
-            Some((_, fields)) => fields.push(field.to_string()),
-            None => out.push((topic.to_string(), vec![field.to_string()])),
+    /// What the plots and tracks bind.
+    pub fn plotted(&self) -> Vec<Plotted> {
+        let mut out: Vec<Plotted> = Vec::new();
+        let mut add = |topic: &str, field: &str, horizon: Horizon| {
+            let i = match out.iter().position(|p| p.topic == topic) {
+                Some(i) => i,
+                None => {
+                    out.push(Plotted {
+                        topic: topic.to_string(),
+                        fields: Vec::new(),
+                        horizons: Vec::new(),
+                    });
+                    out.len() - 1
+                }
+            };
+            let p = &mut out[i];
+            if !p.fields.iter().any(|f| f == field) {
+                p.fields.push(field.to_string());
+            }
+            if !p.horizons.contains(&horizon) {
+                p.horizons.push(horizon);
+            }
         };
         for node in self.root.walk() {
             match node.kind.as_str() {
                 "plot" => {
+                    let window = node
+                        .attrs
+                        .get("window")
+                        .and_then(|w| parse_duration(w))
+                        .map_or(PLOT_WINDOW, |d| d.as_secs_f64());
                     for (t, f) in node.children.iter().filter_map(|s| s.bound("bind")) {
-                        add(t, f);
+                        add(t, f, Horizon::Seconds(window));
                     }
                 }
                 "track" => {
+                    let trail = node
+                        .attrs
+                        .get("trail")
+                        .and_then(|t| t.trim().parse().ok())
+                        .unwrap_or(TRAIL);
                     if let Some(p) = node.attrs.get("position") {
-                        add(p.trim(), "lat");
-                        add(p.trim(), "lon");
+                        add(p.trim(), "lat", Horizon::Points(trail));
+                        add(p.trim(), "lon", Horizon::Points(trail));
                     }
                     if let Some((t, f)) = node.bound("heading") {
-                        add(t, f);
+                        add(t, f, Horizon::Points(trail));
                     }
                 }
                 _ => {}
