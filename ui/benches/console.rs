@@ -33,12 +33,16 @@ fn cpu_seconds() -> f64 {
     t(u.ru_utime) + t(u.ru_stime)
 }
 
+/// Each variable in a readout, and each topic's in a plot (whose past the console keeps).
 fn layout() -> String {
     let mut widgets = String::new();
     for t in 0..TOPICS {
+        let mut series = String::new();
         for f in 0..FIELDS {
             widgets += &format!("    <readout bind=\"bench.t{t}.f{f}\" precision=\"3\"/>\n");
+            series += &format!("      <series bind=\"bench.t{t}.f{f}\"/>\n");
         }
+        widgets += &format!("    <plot window=\"10min\">\n{series}    </plot>\n");
     }
     format!(
         "<layout name=\"bench\" roles=\"observer\">\n  <grid columns=\"5\">\n{widgets}  </grid>\n</layout>\n"
