@@ -16,6 +16,7 @@ use seabus_medium::xml::{self, FileError, Pos};
 use std::collections::{BTreeMap, HashMap, VecDeque};
 use std::io::{self, Read};
 use std::net::IpAddr;
+use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -137,7 +138,7 @@ impl SessionFile {
         if version <= *written {
             return Ok(());
         }
-        seabus_medium::fs::atomic_write_private(&self.path, text.as_bytes())?;
+        seabus_medium::fs::atomic_write_owner_only(&self.path, text.as_bytes())?;
         *written = version;
         Ok(())
     }
@@ -166,6 +167,21 @@ fn read_file(path: &Path) -> Result<Vec<Stored>, FileError> {
         Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(Vec::new()),
         Err(e) => return Err(at(1, format!("cannot read: {e}"))),
     };
+    // whoever may write the file may log in as anyone: only a private file is trusted
+    let mode = file
+        .metadata()
+        .map_err(|e| at(1, format!("cannot read: {e}")))?
+        .permissions()
+        .mode();
+    if mode & 0o022 != 0 {
+        return Err(at(
+            1,
+            format!(
+                "others may write it (mode {:o}): its sessions are not trusted; `chmod 600` it",
+                mode & 0o777
+            ),
+        ));
+    }
     let mut bytes = Vec::new();
     file.take(MAX_SESSION_FILE + 1)
         .read_to_end(&mut bytes)

@@ -263,3 +263,27 @@ async fn a_corrupt_session_file_is_warned_of_and_holds_no_sessions() {
     assert_eq!(page(&s, &again).await, 200);
     assert!(s.console().hub().sessions.problems().is_empty());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_session_file_others_may_write_is_not_trusted_and_is_made_private_again() {
+    use std::os::unix::fs::PermissionsExt;
+    let mut s = setup().await;
+    let ana = cookie(&s, "ana", "ana-password").await;
+    s.stop();
+    let path = session_file(&s);
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o666)).unwrap();
+    let warnings = Warnings::default();
+    {
+        let _caught = tracing::subscriber::set_default(warnings.clone());
+        s.start().await;
+    }
+    let said = warnings.0.lock().unwrap().join("\n");
+    assert!(said.contains("others may write it (mode 666)"), "{said}");
+    assert_eq!(page(&s, &ana).await, 303);
+    // the next write makes it private, and the start after trusts it
+    let again = cookie(&s, "ana", "ana-password").await;
+    s.restart().await;
+    let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+    assert_eq!(mode, 0o600);
+    assert_eq!(page(&s, &again).await, 200);
+}

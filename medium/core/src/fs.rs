@@ -14,16 +14,22 @@ use std::sync::atomic::{AtomicU64, Ordering};
 /// it, gives it the permissions of the file it replaces, renames it over `path` and syncs the
 /// directory. A new file gets `0o644` less the process's umask.
 pub fn atomic_write(path: &Path, contents: &[u8]) -> io::Result<()> {
-    atomic_write_with(path, contents, 0o644)
+    atomic_write_with(path, contents, 0o644, true)
 }
 
 /// [`atomic_write`] for a file that holds secrets: a new file gets `0o600`; an existing one keeps
 /// its permissions.
 pub fn atomic_write_private(path: &Path, contents: &[u8]) -> io::Result<()> {
-    atomic_write_with(path, contents, 0o600)
+    atomic_write_with(path, contents, 0o600, true)
 }
 
-fn atomic_write_with(path: &Path, contents: &[u8], new_mode: u32) -> io::Result<()> {
+/// [`atomic_write`] for a file only its owner may ever read or write (what grants access, such as
+/// log-in sessions): `0o600`, whatever the file it replaces had.
+pub fn atomic_write_owner_only(path: &Path, contents: &[u8]) -> io::Result<()> {
+    atomic_write_with(path, contents, 0o600, false)
+}
+
+fn atomic_write_with(path: &Path, contents: &[u8], new_mode: u32, keep: bool) -> io::Result<()> {
     static NEXT: AtomicU64 = AtomicU64::new(0);
     let name = path.file_name().ok_or_else(|| {
         io::Error::new(
@@ -36,7 +42,7 @@ fn atomic_write_with(path: &Path, contents: &[u8], new_mode: u32) -> io::Result<
         _ => Path::new("."),
     };
     let kept = match std::fs::metadata(path) {
-        Ok(m) => Some(m.permissions()),
+        Ok(m) => keep.then(|| m.permissions()),
         Err(e) if e.kind() == io::ErrorKind::NotFound => None,
         Err(e) => return Err(e),
     };
