@@ -730,10 +730,7 @@ impl Iver {
             f("depth").unwrap_or(0.0),
             f("speed").unwrap_or(0.0),
         );
-        let hold = f("timeout")
-            .and_then(seabus_medium::parse::secs)
-            .filter(|d| !d.is_zero())
-            .unwrap_or(self.s.hold);
+        let hold = course_hold(f("timeout"), self.s.hold);
         let oms = Command::Oms {
             heading,
             depth,
@@ -973,9 +970,28 @@ impl Module for Iver {
     }
 }
 
+/// How long a course is held: its own `timeout` (when it gives one), at most [`MAX_TIMEOUT`] —
+/// a sender that dies never holds the vehicle on its course for longer — else `default`.
+fn course_hold(timeout: Option<f64>, default: Duration) -> Duration {
+    timeout
+        .and_then(seabus_medium::parse::secs)
+        .filter(|d| !d.is_zero())
+        .map_or(default, |d| d.min(Duration::from_secs_f64(MAX_TIMEOUT)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_course_is_held_for_its_own_timeout_at_most_two_minutes() {
+        let three = Duration::from_secs(3);
+        assert_eq!(course_hold(None, three), three);
+        assert_eq!(course_hold(Some(0.0), three), three);
+        assert_eq!(course_hold(Some(-1.0), three), three);
+        assert_eq!(course_hold(Some(30.0), three), Duration::from_secs(30));
+        assert_eq!(course_hold(Some(1e9), three), Duration::from_secs(120));
+    }
 
     #[test]
     fn fin_bytes_are_centred_and_clamped() {
