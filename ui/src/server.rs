@@ -343,6 +343,7 @@ async fn connection(hub: Arc<Hub>, key: Key, session: Session, socket: WebSocket
                 Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {
                     out.push(hub.lease_json());
                     out.push(hub.history());
+                    out.extend(hub.commands_again(&client));
                 }
                 Err(tokio::sync::broadcast::error::RecvError::Closed) => break,
             },

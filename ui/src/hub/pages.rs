@@ -147,6 +147,21 @@ impl Hub {
         json!({"type": "error", "message": format!("no layout `{name}` for you")})
     }
 
+    /// What a page that missed events is sent again about commands: the values last commanded
+    /// on its layout's command topics and the kept commands (`commanded` and `kept` messages).
+    pub fn commands_again(&self, client: &Client) -> Vec<Json> {
+        let Some(layout) = &client.layout else {
+            return Vec::new();
+        };
+        let mut out: Vec<Json> = self
+            .commanded_for(layout)
+            .into_iter()
+            .map(|(topic, fields)| json!({"type": "commanded", "topic": topic, "fields": fields}))
+            .collect();
+        out.extend(self.state().keeps.json());
+        out
+    }
+
     /// The values last commanded on the topics of `layout`'s commands, by topic.
     fn commanded_for(&self, layout: &Layout) -> Map<String, Json> {
         let st = self.state();
@@ -270,5 +285,32 @@ mod tests {
         let elsewhere = Topic::new("nav.speed").unwrap();
         f.hub.observe(&elsewhere, Stamp(11_000_000_000), &reading);
         assert_eq!(f.hub.data_for(&mut ana), None);
+    }
+
+    #[tokio::test]
+    async fn a_page_that_missed_events_is_sent_what_was_commanded_and_kept() {
+        let f = Fixture::new();
+        let mut ana = f.pilot("ana").await;
+        let bo = f.client("bo");
+        assert_eq!(f.hub.commands_again(&bo), Vec::<Json>::new());
+        let course = DataMap::new()
+            .with("heading", 90)
+            .with("depth", 5.0)
+            .with("speed", 1.5);
+        f.hub
+            .send(&mut ana, "pilot", "helm", &course, None)
+            .await
+            .unwrap();
+        let again = f.hub.commands_again(&bo);
+        assert_eq!(again.len(), 2, "{again:?}");
+        assert_eq!(
+            again[0],
+            json!({"type": "commanded", "topic": "cmd.helm",
+                   "fields": {"heading": 90, "depth": 5.0, "speed": 1.5}})
+        );
+        assert_eq!(
+            (&again[1]["type"], &again[1]["command"], &again[1]["user"]),
+            (&json!("kept"), &json!("helm"), &json!("ana"))
+        );
     }
 }
