@@ -1105,6 +1105,23 @@ fn expired(last: Instant, timeout: Duration, now: Instant) -> bool {
 mod tests {
     use super::*;
 
+    /// Checks that each rules file is refused with its message ("accepted" when it is not).
+    fn assert_refused_as<T: AsRef<str>>(cases: &[(T, &str)]) {
+        let wrong: Vec<String> = cases
+            .iter()
+            .filter_map(|(text, expected)| {
+                let text = text.as_ref();
+                let got = match Rules::parse("health.xml", text) {
+                    Ok(_) => "accepted".to_string(),
+                    Err(e) => e.to_string(),
+                };
+                (got != *expected)
+                    .then(|| format!("{text}\n  got:      {got}\n  expected: {expected}"))
+            })
+            .collect();
+        assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+    }
+
     const STARFISH: &str = include_str!("../../../configs/starfish-health.xml");
 
     fn rules(text: &str) -> Rules {
@@ -1272,18 +1289,7 @@ mod tests {
                 "health.xml:2:23: file ends inside <component> opened at line 2",
             ),
         ];
-        let wrong: Vec<String> = cases
-            .iter()
-            .filter_map(|(text, expected)| {
-                let got = match Rules::parse("health.xml", text) {
-                    Ok(_) => "accepted".to_string(),
-                    Err(e) => e.to_string(),
-                };
-                (got != *expected)
-                    .then(|| format!("{text}\n  got:      {got}\n  expected: {expected}"))
-            })
-            .collect();
-        assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+        assert_refused_as(&cases);
     }
 
     #[test]
@@ -1886,18 +1892,7 @@ mod tests {
                  component goes OFFLINE before it is UNAVAILABLE",
             ),
         ];
-        let wrong: Vec<String> = cases
-            .iter()
-            .filter_map(|(text, expected)| {
-                let got = match Rules::parse("health.xml", text) {
-                    Ok(_) => "accepted".to_string(),
-                    Err(e) => e.to_string(),
-                };
-                (got != *expected)
-                    .then(|| format!("{text}\n  got:      {got}\n  expected: {expected}"))
-            })
-            .collect();
-        assert!(wrong.is_empty(), "{}", wrong.join("\n"));
+        assert_refused_as(&cases);
     }
 
     const NAV: &str = r#"<health timeout="5s">

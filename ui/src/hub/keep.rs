@@ -417,6 +417,7 @@ impl Hub {
 
 #[cfg(test)]
 mod tests {
+    use super::super::Client;
     use super::super::testing::{Fixture, field, waiting};
     use super::*;
     use seabus_medium::{Message, Stamp};
@@ -447,6 +448,16 @@ mod tests {
             .collect()
     }
 
+    /// The pilot `ana`, in control, having sent [`course`] on the kept `helm`.
+    async fn kept_helm(f: &Fixture) -> Client {
+        let mut ana = f.pilot("ana").await;
+        f.hub
+            .send(&mut ana, "pilot", "helm", &course(), None)
+            .await
+            .unwrap();
+        ana
+    }
+
     fn course() -> DataMap {
         DataMap::new()
             .with("heading", 90)
@@ -459,11 +470,7 @@ mod tests {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut events = f.hub.events();
-        let mut ana = f.pilot("ana").await;
-        f.hub
-            .send(&mut ana, "pilot", "helm", &course(), None)
-            .await
-            .unwrap();
+        let ana = kept_helm(&f).await;
         let first = waiting(&mut driver);
         assert_eq!(helms(&first).len(), 1);
         let kept = kept_events(&mut events).remove(0);
@@ -494,11 +501,7 @@ mod tests {
     async fn a_kept_command_the_vehicle_refuses_ends_and_every_page_is_told_why() {
         let f = Fixture::new();
         let mut driver = f.driver();
-        let mut ana = f.pilot("ana").await;
-        f.hub
-            .send(&mut ana, "pilot", "helm", &course(), None)
-            .await
-            .unwrap();
+        kept_helm(&f).await;
         run_for(&f, 2).await;
         let sent = waiting(&mut driver);
         let last = helms(&sent).pop().unwrap().clone();
@@ -573,11 +576,7 @@ mod tests {
     async fn a_stick_takes_the_topic_over_and_nothing_kept_follows_its_neutral() {
         let f = Fixture::new();
         let mut driver = f.driver();
-        let mut ana = f.pilot("ana").await;
-        f.hub
-            .send(&mut ana, "pilot", "helm", &course(), None)
-            .await
-            .unwrap();
+        let mut ana = kept_helm(&f).await;
         let fast = DataMap::new().with("speed", 1.9);
         f.hub.drive(&mut ana, "pilot", "helm", &fast).await.unwrap();
         // a step sent while the stick drives is not kept: the stick owns the topic
@@ -600,11 +599,7 @@ mod tests {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut events = f.hub.events();
-        let mut ana = f.pilot("ana").await;
-        f.hub
-            .send(&mut ana, "pilot", "helm", &course(), None)
-            .await
-            .unwrap();
+        let mut ana = kept_helm(&f).await;
         run_for(&f, 2).await;
         let arm = f.hub.arm(&ana, "pilot", "stop").unwrap();
         f.hub
