@@ -542,6 +542,9 @@ async fn publish(args: PubArgs) -> ExitCode {
         },
     };
     let node = Node::new(&format!("pub-{}", std::process::id()));
+    // a unicast UDP address is where to send, not where to listen
+    #[cfg(feature = "udp")]
+    let url = seabus_medium_udp::sending_url(&url);
     let medium = match media::schemes().open("pub", &url, &node) {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),

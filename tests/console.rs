@@ -1713,3 +1713,29 @@ async fn a_silent_frontseat_on_a_live_line_leaves_healthy_within_3_s_with_the_re
     )
     .await;
 }
+
+#[test]
+fn the_demo_runs_twenty_seconds_without_a_warning() {
+    // (with the console tests: one demo at a time, on its own fixed paths and groups)
+    let out = seabus()
+        .args(["demo", "--for", "20"])
+        .stdout(Stdio::null())
+        .output()
+        .expect("the demo runs");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    let loud: Vec<&str> = err
+        .lines()
+        .filter(|l| l.contains(" WARN ") || l.contains(" ERROR "))
+        .collect();
+    assert!(loud.is_empty(), "{}", loud.join("\n"));
+    // the junk the simulated frontseat puts on its line is said once, at the start
+    assert_eq!(
+        err.matches("the simulated frontseat puts a line of junk before 1.0 % of its replies")
+            .count(),
+        1,
+        "{err}"
+    );
+    // and the vehicle did run: the frontseat took the helm's commands
+    assert!(err.contains("frontseat accepting -> in-control"), "{err}");
+}

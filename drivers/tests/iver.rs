@@ -1,6 +1,7 @@
 //! The Iver2 driver against the simulated frontseat over a real pseudo-terminal: states, course
 //! commands that move the vehicle, acknowledgements, refusals with their reasons, commands left
-//! unanswered timing out, and the link lost and found again.
+//! unanswered timing out, the link lost and found again, and the Iver3 `$OSI` standing in for `$C`
+//! and `$OPI` when they are not requested.
 
 use seabus_medium::{DataMap, Interface, Medium, Message};
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
@@ -253,6 +254,79 @@ async fn course_commands_keep_the_frontseat_alive_and_stop_when_they_stop() {
     back.shutdown().await;
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn without_compass_or_power_the_iver3_osi_gives_depth_battery_and_vehicle_info() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("frontseat").display().to_string();
+    let front = start(&format!(
+        r#"<seabus node="front">
+  <medium name="line" url="pty://{path}"/>
+  <module name="frontseat" type="iver2-sim" medium="line" lat="43.5" lon="16.4" osi="iver3"/>
+</seabus>"#
+    ))
+    .await;
+    let back = start(&format!(
+        r#"<seabus node="back">
+  <medium name="bus" url="inproc://"/>
+  <medium name="serial" url="serial://{path}?baud=19200&amp;reopen=100ms"/>
+  <module name="iver" type="iver2" media="serial bus" request="G S" request_every="200ms" data_timeout="1s"/>
+</seabus>"#
+    ))
+    .await;
+    let bus = back.medium("bus").unwrap().clone();
+    let mut watch = bus
+        .attach_with("watch", 1 << 16, 256)
+        .subscribed("**")
+        .unwrap();
+    let info = wait_for(&mut watch, Duration::from_secs(5), |m| {
+        m.topic.as_str() == "vehicle.info"
+    })
+    .await;
+    assert_eq!(
+        (text(&info, "vehicle"), text(&info, "version")),
+        ("iver2-sim", "5.0")
+    );
+    assert_eq!(
+        (
+            field(&info, "srp").and_then(|v| v.as_bool()),
+            field(&info, "flag_20").and_then(|v| v.as_bool()),
+            field(&info, "battery").and_then(|v| v.as_f64()),
+        ),
+        (Some(false), Some(false), Some(100.0))
+    );
+    // depth from $OSI: the simulated vehicle floats at the surface
+    let depth = wait_for(&mut watch, Duration::from_secs(2), |m| {
+        m.topic.as_str() == "nav.depth"
+    })
+    .await;
+    assert_eq!(field(&depth, "depth").and_then(|v| v.as_f64()), Some(0.0));
+    // the battery from the $OSI field: a percent, without the $OPI's volts
+    let battery = wait_for(&mut watch, Duration::from_secs(2), |m| {
+        m.topic.as_str() == "power.battery"
+    })
+    .await;
+    assert_eq!(
+        field(&battery, "percent").and_then(|v| v.as_f64()),
+        Some(100.0)
+    );
+    assert!(field(&battery, "voltage").is_none(), "{battery:?}");
+    // an $OSI every 200 ms, but vehicle.info only when it changes or every 5 s
+    let (mut depths, mut infos) = (0, 0);
+    let until = Instant::now() + Duration::from_secs(2);
+    while let Ok(Some(m)) = tokio::time::timeout_at(until, watch.recv()).await {
+        match m.topic.as_str() {
+            "nav.depth" => depths += 1,
+            "vehicle.info" => infos += 1,
+            "nav.attitude" => panic!("no $C was requested: {m:?}"),
+            _ => {}
+        }
+    }
+    assert!(depths >= 5, "only {depths} depths in 2 s");
+    assert_eq!(infos, 0, "vehicle.info repeated within 5 s");
+    front.shutdown().await;
+    back.shutdown().await;
+}
+
 /// A frontseat that sends its state and compass but acknowledges nothing: what the driver sends it
 /// is handed back on the channel.
 fn mute_frontseat(path: &str) -> (Medium, tokio::sync::mpsc::Receiver<String>) {
@@ -283,7 +357,7 @@ fn mute_frontseat(path: &str) -> (Medium, tokio::sync::mpsc::Receiver<String>) {
         remaining: Some(0.0),
         heading: Some(10.0),
         depth_feet: Some(0.0),
-        battery_percent: Some(90.0),
+        iver3: None,
         extra: Vec::new(),
     }
     .sentence();

@@ -363,6 +363,7 @@ mod tests {
             "altitude",
             "battery",
             "vehicle-state",
+            "vehicle-info",
             "course-command",
             "actuator-command",
             "mission-command",

@@ -269,6 +269,9 @@ impl Runtime {
             s.finish(SHUTDOWN_GRACE).await;
         }
         for m in self.shared.media.values() {
+            m.closing();
+        }
+        for m in self.shared.media.values() {
             m.close();
         }
     }

@@ -3,9 +3,13 @@
 //!
 //! It asks for data with `$OSD` (`request`, default `G C S P`, every `request_every`, default
 //! 500ms) and publishes what comes back as standard datasets on the bus: attitude and depth from
-//! `$C`, position, velocity, altitude and vehicle state from `$OSI`, battery from `$OPI` (or from the
-//! `$OSI` battery field when power is not requested), the frontseat's GPS from its RMC (`$GPRMC`,
-//! `$GNRMC`, …) on `gps_topic`, and DVL velocities on `dvl_topic`.
+//! `$C`, position, velocity, altitude and vehicle state from `$OSI`, battery from `$OPI`, the
+//! frontseat's GPS from its RMC (`$GPRMC`, `$GNRMC`, …) on `gps_topic`, and DVL velocities on
+//! `dvl_topic`. `$OSI` stands in for the others: its depth is published when no `$C` brought a
+//! depth within the last three `request_every`, its battery field (Iver3 form) when no `$OPI`
+//! brought a battery in that time — so one source feeds each topic, never both at once. The Iver3
+//! `$OSI` also gives `vehicle.info` (vehicle name, version, SRP flag and two more flags, battery),
+//! published when name, version or flags change and every `info_every` (5s) otherwise.
 //!
 //! Commands it accepts on the bus:
 //! - `cmd.course` (heading, depth, speed) → `$OMS`, repeated every `repeat` (1s) while the course
@@ -93,6 +97,7 @@ struct Topics {
     altitude: Topic,
     battery: Topic,
     state: Topic,
+    info: Topic,
     status: Topic,
     course: Topic,
     actuator: Topic,
@@ -111,6 +116,7 @@ struct Settings {
     max_pitch: f64,
     ack_timeout: Duration,
     data_timeout: Duration,
+    info_every: Duration,
     accepting: Vec<String>,
     in_control: Vec<String>,
     fin_scale: f64,
@@ -153,7 +159,49 @@ struct Iver {
     next_id: i64,
     last_state: Option<(Control, String, String, Instant)>,
     heading: Option<f64>,
+    /// When a `$C` last brought a depth.
+    compass_depth_at: Option<Instant>,
+    /// When an `$OPI` last brought a battery.
+    opi_battery_at: Option<Instant>,
+    /// The `vehicle.info` last published, and when.
+    last_info: Option<(InfoKey, Instant)>,
     tally: Tally,
+}
+
+/// What makes `vehicle.info` change: name, version and flags (not the battery, which drifts).
+#[derive(Debug, Clone, PartialEq)]
+struct InfoKey {
+    vehicle: String,
+    version: String,
+    srp: bool,
+    flags: [bool; 2],
+}
+
+impl InfoKey {
+    fn of(i: &protocol::Iver3Osi) -> InfoKey {
+        InfoKey {
+            vehicle: i.vehicle.clone(),
+            version: i.version.clone(),
+            srp: i.srp,
+            flags: i.flags,
+        }
+    }
+}
+
+/// `vehicle.info` is due when it changed, or `every` has passed since it was last published.
+fn info_due(
+    last: Option<&(InfoKey, Instant)>,
+    key: &InfoKey,
+    now: Instant,
+    every: Duration,
+) -> bool {
+    last.is_none_or(|(k, at)| k != key || now.duration_since(*at) >= every)
+}
+
+/// A value from `$OSI` stands in for a dedicated sentence's (`$C` depth, `$OPI` battery) when that
+/// sentence has not brought one within `window`.
+fn osi_stands_in(dedicated_at: Option<Instant>, now: Instant, window: Duration) -> bool {
+    dedicated_at.is_none_or(|t| now.duration_since(t) > window)
 }
 
 fn words(s: &str) -> Vec<String> {
@@ -179,6 +227,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         max_pitch: p.positive_or("max_pitch", 20.0)?,
         ack_timeout: p.duration_or("ack_timeout", Duration::from_secs(3))?,
         data_timeout: p.duration_or("data_timeout", Duration::from_secs(10))?,
+        info_every: p.duration_or("info_every", Duration::from_secs(5))?,
         accepting: words(p.str("accepting").unwrap_or("N M m A W")),
         in_control: words(p.str("in_control").unwrap_or("P")),
         fin_scale: p.positive_or("fin_scale", 4.0)?,
@@ -250,6 +299,7 @@ fn topics(p: &Params, cat: &Catalogue) -> Result<Topics, FileError> {
         altitude: topic("altitude_topic", "altitude", "nav.altitude")?,
         battery: topic("battery_topic", "battery", "power.battery")?,
         state: topic("state_topic", "vehicle-state", "vehicle.state")?,
+        info: topic("info_topic", "vehicle-info", "vehicle.info")?,
         status: topic("status_topic", "command-status", "cmd.status")?,
         course: command("course-command", "cmd.course")?,
         actuator: command("actuator-command", "cmd.actuator")?,
@@ -274,6 +324,7 @@ fn declaration(p: &Params, t: &Topics) -> Declaration {
         (&t.altitude, "altitude"),
         (&t.battery, "battery"),
         (&t.state, "vehicle-state"),
+        (&t.info, "vehicle-info"),
         (&t.status, "command-status"),
         (&t.gps, "position"),
         (&t.dvl, "velocity"),
@@ -329,6 +380,9 @@ impl Iver {
             next_id: 1,
             last_state: None,
             heading: None,
+            compass_depth_at: None,
+            opi_battery_at: None,
+            last_info: None,
             tally: Tally::new(),
         }
     }
@@ -393,7 +447,7 @@ impl Iver {
         }
     }
 
-    /// Depth from the surface, given in feet ($OSI, or $C when the compass is requested).
+    /// Depth from the surface, given in feet (`$C`, or `$OSI` standing in for it).
     async fn publish_depth(&self, ctx: &Context, feet: f64) {
         let m = DataMap::new().with("depth", feet * FOOT);
         self.publish(ctx, "depth", &self.t.depth, m).await;
@@ -510,8 +564,13 @@ impl Iver {
         }
     }
 
-    /// `$OSI`: the frontseat's mode, mission and error state, its position, velocity and altitude
-    /// (and depth and battery when those are not requested on their own), and the control state.
+    /// How long a `$C` depth or an `$OPI` battery keeps `$OSI` from standing in for it.
+    fn stand_in_window(&self) -> Duration {
+        self.s.request_every * 3
+    }
+
+    /// `$OSI`: the frontseat's mode, mission and error state, its position, velocity and altitude,
+    /// depth and battery when no `$C` or `$OPI` brings them, `vehicle.info`, and the control state.
     async fn on_osi(&mut self, ctx: &Context, o: &protocol::Osi, now: Instant) {
         self.mode = o.mode.clone();
         self.error = o.error.clone();
@@ -538,13 +597,14 @@ impl Iver {
                 .with("valid", ft > 0.0);
             self.publish(ctx, "altitude", &self.t.altitude, m).await;
         }
-        if !self.s.request.compass
+        let window = self.stand_in_window();
+        if osi_stands_in(self.compass_depth_at, now, window)
             && let Some(ft) = o.depth_feet
         {
             self.publish_depth(ctx, ft).await;
         }
-        if !self.s.request.power
-            && let Some(pc) = o.battery_percent
+        if osi_stands_in(self.opi_battery_at, now, window)
+            && let Some(pc) = o.battery_percent()
         {
             self.publish(
                 ctx,
@@ -554,11 +614,33 @@ impl Iver {
             )
             .await;
         }
+        if let Some(i) = &o.iver3 {
+            self.publish_info(ctx, i, now).await;
+        }
         let link = ctx
             .port(0)
             .map_or(LinkState::Up, |p| p.medium().link_state());
         self.update_control(&link, now);
         self.publish_state(ctx).await;
+    }
+
+    /// `vehicle.info` from an Iver3 `$OSI`, when it changed or is due again.
+    async fn publish_info(&mut self, ctx: &Context, i: &protocol::Iver3Osi, now: Instant) {
+        let key = InfoKey::of(i);
+        if !info_due(self.last_info.as_ref(), &key, now, self.s.info_every) {
+            return;
+        }
+        let mut m = DataMap::new()
+            .with("vehicle", i.vehicle.as_str())
+            .with("version", i.version.as_str())
+            .with("srp", i.srp)
+            .with("flag_20", i.flags[0])
+            .with("flag_21", i.flags[1]);
+        if let Some(pc) = i.battery_percent {
+            m.insert("battery", pc);
+        }
+        self.publish(ctx, "vehicle-info", &self.t.info, m).await;
+        self.last_info = Some((key, now));
     }
 
     /// `$C`: attitude, and depth.
@@ -573,15 +655,17 @@ impl Iver {
         }
         self.publish(ctx, "attitude", &self.t.attitude, m).await;
         if let Some(ft) = c.depth_feet {
+            self.compass_depth_at = Some(Instant::now());
             self.publish_depth(ctx, ft).await;
         }
     }
 
     /// `$OPI`: the battery.
-    async fn on_opi(&self, ctx: &Context, p: protocol::Opi) {
+    async fn on_opi(&mut self, ctx: &Context, p: protocol::Opi) {
         let Some(pc) = p.percent else {
             return;
         };
+        self.opi_battery_at = Some(Instant::now());
         let mut m = DataMap::new().with("percent", pc);
         for (k, v) in [
             ("remaining", p.remaining_wh),
@@ -991,6 +1075,54 @@ mod tests {
         assert_eq!(course_hold(Some(-1.0), three), three);
         assert_eq!(course_hold(Some(30.0), three), Duration::from_secs(30));
         assert_eq!(course_hold(Some(1e9), three), Duration::from_secs(120));
+    }
+
+    #[test]
+    fn osi_stands_in_only_when_the_dedicated_sentence_is_quiet() {
+        let now = Instant::now();
+        let window = Duration::from_millis(1500);
+        // never heard ($C not requested, or never answered): $OSI gives the value
+        assert!(osi_stands_in(None, now, window));
+        // heard recently: $OSI stays quiet
+        assert!(!osi_stands_in(Some(now), now, window));
+        assert!(!osi_stands_in(
+            Some(now - Duration::from_millis(1500)),
+            now,
+            window
+        ));
+        // gone quiet for longer than the window: $OSI takes over again
+        assert!(osi_stands_in(
+            Some(now - Duration::from_millis(1501)),
+            now,
+            window
+        ));
+    }
+
+    #[test]
+    fn vehicle_info_is_due_on_change_or_after_its_period() {
+        let now = Instant::now();
+        let every = Duration::from_secs(5);
+        let key = InfoKey {
+            vehicle: "iver3-3082".into(),
+            version: "5.4".into(),
+            srp: false,
+            flags: [true, false],
+        };
+        assert!(info_due(None, &key, now, every));
+        let last = (key.clone(), now - Duration::from_secs(1));
+        assert!(!info_due(Some(&last), &key, now, every));
+        let srp = InfoKey {
+            srp: true,
+            ..key.clone()
+        };
+        assert!(info_due(Some(&last), &srp, now, every));
+        let renamed = InfoKey {
+            vehicle: "other".into(),
+            ..key.clone()
+        };
+        assert!(info_due(Some(&last), &renamed, now, every));
+        let old = (key.clone(), now - every);
+        assert!(info_due(Some(&old), &key, now, every));
     }
 
     #[test]

@@ -112,10 +112,39 @@ pub struct Osi {
     pub heading: Option<f64>,
     /// Depth from the surface, feet.
     pub depth_feet: Option<f64>,
-    /// Remote Helm 5: battery percent (field 16), when present and numeric.
-    pub battery_percent: Option<f64>,
-    /// Fields after the 15th, as sent (they differ between Remote Helm 4 and 5).
+    /// Fields 16 to 21 of the Iver3 form (21 fields or more); `None` for the short Iver2 form
+    /// and for any other layout.
+    pub iver3: Option<Iver3Osi>,
+    /// Fields after those read, as sent: after the 21st in the Iver3 form, after the 15th in any
+    /// other (their meaning differs between Remote Helm versions).
     pub extra: Vec<String>,
+}
+
+/// The fields an Iver3 (Remote Helm 5) `$OSI` carries after the 15th.
+///
+/// One Iver3 capture reads `…,<depth>,76,False,iver3-3082,5.4,True,False`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Iver3Osi {
+    /// Field 16: battery, percent (0–100), `None` when empty.
+    pub battery_percent: Option<f64>,
+    /// Field 17: the safety return path (SRP) flag.
+    pub srp: bool,
+    /// Field 18: the vehicle's name.
+    pub vehicle: String,
+    /// Field 19: the Remote Helm / firmware version, as text.
+    pub version: String,
+    /// Fields 20 and 21: two more flags, whose meaning no open source documents; as sent.
+    pub flags: [bool; 2],
+}
+
+/// How many fields the Iver3 `$OSI` has.
+pub const IVER3_OSI_FIELDS: usize = 21;
+
+impl Osi {
+    /// The battery percent, when this `$OSI` carries one (the Iver3 form).
+    pub fn battery_percent(&self) -> Option<f64> {
+        self.iver3.as_ref().and_then(|i| i.battery_percent)
+    }
 }
 
 /// `$C`: compass.
@@ -238,6 +267,11 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
                     format!("$OSI has {} fields, at least 15 were expected", f.len()),
                 ));
             }
+            let (iver3, read) = if f.len() >= IVER3_OSI_FIELDS {
+                (Some(parse_iver3_osi(line, &f)?), IVER3_OSI_FIELDS)
+            } else {
+                (None, 15)
+            };
             let park = text(&f, 9);
             let park_time = match park.strip_prefix('P') {
                 Some(p) => num(p),
@@ -259,8 +293,8 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
                 remaining: opt_num(line, &f, 12, "remaining time")?,
                 heading: opt_num(line, &f, 13, "true heading")?,
                 depth_feet: opt_num(line, &f, 14, "depth")?,
-                battery_percent: f.get(15).and_then(|s| num(s)),
-                extra: f.iter().skip(15).map(|s| s.trim().to_string()).collect(),
+                iver3,
+                extra: f.iter().skip(read).map(|s| s.trim().to_string()).collect(),
             }))
         }
         "OPI" => {
@@ -320,6 +354,43 @@ pub fn parse_front(line: &str) -> Result<FromFront, RhError> {
     })
 }
 
+/// A `True`/`False` field (any case; `1`/`0` too).
+fn flag(line: &str, f: &[&str], i: usize, what: &str) -> Result<bool, RhError> {
+    let s = f.get(i).map_or("", |s| s.trim());
+    if s.eq_ignore_ascii_case("true") || s == "1" {
+        Ok(true)
+    } else if s.eq_ignore_ascii_case("false") || s == "0" {
+        Ok(false)
+    } else {
+        Err(rh_err(
+            line,
+            format!("field {} ({what}) `{s}` is not True or False", i + 1),
+        ))
+    }
+}
+
+/// Fields 16 to 21 of an Iver3 `$OSI`: battery percent, SRP flag, vehicle name, version, two flags.
+fn parse_iver3_osi(line: &str, f: &[&str]) -> Result<Iver3Osi, RhError> {
+    let battery_percent = opt_num(line, f, 15, "battery percent")?;
+    if let Some(pc) = battery_percent.filter(|pc| !(0.0..=100.0).contains(pc)) {
+        return Err(rh_err(
+            line,
+            format!("field 16 (battery percent) `{pc}` is not 0 to 100"),
+        ));
+    }
+    let vehicle = text(f, 17);
+    if vehicle.is_empty() {
+        return Err(rh_err(line, "field 18 (vehicle name) is empty"));
+    }
+    Ok(Iver3Osi {
+        battery_percent,
+        srp: flag(line, f, 16, "SRP flag")?,
+        vehicle,
+        version: text(f, 18),
+        flags: [flag(line, f, 19, "flag 20")?, flag(line, f, 20, "flag 21")?],
+    })
+}
+
 /// Reads `$C<heading>P<pitch>R<roll>T<temp>D<depth>*hh`.
 fn parse_compass(line: &str) -> Result<Compass, RhError> {
     let body = line.get(2..).unwrap_or("");
@@ -351,7 +422,7 @@ fn parse_compass(line: &str) -> Result<Compass, RhError> {
 }
 
 impl Osi {
-    /// Writes the sentence, with the fields after the 15th from `extra`.
+    /// Writes the sentence: the 15 fields, the Iver3 fields when present, then `extra`.
     pub fn sentence(&self) -> String {
         let o = |v: Option<f64>, p: usize| v.map_or(String::new(), |v| format!("{v:.p$}"));
         let mut body = format!(
@@ -372,6 +443,18 @@ impl Osi {
             o(self.heading, 1),
             o(self.depth_feet, 1),
         );
+        if let Some(i) = &self.iver3 {
+            let b = |v: bool| if v { "True" } else { "False" };
+            body.push_str(&format!(
+                ",{},{},{},{},{},{}",
+                o(i.battery_percent, 0),
+                b(i.srp),
+                i.vehicle,
+                i.version,
+                b(i.flags[0]),
+                b(i.flags[1])
+            ));
+        }
         for e in &self.extra {
             body.push(',');
             body.push_str(e);
@@ -858,10 +941,10 @@ mod tests {
 
     #[test]
     fn osi_is_read_field_by_field() {
-        let line = s(
-            "OSI,8080808080,S,1,30.36342050,-89.09611017,0.00,162.91,N,6.204,P0,-1.8894,test,0.0,90.0,3.2",
-        );
-        let FromFront::Osi(o) = parse_front(&line).unwrap() else {
+        // the short (Iver2) line of the protocol notes, with its checksum
+        let line = "$OSI,8080808080,S,1,30.36342050,-89.09611017,0.00,162.91,N,6.204,P0,-1.8894,test,0.0,90.0,3.2*02";
+        assert_eq!(line, s(&line[1..line.len() - 3]));
+        let FromFront::Osi(o) = parse_front(line).unwrap() else {
             panic!()
         };
         assert_eq!(
@@ -882,21 +965,102 @@ mod tests {
             (Some(-1.8894), "test", Some(0.0))
         );
         assert_eq!(
-            (o.heading, o.depth_feet, o.battery_percent),
+            (o.heading, o.depth_feet, o.battery_percent()),
             (Some(90.0), Some(3.2), None)
         );
-        // a Remote Helm 5 line carries the battery in field 16
-        let line5 = s(
-            "OSI,8080808080,N,2,30.1,-89.2,1.50,10.0,Sle,12.0,P30,-1.9,m1,100.0,180.0,15.0,76,False,iver3-3082,5.4,True,False",
-        );
-        let FromFront::Osi(o) = parse_front(&line5).unwrap() else {
+        assert_eq!((o.iver3.as_ref(), o.extra.len()), (None, 0));
+    }
+
+    /// The Iver3 line of the protocol notes, with its checksum.
+    const IVER3_OSI: &str = "$OSI,8080808080,N,2,30.1,-89.2,1.50,10.0,Sle,12.0,P30,-1.9,m1,100.0,180.0,15.0,76,False,iver3-3082,5.4,True,False*72";
+
+    #[test]
+    fn the_iver3_osi_gives_battery_srp_name_version_and_flags() {
+        assert_eq!(IVER3_OSI, s(&IVER3_OSI[1..IVER3_OSI.len() - 3]));
+        let FromFront::Osi(o) = parse_front(IVER3_OSI).unwrap() else {
             panic!()
         };
         assert_eq!(
-            (o.battery_percent, o.park_time, o.extra.len()),
-            (Some(76.0), Some(30.0), 6)
+            o.iver3,
+            Some(Iver3Osi {
+                battery_percent: Some(76.0),
+                srp: false,
+                vehicle: "iver3-3082".into(),
+                version: "5.4".into(),
+                flags: [true, false],
+            })
         );
+        assert_eq!(
+            (o.battery_percent(), o.depth_feet, o.park_time),
+            (Some(76.0), Some(15.0), Some(30.0))
+        );
+        assert!(o.extra.is_empty(), "{:?}", o.extra);
         assert_eq!(error_state_text(&o.error), "leak");
+        // an empty battery field is no battery; fields after the 21st are kept
+        let line = s(
+            "OSI,8080808080,S,1,30.1,-89.2,0.00,0.0,N,6.0,P0,-1.9,m1,0.0,90.0,0.0,,true,v1,5.2,0,1,x",
+        );
+        let FromFront::Osi(o) = parse_front(&line).unwrap() else {
+            panic!()
+        };
+        let i = o.iver3.as_ref().unwrap();
+        assert_eq!(
+            (i.battery_percent, i.srp, i.flags, o.extra.as_slice()),
+            (None, true, [false, true], &["x".to_string()][..])
+        );
+    }
+
+    #[test]
+    fn short_and_unknown_osi_layouts_read_no_iver3_fields() {
+        // 19 fields: neither the Iver2 nor the Iver3 form; fields 16+ are kept, not read
+        let line = s(
+            "OSI,8080808080,S,1,30.1,-89.2,0.00,0.0,N,6.0,P0,-1.9,m1,0.0,90.0,3.0,76,False,v,5.0",
+        );
+        let FromFront::Osi(o) = parse_front(&line).unwrap() else {
+            panic!()
+        };
+        assert_eq!(
+            (o.battery_percent(), o.iver3, o.extra.len()),
+            (None, None, 4)
+        );
+    }
+
+    #[test]
+    fn malformed_iver3_osi_fields_are_refused_by_name() {
+        let head = "OSI,8080808080,N,2,30.1,-89.2,1.50,10.0,Sle,12.0,P30,-1.9,m1,100.0,180.0,15.0";
+        for (tail, want) in [
+            (
+                "full,False,iver3,5.4,True,False",
+                "field 16 (battery percent) `full` is not a number",
+            ),
+            (
+                "120,False,iver3,5.4,True,False",
+                "field 16 (battery percent) `120` is not 0 to 100",
+            ),
+            (
+                "-1,False,iver3,5.4,True,False",
+                "field 16 (battery percent) `-1` is not 0 to 100",
+            ),
+            (
+                "76,maybe,iver3,5.4,True,False",
+                "field 17 (SRP flag) `maybe` is not True or False",
+            ),
+            (
+                "76,False,,5.4,True,False",
+                "field 18 (vehicle name) is empty",
+            ),
+            (
+                "76,False,iver3,5.4,yes,False",
+                "field 20 (flag 20) `yes` is not True or False",
+            ),
+            (
+                "76,False,iver3,5.4,True,",
+                "field 21 (flag 21) `` is not True or False",
+            ),
+        ] {
+            let e = parse_front(&s(&format!("{head},{tail}"))).unwrap_err();
+            assert_eq!(e.reason, want, "{tail}");
+        }
     }
 
     #[test]
@@ -961,6 +1125,16 @@ mod tests {
     fn malformed_front_sentences_say_which_field() {
         let e = parse_front(&s("OSI,8080808080,S,1,north")).unwrap_err();
         assert!(e.reason.contains("at least 15"), "{e}");
+        let e = parse_front(&s(
+            "OSI,8080808080,S,1,north,-89.09611017,0.00,162.91,N,6.204,P0,-1.8894,test,0.0,90.0,3.2",
+        ))
+        .unwrap_err();
+        assert_eq!(e.reason, "field 4 (latitude) `north` is not a number");
+        let e = parse_front(&s(
+            "OSI,8080808080,S,1,30.1,-89.2,0.00,162.91,N,6.204,P0,-1.8894,test,0.0,90.0,deep",
+        ))
+        .unwrap_err();
+        assert_eq!(e.reason, "field 15 (depth) `deep` is not a number");
         let e = parse_front(&s("ACK,9,x,0")).unwrap_err();
         assert!(e.reason.contains("field 2 (status) `x`"), "{e}");
         let e = parse_front(&s("C82.8P--1R2")).unwrap_err();
@@ -1124,13 +1298,29 @@ mod tests {
             remaining: Some(120.0),
             heading: Some(45.0),
             depth_feet: Some(10.0),
-            battery_percent: Some(88.0),
-            extra: vec!["88".into(), "False".into(), "sim".into(), "5.0".into()],
+            iver3: Some(Iver3Osi {
+                battery_percent: Some(88.0),
+                srp: true,
+                vehicle: "sim".into(),
+                version: "5.0".into(),
+                flags: [false, true],
+            }),
+            extra: vec!["more".into()],
         };
         let FromFront::Osi(back) = parse_front(&osi.sentence()).unwrap() else {
             panic!()
         };
         assert_eq!(*back, osi);
+        let short = Osi {
+            iver3: None,
+            extra: Vec::new(),
+            ..osi
+        };
+        assert_eq!(fields(&short.sentence()).len(), 15);
+        let FromFront::Osi(back) = parse_front(&short.sentence()).unwrap() else {
+            panic!()
+        };
+        assert_eq!(*back, short);
         let c = Compass {
             heading: 10.5,
             pitch: 1.25,

@@ -12,7 +12,9 @@
 //! asked sentences in the order G, C, S, P, D, then its `$ACK`.
 //!
 //! Parameters: `lat`, `lon`, `heading`, `autostart` (start with the mission running, false),
-//! `version` (Remote Helm major version, 5), `mission`
+//! `version` (Remote Helm major version, 5), `osi` (the `$OSI` form: `iver3`, 21 fields with the
+//! battery, SRP flag, vehicle name `iver2-sim` and version; or `iver2`, the short 15-field form;
+//! `iver3` from version 5 on, else `iver2`), `mission`
 //! (`demo.mis`), `mission_speed` (m/s, 1), `backseat_mode` (`P`), `battery` (Wh, 600),
 //! `water_depth` (m, 40), `declination` (deg, 0), faults: `noise` (standard deviation of sensor
 //! noise, degrees and metres, 0), `garbage` (chance, per reply, of a line of junk first, 0; needs
@@ -20,7 +22,8 @@
 //! no replies, nothing read), and `gps_rate` (NMEA GPS sentences per second on the second medium, 1).
 
 use super::protocol::{
-    self, Ack, Command, Compass, DataRequest, DepthUnits, Dvl, MAX_TIMEOUT, Opi, Osi, Waypoint,
+    self, Ack, Command, Compass, DataRequest, DepthUnits, Dvl, Iver3Osi, MAX_TIMEOUT, Opi, Osi,
+    Waypoint,
 };
 use crate::nmea::sentence::build;
 use crate::sim::kinematics::{Limits, Setpoint, Vehicle};
@@ -77,6 +80,9 @@ struct Sim {
     v: Vehicle,
     limits: Limits,
     units: DepthUnits,
+    version: u32,
+    /// `$OSI` in the 21-field Iver3 form, else the short one.
+    iver3_osi: bool,
     drive: Drive,
     mission: String,
     mission_speed: f64,
@@ -126,6 +132,14 @@ impl Sim {
             }
         };
         let gps_rate = p.positive_or("gps_rate", 1.0)?;
+        let iver3_osi = match p.get("osi") {
+            None => version >= 5,
+            Some(param) => match param.value.as_str() {
+                "iver3" => true,
+                "iver2" => false,
+                other => return Err(param.error(format!("`{other}` is not iver2 or iver3"))),
+            },
+        };
         let now = Instant::now();
         Ok(Sim {
             v: Vehicle::at(
@@ -136,6 +150,8 @@ impl Sim {
             ),
             limits: Limits::default(),
             units: DepthUnits::of_version(version),
+            version,
+            iver3_osi,
             drive: if p.flag_or("autostart", false)? {
                 Drive::Mission {
                     heading: p.float_or("heading", 0.0)?,
@@ -207,11 +223,6 @@ impl Sim {
             Drive::Backseat { .. } | Drive::ToPoint { .. } => &self.backseat_mode,
             Drive::Servo { .. } => "A",
         }
-    }
-
-    /// Remote Helm 5 or later: `$OSI` carries the battery and the fields after it.
-    fn rh5(&self) -> bool {
-        self.units == DepthUnits::Metres
     }
 
     fn running(&self) -> bool {
@@ -485,15 +496,13 @@ impl Sim {
 
     fn osi_line(&mut self) -> String {
         let altitude_ft = (self.water_depth - self.v.depth).max(0.0) / FOOT;
-        let mut extra = Vec::new();
-        if self.rh5() {
-            extra = vec![
-                format!("{:.0}", self.v.percent()),
-                "False".into(),
-                "iver-sim".into(),
-                "5.0".into(),
-            ];
-        }
+        let iver3 = self.iver3_osi.then(|| Iver3Osi {
+            battery_percent: Some(self.v.percent().round().clamp(0.0, 100.0)),
+            srp: false,
+            vehicle: "iver2-sim".into(),
+            version: format!("{}.0", self.version),
+            flags: [false, false],
+        });
         Osi {
             fins: "8080808080".into(),
             mode: self.mode().to_string(),
@@ -510,8 +519,8 @@ impl Sim {
             remaining: Some(0.0),
             heading: Some(self.v.heading),
             depth_feet: Some(self.v.depth / FOOT),
-            battery_percent: self.rh5().then(|| self.v.percent()),
-            extra,
+            iver3,
+            extra: Vec::new(),
         }
         .sentence()
     }
@@ -547,7 +556,8 @@ impl Sim {
 
     async fn send_lines(&mut self, ctx: &Context, port: usize, lines: Vec<String>) {
         for line in lines {
-            if self.garbage > 0.0 && self.rng.f64() < self.garbage {
+            // junk goes on the Remote Helm line only (the NMEA line takes sentences alone)
+            if port == 0 && self.garbage > 0.0 && self.rng.f64() < self.garbage {
                 let junk = "\u{1}#~garbage~".to_string();
                 if let Err(e) = ctx
                     .publish_on(
@@ -579,6 +589,14 @@ impl Sim {
 #[async_trait]
 impl Module for Sim {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        if self.garbage > 0.0 {
+            tracing::info!(
+                module = ctx.name(),
+                "the simulated frontseat puts a line of junk before {:.1} % of its replies \
+                 (`garbage`): the backseat rejects and counts them",
+                self.garbage * 100.0
+            );
+        }
         if ctx.ports() > 1
             && let Some(p) = self.gps_rate
         {
@@ -703,6 +721,36 @@ mod tests {
                 status: 1,
                 error: 27
             }]
+        );
+    }
+
+    #[test]
+    fn osi_comes_in_the_iver3_or_the_short_form() {
+        let osi = |pairs: &[(&str, &str)]| {
+            let mut s = Sim::new(&Params::from_pairs(pairs)).unwrap();
+            let line = s.osi_line();
+            match protocol::parse_front(&line) {
+                Ok(protocol::FromFront::Osi(o)) => (protocol::fields(&line).len(), *o),
+                other => panic!("{line}: {other:?}"),
+            }
+        };
+        let (n, o) = osi(&[]);
+        assert_eq!(n, 21);
+        let i = o.iver3.unwrap();
+        assert_eq!(
+            (i.vehicle.as_str(), i.version.as_str(), i.battery_percent),
+            ("iver2-sim", "5.0", Some(100.0))
+        );
+        let (n, o) = osi(&[("osi", "iver2")]);
+        assert_eq!((n, o.iver3), (15, None));
+        let (n, o) = osi(&[("version", "4")]);
+        assert_eq!((n, o.iver3), (15, None));
+        let e = Sim::new(&Params::from_pairs(&[("osi", "iver4")]))
+            .err()
+            .unwrap();
+        assert!(
+            e.to_string().contains("`iver4` is not iver2 or iver3"),
+            "{e}"
         );
     }
 

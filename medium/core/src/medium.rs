@@ -410,6 +410,8 @@ pub(crate) struct Builder {
     pub(crate) url: String,
     pub(crate) node: Node,
     pub(crate) faults: Option<FaultConfig>,
+    /// Whether rejected input is logged at DEBUG (`rejects=debug`).
+    pub(crate) quiet_rejects: bool,
 }
 
 impl Builder {
@@ -430,7 +432,11 @@ impl Builder {
             transport: OnceLock::new(),
             faults: self.faults.map(Faults::new),
             counters: Counters::default(),
-            rejected: Tally::new(),
+            rejected: if self.quiet_rejects {
+                Tally::logged_at_debug()
+            } else {
+                Tally::new()
+            },
             link,
             tasks: Mutex::new(Vec::new()),
             closed: AtomicBool::new(false),
@@ -455,6 +461,7 @@ impl Medium {
             url: "inproc://".to_string(),
             node: node.clone(),
             faults,
+            quiet_rejects: false,
         }
         .build(|_| Ok(None))
         .expect("an in-process medium has nothing that can fail")
@@ -581,9 +588,16 @@ impl Medium {
         }
     }
 
+    /// Marks the medium as closing: sends are refused and its link going down is expected. A
+    /// system that stops marks all its media first, so that one closing (a pseudo-terminal's
+    /// end) is no alarm on another (the serial line reading it).
+    pub fn closing(&self) {
+        self.inner.closed.store(true, Ordering::Release);
+    }
+
     /// Closes the medium: its I/O tasks stop, sends fail, interfaces drain then see the end.
     pub fn close(&self) {
-        self.inner.closed.store(true, Ordering::Release);
+        self.closing();
         for t in self
             .inner
             .tasks
@@ -876,6 +890,10 @@ impl Ingress {
             }
             match &state {
                 LinkState::Up => tracing::info!(medium = %inner.name, "link up"),
+                // a medium closing (the system stopping) loses its wire as it should
+                LinkState::Down(why) if inner.closed.load(Ordering::Acquire) => {
+                    tracing::debug!(medium = %inner.name, "link down while closing: {why}")
+                }
                 LinkState::Down(why) => tracing::warn!(medium = %inner.name, "link down: {why}"),
             }
             *cur = state;

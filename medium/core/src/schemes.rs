@@ -175,12 +175,13 @@ impl Schemes {
     /// Opens the medium a URL names, as `name` of `node`. `fault.*` options add the fault stage to
     /// any medium. Must be called inside a tokio runtime.
     pub fn open(&self, name: &str, url: &str, node: &Node) -> Result<Medium, OpenError> {
-        let (scheme, parsed, faults) = self.parse(url)?;
+        let (scheme, parsed, common) = self.parse(url)?;
         Builder {
             name: Arc::from(name),
             url: url.to_string(),
             node: node.clone(),
-            faults,
+            faults: common.faults,
+            quiet_rejects: common.quiet_rejects,
         }
         .build(|ingress| {
             (scheme.open)(Opening {
@@ -193,11 +194,29 @@ impl Schemes {
         })
     }
 
-    fn parse(&self, url: &str) -> Result<(&Scheme, MediumUrl, Option<FaultConfig>), OpenError> {
+    /// The scheme of `url`, the URL with the options every medium takes removed, and those
+    /// options: the fault stage (`fault.*`) and how rejected input is logged (`rejects`).
+    fn parse(&self, url: &str) -> Result<(&Scheme, MediumUrl, Common), OpenError> {
         let mut parsed = MediumUrl::parse(url)?;
         let faults = FaultConfig::from_url(&mut parsed)?;
+        let quiet_rejects = match parsed.take("rejects").as_deref() {
+            None | Some("warn") => false,
+            Some("debug") => true,
+            Some(other) => {
+                return Err(parsed
+                    .error(format!(
+                        "option `rejects={other}`: expected `warn` (the default) or `debug` (for a \
+                         line known to carry noise, such as a simulator injecting faults)"
+                    ))
+                    .into());
+            }
+        };
+        let common = Common {
+            faults,
+            quiet_rejects,
+        };
         if let Some(scheme) = self.schemes.iter().find(|s| s.name == parsed.scheme) {
-            return Ok((scheme, parsed, faults));
+            return Ok((scheme, parsed, common));
         }
         if let Some(l) = self
             .left_out
@@ -216,6 +235,12 @@ impl Schemes {
             known: self.names().join(", "),
         })
     }
+}
+
+/// The options every medium's URL takes, whatever its scheme.
+struct Common {
+    faults: Option<FaultConfig>,
+    quiet_rejects: bool,
 }
 
 #[cfg(test)]
@@ -278,5 +303,20 @@ mod tests {
         let m = s.open("bus", "inproc://", &Node::new("n")).unwrap();
         assert_eq!(m.capabilities(), Capabilities::IN_PROCESS);
         assert_eq!(m.url(), "inproc://");
+    }
+
+    #[tokio::test]
+    async fn every_medium_takes_rejects_and_refuses_a_level_it_does_not_know() {
+        let mut s = Schemes::new();
+        register_loop(&mut s);
+        assert!(s.check("loop://x?rejects=debug").is_ok());
+        assert!(s.check("loop://x?rejects=warn").is_ok());
+        let wrong = s.check("loop://x?rejects=loud").unwrap_err().to_string();
+        assert!(
+            wrong.contains("option `rejects=loud`: expected `warn` (the default) or `debug`"),
+            "{wrong}"
+        );
+        let node = crate::Node::new("n");
+        assert!(s.open("m", "loop://x?rejects=debug", &node).is_ok());
     }
 }

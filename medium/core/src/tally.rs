@@ -9,12 +9,23 @@ use std::sync::Mutex;
 #[derive(Debug, Default)]
 pub struct Tally {
     counts: Mutex<BTreeMap<String, u64>>,
+    /// Logged at DEBUG rather than WARN: input known to carry noise (a simulator that injects
+    /// faults), still counted.
+    debug: bool,
 }
 
 impl Tally {
     /// An empty tally.
     pub fn new() -> Tally {
         Tally::default()
+    }
+
+    /// An empty tally that logs at DEBUG (what it counts is expected).
+    pub fn logged_at_debug() -> Tally {
+        Tally {
+            debug: true,
+            ..Tally::default()
+        }
     }
 
     /// Counts one rejection; logs it (as `who`) when it is one of the first five of its reason or
@@ -32,7 +43,11 @@ impl Tally {
             }
         };
         if n <= 5 || n.is_power_of_two() {
-            tracing::warn!(source = who, reason, count = n, "{detail}");
+            if self.debug {
+                tracing::debug!(source = who, reason, count = n, "{detail}");
+            } else {
+                tracing::warn!(source = who, reason, count = n, "{detail}");
+            }
         }
         n
     }

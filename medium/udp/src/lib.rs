@@ -101,12 +101,49 @@ pub struct UdpTransport {
     caps: Capabilities,
 }
 
+/// The URL a program that only sends (`seabus pub`) uses for `url`: a unicast `udp://HOST:PORT`
+/// without `peer` names where the datagrams go, so it becomes `udp://0.0.0.0:0?peer=HOST:PORT`
+/// (any free port of its own, the other options kept); any other URL is kept as written.
+pub fn sending_url(url: &str) -> String {
+    let Ok(parsed) = MediumUrl::parse(url) else {
+        return url.to_string();
+    };
+    let (Ok(host), Some(port)) = (parsed.host.parse::<std::net::Ipv4Addr>(), parsed.port) else {
+        return url.to_string();
+    };
+    let query = url.split_once('?').map_or("", |(_, q)| q);
+    let has = |k: &str| query.split('&').any(|kv| kv.split('=').next() == Some(k));
+    let unicast = !host.is_multicast() && !host.is_broadcast() && !host.is_unspecified();
+    if parsed.scheme != "udp" || !unicast || has("peer") || has("broadcast") || has("bind") {
+        return url.to_string();
+    }
+    let rest = if query.is_empty() {
+        String::new()
+    } else {
+        format!("&{query}")
+    };
+    format!("udp://0.0.0.0:0?peer={host}:{port}{rest}")
+}
+
 /// Opens a UDP medium.
 fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let cfg = UdpConfig::from_url(&mut o.url)?;
     let ep = &cfg.endpoint;
-    let (std_socket, recv_buf) =
-        net::socket(ep).map_err(o.io_error(format!("binding {}", ep.bind)))?;
+    let in_use = |e: &std::io::Error| e.kind() == std::io::ErrorKind::AddrInUse;
+    let (std_socket, recv_buf) = match net::socket(ep) {
+        Ok(s) => s,
+        // a unicast address names where this medium listens; another program listens there
+        Err(e) if in_use(&e) && matches!(ep.mode, net::Mode::Unicast(_)) => {
+            let hint = format!(
+                "binding {}: another program listens there; to send to it, name it as the \
+                 peer and bind any free port: udp://0.0.0.0:0?peer={} (`seabus pub` does so \
+                 by itself)",
+                ep.bind, ep.bind
+            );
+            return Err(o.io_error(hint)(e));
+        }
+        Err(e) => return Err(o.io_error(format!("binding {}", ep.bind))(e)),
+    };
     let socket =
         Arc::new(UdpSocket::from_std(std_socket).map_err(o.io_error("registering the socket"))?);
     if recv_buf < ep.recv_buf {
@@ -238,6 +275,49 @@ mod tests {
         assert_eq!(
             cfg("udp://1.2.3.4:1").unwrap().capabilities().max_frame,
             Some(MAX_DATAGRAM)
+        );
+    }
+
+    #[test]
+    fn a_unicast_address_is_where_a_sender_sends() {
+        assert_eq!(
+            sending_url("udp://127.0.0.1:47811"),
+            "udp://0.0.0.0:0?peer=127.0.0.1:47811"
+        );
+        assert_eq!(
+            sending_url("udp://10.0.0.2:47811?max=1400"),
+            "udp://0.0.0.0:0?peer=10.0.0.2:47811&max=1400"
+        );
+        for kept in [
+            "udp://239.255.42.1:47800?ttl=0",
+            "udp://255.255.255.255:47800",
+            "udp://0.0.0.0:47801?peer=10.0.0.2:47801",
+            "udp://127.0.0.1:47811?bind=127.0.0.1",
+            "serial:///dev/ttyUSB0",
+        ] {
+            assert_eq!(sending_url(kept), kept);
+        }
+    }
+
+    #[tokio::test]
+    async fn a_unicast_port_in_use_says_how_to_send_to_it() {
+        let taken = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let port = taken.local_addr().unwrap().port();
+        let url = format!("udp://127.0.0.1:{port}");
+        let err = schemes()
+            .open("m", &url, &seabus_medium::Node::new("n"))
+            .unwrap_err()
+            .to_string();
+        let want = format!(
+            "another program listens there; to send to it, name it as the peer and bind any \
+             free port: udp://0.0.0.0:0?peer=127.0.0.1:{port}"
+        );
+        assert!(err.contains(&want), "{err}");
+        // and the sender's form of the same URL opens
+        assert!(
+            schemes()
+                .open("m", &sending_url(&url), &seabus_medium::Node::new("n"))
+                .is_ok()
         );
     }
 }
