@@ -154,8 +154,15 @@ fn a_valid_file_checks_clean_and_a_missing_one_is_an_error() {
 fn every_shipped_config_is_valid() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
     let demo = dir.join("demo.xml");
+    // the line of the demo's `<console>` element
+    let line = std::fs::read_to_string(&demo)
+        .expect("the demo")
+        .lines()
+        .position(|l| l.trim_start().starts_with("<console "))
+        .expect("a console")
+        + 1;
     let needs_users = format!(
-        "{}:48:3: a console needs `users`, a users file with password hashes (`seabus user add \
+        "{}:{line}:3: a console needs `users`, a users file with password hashes (`seabus user add \
          FILE NAME --roles pilot` writes one); only `seabus demo` makes its own users\n",
         demo.display()
     );
