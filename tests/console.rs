@@ -1664,6 +1664,13 @@ async fn a_silent_frontseat_on_a_live_line_leaves_healthy_within_3_s_with_the_re
     let driver = chromedriver();
     let c = browser(&driver).await;
     log_in(&c, &sys.url, "ivo", "observer-password").await;
+    until(
+        &c,
+        Duration::from_secs(15),
+        "the health table",
+        "return !!window.seabusConsole && !!document.querySelector('[data-kind=health]');",
+    )
+    .await;
     // the page notes when the navigation last moved and when the health row first left HEALTHY
     js(
         &c,
@@ -1688,7 +1695,7 @@ async fn a_silent_frontseat_on_a_live_line_leaves_healthy_within_3_s_with_the_re
         &c,
         Duration::from_secs(25),
         "the navigation row leaving HEALTHY",
-        "const w = window.watch; return w.left !== null && w;",
+        "const w = window.watch; return !!w && w.left !== null && w;",
     )
     .await;
     let after = seen["left"].as_f64().expect("milliseconds");
