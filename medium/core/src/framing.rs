@@ -288,8 +288,7 @@ impl Framer {
                 && matches!(self.state, State::Idle | State::Garbage | State::Skipping)
                 && let Some(len) = self.whole_sentence(&bytes[i..])
             {
-                let line = &bytes[i..i + len];
-                let line = line.strip_suffix(b"\r").unwrap_or(line);
+                let line = trim_cr(&bytes[i..i + len]);
                 let offset = self.offset + len as u64;
                 out(check_nmea(line, self.policy).map_err(|reason| Rejected { reason, offset }));
                 self.state = State::Idle;
@@ -331,8 +330,7 @@ impl Framer {
             return None;
         }
         let end = 1 + memchr::memchr3(b'\n', b'$', b'!', &rest[1..])?;
-        let line = &rest[..end];
-        let line = line.strip_suffix(b"\r").unwrap_or(line);
+        let line = trim_cr(&rest[..end]);
         (rest[end] == b'\n' && line.len() <= self.max).then_some(end)
     }
 
@@ -397,10 +395,7 @@ impl Framer {
                     self.start(b);
                 } else if b == b'\n' {
                     self.state = State::Idle;
-                    if self.buf.last() == Some(&b'\r') {
-                        self.buf.pop();
-                    }
-                    out(check_nmea(&self.buf, self.policy));
+                    out(check_nmea(trim_cr(&self.buf), self.policy));
                     self.buf.clear();
                 } else if self.overflows(b, true) {
                     self.skip_too_long(out);
@@ -593,6 +588,12 @@ pub fn cobs_decode(data: &[u8]) -> Option<Vec<u8>> {
     Some(out)
 }
 
+/// `line` without the carriage returns that end it (devices end lines `\r\n`, some `\r\r\n`).
+fn trim_cr(line: &[u8]) -> &[u8] {
+    let end = line.iter().rposition(|&b| b != b'\r').map_or(0, |i| i + 1);
+    &line[..end]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -753,6 +754,26 @@ mod tests {
             got.push(o.map_err(|r| r.reason))
         });
         assert_eq!(got, [Err(Reject::TooLong)]);
+    }
+
+    #[test]
+    fn a_line_ending_in_two_carriage_returns_is_a_sentence() {
+        let s = nmea_sentence(b'$', "GPHDT,274.1,T");
+        let input = format!("{s}\r\r\n{s}\r\n{s}\n");
+        let want = vec![ok(&s), ok(&s), ok(&s)];
+        assert_eq!(
+            frames(Framing::Nmea, ChecksumPolicy::Require, input.as_bytes()),
+            want
+        );
+        // byte by byte (the slow path) too
+        let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, 100);
+        let mut got = Vec::new();
+        for b in input.as_bytes() {
+            f.push(std::slice::from_ref(b), &mut |o| {
+                got.push(o.map_err(|r| r.reason))
+            });
+        }
+        assert_eq!(got, want);
     }
 
     #[test]
