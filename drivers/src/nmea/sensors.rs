@@ -226,9 +226,19 @@ pub type Reading = (usize, DataMap);
 /// The readings of one sentence: at most two (RMC gives a position and a velocity; a heading
 /// gives a heading and an attitude), kept without allocating.
 #[derive(Debug, Default)]
-pub struct Readings([Option<Reading>; 2]);
+pub struct Readings([Option<Reading>; 2], Option<String>);
 
 impl Readings {
+    /// A value of the sentence out of its range: dropped (never wrapped or clamped) and said why.
+    fn out_of_range(&mut self, why: String) {
+        self.1.get_or_insert(why);
+    }
+
+    /// Why a value of the sentence was dropped, if one was.
+    pub fn dropped(&self) -> Option<&str> {
+        self.1.as_deref()
+    }
+
     fn push(&mut self, r: Reading) {
         if let Some(slot) = self.0.iter_mut().find(|s| s.is_none()) {
             *slot = Some(r);
@@ -311,7 +321,9 @@ impl Sensor {
         let fed = |i: usize| self.fed(i, parsed.formatter);
         match &parsed.sentence {
             Sentence::Gga(g) if fed(0) => {
-                if let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
+                // quality 0 (no fix): whatever position it carries is not one
+                let fixed = g.fix_type.is_some_and(|t| fix_quality(t) > 0);
+                if fixed && let (Some(lat), Some(lon)) = (g.latitude, g.longitude) {
                     let m = self.fix(
                         lat,
                         lon,
@@ -355,12 +367,12 @@ impl Sensor {
                     && fed(1)
                     && let (Some(sog), Some(cog)) = (r.speed_over_ground, r.true_course)
                 {
-                    out.push((1, velocity(f64::from(sog) * KNOT, f64::from(cog))));
+                    ground_velocity(f64::from(sog), f64::from(cog), out);
                 }
             }
             Sentence::Vtg(v) if fed(1) => {
                 if let (Some(sog), Some(cog)) = (v.speed_over_ground, v.true_course) {
-                    out.push((1, velocity(f64::from(sog) * KNOT, f64::from(cog))));
+                    ground_velocity(f64::from(sog), f64::from(cog), out);
                 }
             }
             _ => {}
@@ -375,15 +387,17 @@ impl Sensor {
         let fed = || self.fed(0, parsed.formatter);
         match &parsed.sentence {
             Sentence::Hdt(h) if fed() => {
-                if let Some(hdg) = h.heading {
-                    out.push((0, heading(f64::from(hdg), false)));
+                if let Some(hdg) = h.heading.map(f64::from)
+                    && in_range("heading", hdg, 0.0, 360.0, out)
+                {
+                    out.push((0, heading(hdg, false)));
                 }
             }
             Sentence::Hdg {
                 heading: Some(hdg),
                 deviation,
                 variation,
-            } if fed() => {
+            } if fed() && in_range("heading", *hdg, 0.0, 360.0, out) => {
                 let dev = deviation.unwrap_or(0.0);
                 match variation.or(self.variation) {
                     Some(var) => {
@@ -399,10 +413,14 @@ impl Sensor {
                     }
                 }
             }
-            Sentence::Hdm { heading: Some(hdg) } if fed() => match self.variation {
-                Some(var) => out.push((0, heading(hdg + var, false).and("variation", var))),
-                None => out.push((0, heading(*hdg, true))),
-            },
+            Sentence::Hdm { heading: Some(hdg) }
+                if fed() && in_range("heading", *hdg, 0.0, 360.0, out) =>
+            {
+                match self.variation {
+                    Some(var) => out.push((0, heading(hdg + var, false).and("variation", var))),
+                    None => out.push((0, heading(*hdg, true))),
+                }
+            }
             Sentence::Xdr(x) => {
                 let angle = |name: &str| {
                     x.iter()
@@ -441,7 +459,16 @@ impl Sensor {
             Sentence::Dbk(d) => d.depth_meters.or(d.depth_feet.map(|f| f * FOOT)),
             _ => None,
         };
-        if let Some(d) = depth {
+        if let Some(d) = depth
+            && in_range("depth", d, 0.0, MAX_DEPTH, out)
+            && in_range(
+                "depth with the offset",
+                d + self.offset,
+                0.0,
+                MAX_DEPTH,
+                out,
+            )
+        {
             out.push((0, altitude(d + self.offset)));
         }
     }
@@ -459,6 +486,30 @@ fn fix_quality(t: nmea::sentences::FixType) -> i64 {
         Estimated => 6,
         Manual => 7,
         Simulation => 8,
+    }
+}
+
+/// The deepest water there is, in metres (with margin): a deeper reading is not one.
+const MAX_DEPTH: f64 = 12_000.0;
+/// The fastest a vessel goes, in knots (with margin).
+const MAX_KNOTS: f64 = 150.0;
+
+/// Whether `what` = `value` is within `lo`–`hi` (and finite); if not, `out` says why it is
+/// dropped.
+fn in_range(what: &str, value: f64, lo: f64, hi: f64, out: &mut Readings) -> bool {
+    let ok = value.is_finite() && (lo..=hi).contains(&value);
+    if !ok {
+        out.out_of_range(format!("{what} {value} is not within {lo}–{hi}"));
+    }
+    ok
+}
+
+/// A velocity over ground from `knots` and `course` (degrees true), when both are in range.
+fn ground_velocity(knots: f64, course: f64, out: &mut Readings) {
+    if in_range("speed (knots)", knots, 0.0, MAX_KNOTS, out)
+        && in_range("course", course, 0.0, 360.0, out)
+    {
+        out.push((1, velocity(knots * KNOT, course)));
     }
 }
 
@@ -484,7 +535,7 @@ fn heading(h: f64, magnetic: bool) -> DataMap {
 
 fn altitude(a: f64) -> DataMap {
     DataMap::from_entries(vec![
-        ("altitude".into(), Value::Float(a.max(0.0))),
+        ("altitude".into(), Value::Float(a)),
         ("valid".into(), Value::Bool(true)),
     ])
 }
@@ -517,7 +568,12 @@ impl Module for Sensor {
                 return Ok(());
             }
         };
-        for (i, map) in self.read(&parsed, Instant::now()) {
+        let readings = self.read(&parsed, Instant::now());
+        if let Some(why) = readings.dropped() {
+            let e = format!("{}: {why}", line.trim_end());
+            self.tally.record(ctx.name(), "out-of-range", e);
+        }
+        for (i, map) in readings {
             let o = &self.outputs[i];
             if let Err(e) = ctx
                 .dataset_on(1, Kind::Data, o.dataset, &o.topic, map)
@@ -659,5 +715,55 @@ mod tests {
         assert_eq!(out[0].1.get_f64("altitude"), Some(18.0));
         let out = read(&mut s, "SDDBT,10.0,f,,M,,F");
         assert!((out[0].1.get_f64("altitude").unwrap() - (10.0 * FOOT + 0.5)).abs() < 1e-9);
+    }
+
+    /// What `body` gives, and why a value of it was dropped.
+    fn read_dropped(s: &mut Sensor, body: &str) -> (Vec<(usize, DataMap)>, Option<String>) {
+        let line = nmea_sentence(b'$', body);
+        let parsed = parse(&line).unwrap();
+        let r = s.read(&parsed, Instant::now());
+        let why = r.dropped().map(str::to_string);
+        (r.into_iter().collect(), why)
+    }
+
+    #[test]
+    fn values_out_of_range_are_dropped_with_the_reason_never_wrapped_or_clamped() {
+        let mut compass = sensor(Role::Heading, &[]);
+        let (out, why) = read_dropped(&mut compass, "HEHDT,400.0,T");
+        assert!(out.is_empty());
+        assert_eq!(why.as_deref(), Some("heading 400 is not within 0–360"));
+        let (out, why) = read_dropped(&mut compass, "HEHDT,359.9,T");
+        assert_eq!((out.len(), why), (1, None));
+        let mut gps = sensor(Role::Gps, &[]);
+        let (out, why) = read_dropped(&mut gps, "GPVTG,720.0,T,,M,5.0,N,9.3,K");
+        assert!(out.is_empty());
+        assert_eq!(why.as_deref(), Some("course 720 is not within 0–360"));
+        let mut sounder = sensor(Role::Sounder, &[]);
+        let (out, why) = read_dropped(&mut sounder, "SDDBT,,f,-1.5,M,,F");
+        assert!(out.is_empty());
+        assert_eq!(why.as_deref(), Some("depth -1.5 is not within 0–12000"));
+        let mut keel = sensor(Role::Sounder, &[("offset", "-2.0")]);
+        let (out, why) = read_dropped(&mut keel, "SDDBT,,f,1.5,M,,F");
+        assert!(out.is_empty());
+        assert_eq!(
+            why.as_deref(),
+            Some("depth with the offset -0.5 is not within 0–12000")
+        );
+    }
+
+    #[test]
+    fn a_fix_of_quality_zero_is_no_position() {
+        let mut gps = sensor(Role::Gps, &[]);
+        let none = read(
+            &mut gps,
+            "GPGGA,123519,4807.038,N,01131.000,E,0,08,0.9,545.4,M,46.9,M,,",
+        );
+        assert!(none.is_empty());
+        let one = read(
+            &mut gps,
+            "GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,",
+        );
+        assert_eq!(one.len(), 1);
+        assert!((one[0].1.get_f64("lat").unwrap() - 48.1173).abs() < 1e-7);
     }
 }
