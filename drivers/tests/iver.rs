@@ -42,6 +42,25 @@ fn backseat(path: &str) -> String {
 }
 
 /// Waits (at most `limit`) for a message on `port` that `want` accepts.
+/// A backseat on the serial end of `path` with an `iver2` driver of `attrs`, and an interface
+/// watching its bus.
+async fn watched_backseat(path: &str, attrs: &str) -> (Runtime, seabus_medium::Medium, Interface) {
+    let back = start(&format!(
+        r#"<seabus node="back">
+  <medium name="bus" url="inproc://"/>
+  <medium name="serial" url="serial://{path}?baud=19200&amp;reopen=100ms"/>
+  <module name="iver" type="iver2" media="serial bus" {attrs}/>
+</seabus>"#
+    ))
+    .await;
+    let bus = back.medium("bus").unwrap().clone();
+    let watch = bus
+        .attach_with("watch", 1 << 16, 256)
+        .subscribed("**")
+        .unwrap();
+    (back, bus, watch)
+}
+
 async fn wait_for(
     port: &mut Interface,
     limit: Duration,
@@ -265,19 +284,11 @@ async fn without_compass_or_power_the_iver3_osi_gives_depth_battery_and_vehicle_
 </seabus>"#
     ))
     .await;
-    let back = start(&format!(
-        r#"<seabus node="back">
-  <medium name="bus" url="inproc://"/>
-  <medium name="serial" url="serial://{path}?baud=19200&amp;reopen=100ms"/>
-  <module name="iver" type="iver2" media="serial bus" request="G S" request_every="200ms" data_timeout="1s"/>
-</seabus>"#
-    ))
+    let (back, _bus, mut watch) = watched_backseat(
+        &path,
+        r#"request="G S" request_every="200ms" data_timeout="1s""#,
+    )
     .await;
-    let bus = back.medium("bus").unwrap().clone();
-    let mut watch = bus
-        .attach_with("watch", 1 << 16, 256)
-        .subscribed("**")
-        .unwrap();
     let info = wait_for(&mut watch, Duration::from_secs(5), |m| {
         m.topic.as_str() == "vehicle.info"
     })
@@ -394,19 +405,11 @@ async fn a_command_the_frontseat_never_acknowledges_times_out() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("frontseat").display().to_string();
     let (_front, mut heard) = mute_frontseat(&path);
-    let back = start(&format!(
-        r#"<seabus node="back">
-  <medium name="bus" url="inproc://"/>
-  <medium name="serial" url="serial://{path}?baud=19200&amp;reopen=100ms"/>
-  <module name="iver" type="iver2" media="serial bus" request_every="200ms" data_timeout="1s" ack_timeout="500ms"/>
-</seabus>"#
-    ))
+    let (back, bus, mut watch) = watched_backseat(
+        &path,
+        r#"request_every="200ms" data_timeout="1s" ack_timeout="500ms""#,
+    )
     .await;
-    let bus = back.medium("bus").unwrap().clone();
-    let mut watch = bus
-        .attach_with("watch", 1 << 16, 256)
-        .subscribed("**")
-        .unwrap();
     control(&mut watch, "idle").await;
     bus.attach("operator")
         .command("cmd.mission", DataMap::new().with("action", "start"))
