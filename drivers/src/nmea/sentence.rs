@@ -225,6 +225,14 @@ pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
         };
         &line[start..end]
     };
+    // a GLL of NMEA 2.0 and older has no mode field: it reads as an empty one (no mode given)
+    let padded;
+    let data = if &code == b"GLL" && data.matches(',').count() == 5 {
+        padded = format!("{data},");
+        padded.as_str()
+    } else {
+        data
+    };
     let crate_sentence = |id: nmea::SentenceType| nmea::NmeaSentence {
         talker_id: talker,
         message_id: id,
@@ -484,6 +492,23 @@ mod tests {
         assert_eq!(time_field(59.999), "000100.00");
         assert_eq!(time_field(86_399.999), "000000.00");
         assert_eq!(time_field(-1.0), "235959.00");
+    }
+
+    #[test]
+    fn a_gll_without_its_mode_field_reads_as_one_with_no_mode() {
+        let Sentence::Gll(g) = p("GPGLL,4916.450,N,12311.120,W,225444.00,A").sentence else {
+            panic!("a GLL")
+        };
+        assert!((g.latitude.unwrap() - (49.0 + 16.45 / 60.0)).abs() < 1e-9);
+        assert!((g.longitude.unwrap() + (123.0 + 11.12 / 60.0)).abs() < 1e-9);
+        assert!(g.valid);
+        assert_eq!(g.faa_mode, None);
+        let Sentence::Gll(g) = p("GPGLL,4916.450,N,12311.120,W,225444.00,V").sentence else {
+            panic!("a GLL")
+        };
+        assert!(!g.valid);
+        // a field short of that is still an error
+        assert!(parse(line(b'$', "GPGLL,4916.450,N,12311.120,W,225444.00")).is_err());
     }
 
     #[test]
