@@ -205,15 +205,7 @@ impl Drives {
 
     /// Removes and returns the drives `stop` picks.
     pub(super) fn take(&mut self, stop: impl Fn(&DriveKey, &Drive) -> bool) -> Vec<Drive> {
-        let keys: Vec<DriveKey> = self
-            .running
-            .iter()
-            .filter(|(k, d)| stop(k, d))
-            .map(|(k, _)| k.clone())
-            .collect();
-        keys.into_iter()
-            .filter_map(|k| self.running.remove(&k))
-            .collect()
+        super::take_where(&mut self.running, stop)
     }
 
     /// Removes and returns the drives whose re-sends stopped [`DRIVE_PERIODS`] periods ago.

@@ -156,14 +156,9 @@ pub(super) struct Keeps {
 impl Keeps {
     /// Removes the kept commands `stop` picks; returns each with the message pages are shown.
     fn end(&mut self, stop: impl Fn(&Kept) -> bool, why: &str) -> Vec<(Kept, Json)> {
-        let topics: Vec<Topic> = self
-            .kept
-            .values()
-            .filter(|k| stop(k))
-            .map(|k| k.topic.clone())
-            .collect();
+        let ended = super::take_where(&mut self.kept, |_, k| stop(k));
         let mut out = Vec::new();
-        for k in topics.into_iter().filter_map(|t| self.kept.remove(&t)) {
+        for k in ended {
             let m = k.json(Some(why));
             if self.ended.len() >= COMMANDED_TOPICS {
                 self.ended.clear();

@@ -266,6 +266,19 @@ impl Hub {
     }
 }
 
+/// Removes and returns the values of `map` that `pick` picks.
+fn take_where<K: Clone + Eq + std::hash::Hash, V>(
+    map: &mut HashMap<K, V>,
+    pick: impl Fn(&K, &V) -> bool,
+) -> Vec<V> {
+    let keys: Vec<K> = map
+        .iter()
+        .filter(|(k, v)| pick(k, v))
+        .map(|(k, _)| k.clone())
+        .collect();
+    keys.iter().filter_map(|k| map.remove(k)).collect()
+}
+
 /// A layout error for the page: file, line, column and message.
 pub fn error_json(e: &FileError) -> Json {
     json!({
