@@ -334,6 +334,8 @@ pub(crate) struct Inner {
     link: watch::Sender<LinkState>,
     tasks: Mutex<Vec<AbortHandle>>,
     closed: AtomicBool,
+    /// State shared by everything attached to the medium, one value per type ([`Medium::shared`]).
+    shared: Mutex<Vec<Arc<dyn Any + Send + Sync>>>,
 }
 
 impl Drop for Inner {
@@ -440,6 +442,7 @@ impl Builder {
             link,
             tasks: Mutex::new(Vec::new()),
             closed: AtomicBool::new(false),
+            shared: Mutex::new(Vec::new()),
         });
         let medium = Medium { inner };
         if let Some(t) = make_transport(medium.ingress())? {
@@ -613,6 +616,19 @@ impl Medium {
         for s in self.inner.snapshot().iter() {
             s.queue.close();
         }
+    }
+
+    /// The one value of type `T` shared by everything attached to this medium, made with
+    /// `T::default()` the first time it is asked for. Modules reading the same wire use it to do
+    /// once what each would otherwise repeat (the NMEA drivers parse each sentence once for all).
+    pub fn shared<T: Default + Send + Sync + 'static>(&self) -> Arc<T> {
+        let mut all = self.inner.shared.lock().unwrap_or_else(|p| p.into_inner());
+        if let Some(found) = all.iter().find_map(|v| Arc::clone(v).downcast::<T>().ok()) {
+            return found;
+        }
+        let made = Arc::new(T::default());
+        all.push(made.clone());
+        made
     }
 
     /// The ingress of this medium, for code that feeds it messages from outside (tests, adapters).
@@ -859,8 +875,8 @@ impl Ingress {
             .is_some_and(|i| !i.closed.load(Ordering::Acquire))
     }
 
-    /// Counts an input rejected from the wire and logs it (the first few of each reason, then
-    /// every power of two).
+    /// Counts an input rejected from the wire and logs it (the first of each reason in 10 s, then
+    /// the next with the count of those not logged: [`Tally`]).
     pub fn reject(&self, reason: &str, detail: impl fmt::Display) {
         if let Some(inner) = self.inner.upgrade() {
             inner.rejected.record(
@@ -1250,5 +1266,22 @@ mod tests {
         assert_eq!(other.into::<u32>(), Some(7));
         assert_eq!(copy.into::<u32>(), Some(7), "a copy the fault stage made");
         assert_eq!(Frame::of(7u32).into::<Bytes>(), None);
+    }
+
+    #[test]
+    fn one_shared_value_per_type_and_medium() {
+        #[derive(Default)]
+        struct Count(AtomicU64);
+        let node = Node::new("n");
+        let a = Medium::in_process("a", &node);
+        a.shared::<Count>().0.fetch_add(1, Ordering::Relaxed);
+        a.clone()
+            .shared::<Count>()
+            .0
+            .fetch_add(1, Ordering::Relaxed);
+        assert_eq!(a.shared::<Count>().0.load(Ordering::Relaxed), 2);
+        assert_eq!(*a.shared::<Mutex<String>>().lock().unwrap(), "");
+        let b = Medium::in_process("b", &node);
+        assert_eq!(b.shared::<Count>().0.load(Ordering::Relaxed), 0);
     }
 }

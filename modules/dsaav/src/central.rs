@@ -379,6 +379,7 @@ async fn forward(medium: Medium, port: u16, node: String, mut rx: mpsc::Receiver
     };
     let rpc = RpcClient::new(&medium, port);
     let mut routes: HashMap<String, Route> = HashMap::new();
+    let mut unsent_log = seabus_medium::tally::Limiter::default();
     while let Some(rec) = rx.recv().await {
         let component = rec.component.unwrap_or_else(|| node.clone());
         let stale = routes
@@ -419,8 +420,10 @@ async fn forward(medium: Medium, port: u16, node: String, mut rx: mpsc::Receiver
         };
         if let Err(e) = to.send(&component, rec.time, rec.level, &rec.text).await {
             let n = FAILED.fetch_add(1, Ordering::Relaxed) + 1;
-            if n <= 5 || n.is_power_of_two() {
-                tracing::warn!("central log: record of {component} not logged ({n} so far): {e}");
+            if let Some(held) = unsent_log.admit(std::time::Instant::now()) {
+                tracing::warn!(
+                    "central log: record of {component} not logged ({n} so far): {e}{held}"
+                );
             }
         }
     }

@@ -172,6 +172,8 @@ struct Ordered {
     arrivals: u64,
     /// Write failures so far.
     failures: u64,
+    /// Keeps the failures' log lines to one per window.
+    failure_log: seabus_medium::tally::Limiter,
     /// Whether the last write failed.
     failing: bool,
     /// How long records are held, in seconds: [`HOLD`], or nothing once the server drains.
@@ -230,8 +232,8 @@ impl Ordered {
         if let Err(e) = written {
             self.failures += 1;
             let n = self.failures;
-            if n <= 5 || n.is_power_of_two() {
-                tracing::error!("cannot write the central log ({n} so far): {e}");
+            if let Some(held) = self.failure_log.admit(std::time::Instant::now()) {
+                tracing::error!("cannot write the central log ({n} so far): {e}{held}");
             }
         }
     }
@@ -248,6 +250,7 @@ pub async fn serve(medium: &Medium, port: u16, log: LogFile, mut drain: watch::R
         held: BinaryHeap::new(),
         arrivals: 0,
         failures: 0,
+        failure_log: Default::default(),
         failing: false,
         hold: HOLD.as_secs_f64(),
     }));
