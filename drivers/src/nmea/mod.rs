@@ -1,6 +1,7 @@
 //! NMEA 0183: sentence parsing and building ([`sentence`]) and the sensor drivers that turn
-//! sentences into standard datasets ([`sensors`]). Framing (bytes → sentences, checksums) is the
+//! sentences into standard datasets ([`sensors`]), sharing one parse per sentence ([`line`]). Framing (bytes → sentences, checksums) is the
 //! serial medium's (`seabus_medium::framing`).
 
+pub mod line;
 pub mod sensors;
 pub mod sentence;

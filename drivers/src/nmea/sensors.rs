@@ -17,7 +17,8 @@
 //! without one) and `fresh` (how long a pitch and roll stay usable, default 2s). `nmea-sounder` takes
 //! `offset` (metres added to depths measured from the transducer).
 
-use super::sentence::{Parsed, Sentence, parse, talker};
+use super::line::Reader;
+use super::sentence::{Parsed, Sentence, talker};
 use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
@@ -90,6 +91,8 @@ pub struct Sensor {
     offset: f64,
     fresh: Duration,
     pitch_roll: Option<(f64, f64, Instant)>,
+    /// The parse shared with the other drivers on the line, once the first sentence came.
+    reader: Option<std::sync::Arc<Reader>>,
     tally: Tally,
 }
 
@@ -214,6 +217,7 @@ impl Sensor {
                 Duration::ZERO
             },
             pitch_roll: None,
+            reader: None,
             tally: Tally::new(),
         };
         Ok((sensor, decl))
@@ -318,7 +322,7 @@ impl Sensor {
     /// A GPS: positions (output 0) from GGA, GNS, GLL and RMC; velocities (output 1) from RMC and
     /// VTG.
     fn read_gps(&self, parsed: &Parsed, out: &mut Readings) {
-        let fed = |i: usize| self.fed(i, parsed.formatter);
+        let fed = |i: usize| self.fed(i, parsed.formatter());
         match &parsed.sentence {
             Sentence::Gga(g) if fed(0) => {
                 // quality 0 (no fix): whatever position it carries is not one
@@ -384,7 +388,7 @@ impl Sensor {
     /// true heading make an attitude (output 1).
     fn read_heading(&mut self, parsed: &Parsed, now: Instant, out: &mut Readings) {
         // asked only of the sentences a heading is read from
-        let fed = || self.fed(0, parsed.formatter);
+        let fed = || self.fed(0, parsed.formatter());
         match &parsed.sentence {
             Sentence::Hdt(h) if fed() => {
                 if let Some(hdg) = h.heading.map(f64::from)
@@ -450,7 +454,7 @@ impl Sensor {
 
     /// An echo sounder: altitudes (output 0) from DBT, DPT and DBK, plus the offset.
     fn read_sounder(&self, parsed: &Parsed, out: &mut Readings) {
-        if !self.fed(0, parsed.formatter) {
+        if !self.fed(0, parsed.formatter()) {
             return;
         }
         let depth = match &parsed.sentence {
@@ -554,24 +558,40 @@ impl Module for Sensor {
         let Some(bytes) = msg.payload.as_bytes() else {
             return Ok(());
         };
-        let line = String::from_utf8_lossy(bytes);
+        // framed NMEA is ASCII; anything else is no sentence (and is not one any driver reads)
+        let Ok(line) = std::str::from_utf8(bytes) else {
+            return Ok(());
+        };
         if let Some(t) = &self.talkers {
-            let talker = talker(&line);
+            let talker = talker(line);
             if !talker.is_empty() && !t.iter().any(|x| x == talker) {
                 return Ok(());
             }
         }
-        let parsed = match parse(&line) {
-            Ok(p) => p,
-            Err(e) => {
-                self.tally.record(ctx.name(), "unreadable", &e);
-                return Ok(());
-            }
+        let Some(medium) = ctx.port(0).map(|p| p.medium().clone()) else {
+            return Ok(());
         };
-        let readings = self.read(&parsed, Instant::now());
+        let reader = self.reader.get_or_insert_with(|| {
+            let r = medium.shared::<Reader>();
+            r.want(
+                self.outputs
+                    .iter()
+                    .flat_map(|o| o.feeds.iter())
+                    .filter_map(|f| std::str::from_utf8(f).ok()),
+            );
+            r
+        });
+        let Some(read) = reader.read(&msg, line, &medium.ingress()) else {
+            return Ok(());
+        };
+        let Ok(parsed) = &*read else {
+            return Ok(());
+        };
+        let readings = self.read(parsed, Instant::now());
         if let Some(why) = readings.dropped() {
-            let e = format!("{}: {why}", line.trim_end());
-            self.tally.record(ctx.name(), "out-of-range", e);
+            medium
+                .ingress()
+                .reject("out-of-range", format_args!("{}: {why}", line.trim_end()));
         }
         for (i, map) in readings {
             let o = &self.outputs[i];
@@ -588,6 +608,7 @@ impl Module for Sensor {
 
 #[cfg(test)]
 mod tests {
+    use super::super::sentence::parse;
     use super::*;
     use seabus_medium::framing::nmea_sentence;
     use seabus_modules::Params;

@@ -40,9 +40,9 @@ pub struct Transducer {
     pub name: String,
 }
 
-/// A parsed sentence; it borrows the line it was read from.
+/// A parsed sentence.
 #[derive(Debug, PartialEq)]
-pub enum Sentence<'a> {
+pub enum Sentence {
     /// GGA: fix data.
     Gga(nmea::sentences::GgaData),
     /// RMC: recommended minimum.
@@ -99,19 +99,59 @@ pub enum Sentence<'a> {
     },
     /// XDR: transducer measurements.
     Xdr(Vec<Transducer>),
-    /// A sentence seabus does not read (AIS, proprietary, …), with its address.
-    Other(&'a str),
+    /// A sentence seabus does not read (AIS, proprietary, …): its address is the formatter.
+    Other,
 }
 
-/// A sentence with its talker (`GP`, `HC`, …; empty for proprietary and non-standard addresses).
+/// The longest address kept whole (`PTNTHPR` and the like are far shorter); a longer one is kept
+/// cut to this length.
+pub const MAX_ADDRESS: usize = 15;
+
+/// A sentence with its talker (`GP`, `HC`, …; empty for proprietary and non-standard addresses)
+/// and formatter (`GGA`, `HDG`, …, or the whole address when it is not standard). It owns what it
+/// holds, so that one parse can serve every driver reading the line.
 #[derive(Debug, PartialEq)]
-pub struct Parsed<'a> {
-    /// Talker id.
-    pub talker: &'a str,
-    /// Sentence formatter (`GGA`, `HDG`, …), or the whole address when it is not standard.
-    pub formatter: &'a str,
+pub struct Parsed {
+    /// The address's letters, [`MAX_ADDRESS`] at most.
+    address: [u8; MAX_ADDRESS],
+    /// How many of them there are.
+    len: u8,
+    /// How many of them are the talker (2, or 0 when there is none).
+    talker: u8,
     /// The contents.
-    pub sentence: Sentence<'a>,
+    pub sentence: Sentence,
+}
+
+impl Parsed {
+    fn new(talker: &str, formatter: &str, sentence: Sentence) -> Parsed {
+        let mut address = [0; MAX_ADDRESS];
+        let mut len = 0;
+        for (slot, b) in address
+            .iter_mut()
+            .zip(talker.bytes().chain(formatter.bytes()))
+        {
+            *slot = b;
+            len += 1;
+        }
+        Parsed {
+            address,
+            len,
+            talker: talker.len().min(MAX_ADDRESS) as u8,
+            sentence,
+        }
+    }
+
+    /// The talker id (`GP`, `HC`, …), empty for proprietary and non-standard addresses.
+    pub fn talker(&self) -> &str {
+        // (an address is ASCII letters: every cut is a character boundary)
+        std::str::from_utf8(&self.address[..usize::from(self.talker)]).unwrap_or_default()
+    }
+
+    /// The sentence formatter (`GGA`, `HDG`, …), or the whole address when it is not standard.
+    pub fn formatter(&self) -> &str {
+        std::str::from_utf8(&self.address[usize::from(self.talker)..usize::from(self.len)])
+            .unwrap_or_default()
+    }
 }
 
 /// The address of a sentence: the letters after `$`/`!` (`GPGGA`, `OSI`, and `C` for the Iver
@@ -138,7 +178,7 @@ pub fn fields(line: &str) -> Vec<&str> {
 
 /// The talker and formatter of a standard address: five capital letters on a `$` sentence, not
 /// proprietary (`$P…`).
-fn standard<'a>(line: &str, addr: &'a str) -> Option<(&'a str, &'a str)> {
+pub(crate) fn standard<'a>(line: &str, addr: &'a str) -> Option<(&'a str, &'a str)> {
     let standard = line.starts_with('$')
         && addr.len() == 5
         && addr.bytes().all(|b| b.is_ascii_uppercase())
@@ -186,17 +226,13 @@ fn east_west(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>
 }
 
 /// Parses one sentence (with its checksum, without line ending).
-pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
+pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
     if !line.is_ascii() || !line.starts_with(['$', '!']) {
         return Err(err(line, "not an NMEA sentence"));
     }
     let addr = address(line);
     let Some((talker, formatter)) = standard(line, addr) else {
-        return Ok(Parsed {
-            talker: "",
-            formatter: addr,
-            sentence: Sentence::Other(addr),
-        });
+        return Ok(Parsed::new("", addr, Sentence::Other));
     };
     // (a standard address has five letters: the formatter is three bytes, matched as a word)
     let code: [u8; 3] = formatter.as_bytes().try_into().unwrap_or_default();
@@ -290,13 +326,9 @@ pub fn parse(line: &str) -> Result<Parsed<'_>, NmeaError> {
             }
             Sentence::Xdr(out)
         }
-        _ => Sentence::Other(addr),
+        _ => Sentence::Other,
     };
-    Ok(Parsed {
-        talker,
-        formatter,
-        sentence,
-    })
+    Ok(Parsed::new(talker, formatter, sentence))
 }
 
 /// Writes a latitude as `ddmm.mmmm,N`.
@@ -435,14 +467,14 @@ mod tests {
         Box::leak(nmea_sentence(start, body).into_boxed_str())
     }
 
-    fn p(body: &str) -> Parsed<'static> {
+    fn p(body: &str) -> Parsed {
         parse(line(b'$', body)).unwrap_or_else(|e| panic!("{e}"))
     }
 
     #[test]
     fn crate_sentences_parse_field_by_field() {
         let g = p("GPGGA,123519,4807.038,N,01131.000,E,1,08,0.9,545.4,M,46.9,M,,");
-        assert_eq!((g.talker, g.formatter), ("GP", "GGA"));
+        assert_eq!((g.talker(), g.formatter()), ("GP", "GGA"));
         let Sentence::Gga(d) = g.sentence else {
             panic!()
         };
@@ -656,7 +688,7 @@ mod tests {
             ("OSI,8080808080,S,1", b'$'),
         ] {
             let l = line(start, body);
-            assert_eq!(talker(l), parse(l).unwrap().talker, "{l}");
+            assert_eq!(talker(l), parse(l).unwrap().talker(), "{l}");
         }
         assert_eq!(talker(line(b'$', "GNRMC,1")), "GN");
         assert_eq!(talker("GPGGA,1*00"), "");
@@ -665,11 +697,18 @@ mod tests {
     #[test]
     fn others_pass_through() {
         let a = parse(line(b'!', "AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0")).unwrap();
-        assert_eq!(a.sentence, Sentence::Other("AIVDM"));
+        assert_eq!((a.talker(), a.formatter()), ("", "AIVDM"));
+        assert_eq!(a.sentence, Sentence::Other);
         let o = parse(line(b'$', "OSI,8080808080,S,1")).unwrap();
-        assert_eq!(o.sentence, Sentence::Other("OSI"));
+        assert_eq!((o.formatter(), &o.sentence), ("OSI", &Sentence::Other));
         let x = parse(line(b'$', "PGRME,15.0,M,45.0,M,25.0,M")).unwrap();
-        assert_eq!(x.sentence, Sentence::Other("PGRME"));
+        assert_eq!((x.formatter(), &x.sentence), ("PGRME", &Sentence::Other));
+        let long = parse(line(b'$', "PABCDEFGHIJKLMNOPQRS,1")).unwrap();
+        assert_eq!(
+            long.formatter(),
+            "PABCDEFGHIJKLMN",
+            "cut to {MAX_ADDRESS} letters"
+        );
     }
 
     #[test]
