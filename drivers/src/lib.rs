@@ -12,7 +12,8 @@
            `can-device` module (the `can` feature, on by default, left out of this build)."
 )]
 //! - [`iver`] — the Iver2/Iver3 frontseat: Remote Helm protocol, backseat driver, simulated frontseat.
-//! - [`nmea`] — NMEA 0183 sentences and the GPS, heading and echo-sounder drivers built on them.
+//! - [`nmea`] — NMEA 0183 sentences and the GPS, heading, echo-sounder, wind, speed-log and
+//!   steering drivers built on them.
 //! - [`units`] — unit conversions of device protocols.
 //! - [`sim`] — a simulated vehicle: [`sim::kinematics`] (heading, depth, speed dynamics and dead
 //!   reckoning) and the `vehicle-sim` module that follows course commands and publishes navigation,
@@ -39,6 +40,9 @@ pub fn register(reg: &mut Registry) {
         .add_module(nmea::sensors::GPS)
         .add_module(nmea::sensors::HEADING)
         .add_module(nmea::sensors::SOUNDER)
+        .add_module(nmea::sensors::WIND)
+        .add_module(nmea::sensors::LOG)
+        .add_module(nmea::sensors::STEERING)
         .add_module(iver::driver::TYPE)
         .add_module(iver::sim::TYPE);
     #[cfg(feature = "can")]

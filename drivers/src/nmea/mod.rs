@@ -2,6 +2,8 @@
 //! sentences into standard datasets ([`sensors`]), sharing one parse per sentence ([`line`]). Framing (bytes → sentences, checksums) is the
 //! serial medium's (`seabus_medium::framing`).
 
+pub mod attitude;
 pub mod line;
+mod read;
 pub mod sensors;
 pub mod sentence;

@@ -51,12 +51,20 @@ pub enum Sentence {
     Vtg(nmea::sentences::VtgData),
     /// GLL: position.
     Gll(nmea::sentences::GllData),
-    /// GNS: GNSS fix.
-    Gns(nmea::sentences::GnsData),
+    /// GNS: GNSS fix (read by seabus: the crate refuses a mode of more than two letters).
+    Gns(Gns),
     /// HDT: true heading.
     Hdt(nmea::sentences::HdtData),
-    /// DPT: depth below transducer, with offset.
-    Dpt(nmea::sentences::DptData),
+    /// DPT: depth below transducer, with offset (read by seabus: the crate refuses a negative
+    /// offset, which is the keel's).
+    Dpt {
+        /// Depth below the transducer, metres.
+        depth: Option<f64>,
+        /// Offset from the transducer, metres: positive to the waterline, negative to the keel.
+        offset: Option<f64>,
+        /// Maximum range scale in use, metres.
+        range: Option<f64>,
+    },
     /// DBS: depth below surface.
     Dbs(nmea::sentences::DbsData),
     /// DBK: depth below keel.
@@ -67,6 +75,70 @@ pub enum Sentence {
     Vhw(nmea::sentences::VhwData),
     /// ZDA: time and date.
     Zda(nmea::sentences::ZdaData),
+    /// GSA: DOP and the satellites used.
+    Gsa(nmea::sentences::GsaData),
+    /// GSV: satellites in view (one sentence of a group).
+    Gsv(nmea::sentences::GsvData),
+    /// GST: position error statistics.
+    Gst(nmea::sentences::GstData),
+    /// MWV: wind speed and angle relative to the bow.
+    Mwv(nmea::sentences::MwvData),
+    /// TXT: a text message from the device.
+    Txt(nmea::sentences::TxtData),
+    /// MWD: wind direction (from true and magnetic north) and speed.
+    Mwd {
+        /// Direction the wind blows from, degrees true.
+        true_direction: Option<f64>,
+        /// Direction the wind blows from, degrees magnetic.
+        magnetic_direction: Option<f64>,
+        /// Speed, knots.
+        knots: Option<f64>,
+        /// Speed, metres per second.
+        mps: Option<f64>,
+    },
+    /// VBW: speed through the water and over the ground, along and across the hull.
+    Vbw {
+        /// Water speed along the hull, knots, ahead positive.
+        water_along: Option<f64>,
+        /// Water speed across the hull, knots, to starboard positive.
+        water_across: Option<f64>,
+        /// Whether the water speeds are valid (`A`).
+        water_valid: bool,
+        /// Ground speed along the hull, knots.
+        ground_along: Option<f64>,
+        /// Ground speed across the hull, knots.
+        ground_across: Option<f64>,
+        /// Whether the ground speeds are valid.
+        ground_valid: bool,
+    },
+    /// RSA: rudder angles, degrees, negative to port.
+    Rsa {
+        /// Starboard (or single) rudder.
+        starboard: Option<f64>,
+        /// Whether it is valid.
+        starboard_valid: bool,
+        /// Port rudder.
+        port: Option<f64>,
+        /// Whether it is valid.
+        port_valid: bool,
+    },
+    /// XTE: cross-track error.
+    Xte {
+        /// Distance off the track, nautical miles, positive when right of it (steer left).
+        error: Option<f64>,
+        /// Whether the data is valid (both status fields `A`, mode not `N`).
+        valid: bool,
+        /// FAA mode (`A`, `D`, `E`, …), when given (NMEA 2.3 and later).
+        mode: Option<char>,
+    },
+    /// THS: true heading and its mode (`A` autonomous, `E` estimated, `M` manual, `S` simulator,
+    /// `V` not valid).
+    Ths {
+        /// Heading, degrees true.
+        heading: Option<f64>,
+        /// The mode letter.
+        mode: char,
+    },
     /// HDG: magnetic sensor heading, deviation and variation (east positive).
     Hdg {
         /// Sensor heading, degrees.
@@ -99,8 +171,38 @@ pub enum Sentence {
     },
     /// XDR: transducer measurements.
     Xdr(Vec<Transducer>),
-    /// A sentence seabus does not read (AIS, proprietary, …): its address is the formatter.
+    /// A proprietary or other non-standard sentence (its address is the formatter), with its
+    /// fields, for the tables that read them.
+    Fields(Vec<Box<str>>),
+    /// A standard sentence seabus does not read.
     Other,
+}
+
+/// A GNS fix.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Gns {
+    /// Latitude, degrees north.
+    pub lat: Option<f64>,
+    /// Longitude, degrees east.
+    pub lon: Option<f64>,
+    /// Mode letters, one per constellation (`AAN`: GPS autonomous, GLONASS autonomous, Galileo
+    /// no fix); `N` for each when there is no fix.
+    pub mode: String,
+    /// Satellites in use.
+    pub satellites: Option<u32>,
+    /// Horizontal dilution of precision.
+    pub hdop: Option<f64>,
+    /// Antenna altitude above mean sea level, metres.
+    pub alt: Option<f64>,
+    /// Navigational status (NMEA 4.1: `S` safe, `C` caution, `U` unsafe, `V` not valid).
+    pub status: Option<char>,
+}
+
+impl Gns {
+    /// Whether any constellation has a fix (a mode letter other than `N`).
+    pub fn fixed(&self) -> bool {
+        self.mode.chars().any(|c| c != 'N') && self.status != Some('V')
+    }
 }
 
 /// The longest address kept whole (`PTNTHPR` and the like are far shorter); a longer one is kept
@@ -225,6 +327,94 @@ fn east_west(line: &str, f: &[&str], i: usize, what: &str) -> Result<Option<f64>
     })
 }
 
+/// The single letter of field `i`, when it is one.
+fn letter(f: &[&str], i: usize) -> Option<char> {
+    let s = f.get(i)?.trim();
+    let mut c = s.chars();
+    match (c.next(), c.next()) {
+        (Some(l), None) => Some(l),
+        _ => None,
+    }
+}
+
+/// A latitude or longitude written `ddmm.mmmm` (`dddmm.mmmm`) with its hemisphere letter in the
+/// next field; `None` when empty.
+fn angle(
+    line: &str,
+    f: &[&str],
+    i: usize,
+    what: &str,
+    negative: char,
+) -> Result<Option<f64>, NmeaError> {
+    let Some(v) = opt_num(line, f, i, what)? else {
+        return Ok(None);
+    };
+    let degrees = (v / 100.0).trunc();
+    let minutes = v - degrees * 100.0;
+    if v < 0.0 || minutes >= 60.0 {
+        return Err(err(
+            line,
+            format!("{what} `{}` is not ddmm.mmmm", f[i].trim()),
+        ));
+    }
+    let a = degrees + minutes / 60.0;
+    Ok(Some(if letter(f, i + 1) == Some(negative) {
+        -a
+    } else {
+        a
+    }))
+}
+
+/// A GNS: time, position, mode letters (any number), satellites, HDOP, altitude, geoid separation,
+/// age and station of differential data, and (NMEA 4.1) the navigational status.
+fn gns(line: &str, f: &[&str]) -> Result<Gns, NmeaError> {
+    if f.len() < 12 {
+        return Err(err(
+            line,
+            format!("GNS has {} fields, 12 or more were expected", f.len()),
+        ));
+    }
+    let mode = f[5].trim();
+    if mode.is_empty() || !mode.bytes().all(|b| b.is_ascii_uppercase()) {
+        return Err(err(line, format!("GNS mode `{mode}` is not mode letters")));
+    }
+    let satellites = opt_num(line, f, 6, "satellites")?;
+    Ok(Gns {
+        lat: angle(line, f, 1, "latitude", 'S')?,
+        lon: angle(line, f, 3, "longitude", 'W')?,
+        mode: mode.to_string(),
+        satellites: satellites
+            .filter(|n| n.fract() == 0.0 && (0.0..=999.0).contains(n))
+            .map(|n| n as u32),
+        hdop: opt_num(line, f, 7, "HDOP")?,
+        alt: opt_num(line, f, 8, "altitude")?,
+        status: letter(f, 12),
+    })
+}
+
+/// An XTE: two status letters, the magnitude, the direction to steer, the unit (`N`), and (NMEA
+/// 2.3) the mode.
+fn xte(line: &str, f: &[&str]) -> Result<Sentence, NmeaError> {
+    let magnitude = opt_num(line, f, 2, "cross-track error")?;
+    let error = match (magnitude, letter(f, 3)) {
+        (Some(m), Some('L')) => Some(m),
+        (Some(m), Some('R')) => Some(-m),
+        (Some(_), _) => {
+            return Err(err(line, "XTE direction to steer is not L or R"));
+        }
+        (None, _) => None,
+    };
+    if magnitude.is_some() && letter(f, 4) != Some('N') {
+        return Err(err(line, "XTE unit is not N (nautical miles)"));
+    }
+    let mode = letter(f, 5);
+    Ok(Sentence::Xte {
+        error,
+        valid: letter(f, 0) == Some('A') && letter(f, 1) == Some('A') && mode != Some('N'),
+        mode,
+    })
+}
+
 /// Parses one sentence (with its checksum, without line ending).
 pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
     if !line.is_ascii() || !line.starts_with(['$', '!']) {
@@ -232,13 +422,15 @@ pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
     }
     let addr = address(line);
     let Some((talker, formatter)) = standard(line, addr) else {
-        return Ok(Parsed::new("", addr, Sentence::Other));
+        let f = fields(line).into_iter().map(Box::from).collect();
+        return Ok(Parsed::new("", addr, Sentence::Fields(f)));
     };
     // (a standard address has five letters: the formatter is three bytes, matched as a word)
     let code: [u8; 3] = formatter.as_bytes().try_into().unwrap_or_default();
     // our own parsers read the fields; the crate's read the whole line
     let f = match &code {
-        b"HDG" | b"HDM" | b"DBT" | b"ROT" | b"XDR" => fields(line),
+        b"HDG" | b"HDM" | b"DBT" | b"ROT" | b"XDR" | b"DPT" | b"GNS" | b"MWD" | b"VBW" | b"RSA"
+        | b"XTE" | b"THS" => fields(line),
         _ => Vec::new(),
     };
     // The crate's parser for each sentence is handed the sentence's data directly: the framing
@@ -283,14 +475,48 @@ pub fn parse(line: &str) -> Result<Parsed, NmeaError> {
         b"RMC" => Sentence::Rmc(n::parse_rmc(crate_sentence(T::RMC)).map_err(crate_err)?),
         b"VTG" => Sentence::Vtg(n::parse_vtg(crate_sentence(T::VTG)).map_err(crate_err)?),
         b"GLL" => Sentence::Gll(n::parse_gll(crate_sentence(T::GLL)).map_err(crate_err)?),
-        b"GNS" => Sentence::Gns(n::parse_gns(crate_sentence(T::GNS)).map_err(crate_err)?),
         b"HDT" => Sentence::Hdt(n::parse_hdt(crate_sentence(T::HDT)).map_err(crate_err)?),
-        b"DPT" => Sentence::Dpt(n::parse_dpt(crate_sentence(T::DPT)).map_err(crate_err)?),
         b"DBS" => Sentence::Dbs(n::parse_dbs(crate_sentence(T::DBS)).map_err(crate_err)?),
         b"DBK" => Sentence::Dbk(n::parse_dbk(crate_sentence(T::DBK)).map_err(crate_err)?),
         b"MTW" => Sentence::Mtw(n::parse_mtw(crate_sentence(T::MTW)).map_err(crate_err)?),
         b"VHW" => Sentence::Vhw(n::parse_vhw(crate_sentence(T::VHW)).map_err(crate_err)?),
         b"ZDA" => Sentence::Zda(n::parse_zda(crate_sentence(T::ZDA)).map_err(crate_err)?),
+        b"GSA" => Sentence::Gsa(n::parse_gsa(crate_sentence(T::GSA)).map_err(crate_err)?),
+        b"GSV" => Sentence::Gsv(n::parse_gsv(crate_sentence(T::GSV)).map_err(crate_err)?),
+        b"GST" => Sentence::Gst(n::parse_gst(crate_sentence(T::GST)).map_err(crate_err)?),
+        b"MWV" => Sentence::Mwv(n::parse_mwv(crate_sentence(T::MWV)).map_err(crate_err)?),
+        b"TXT" => Sentence::Txt(n::parse_txt(crate_sentence(T::TXT)).map_err(crate_err)?),
+        b"DPT" => Sentence::Dpt {
+            depth: opt_num(line, &f, 0, "depth")?,
+            offset: opt_num(line, &f, 1, "offset")?,
+            range: opt_num(line, &f, 2, "range scale")?,
+        },
+        b"GNS" => Sentence::Gns(gns(line, &f)?),
+        b"MWD" => Sentence::Mwd {
+            true_direction: opt_num(line, &f, 0, "true direction")?,
+            magnetic_direction: opt_num(line, &f, 2, "magnetic direction")?,
+            knots: opt_num(line, &f, 4, "speed in knots")?,
+            mps: opt_num(line, &f, 6, "speed in m/s")?,
+        },
+        b"VBW" => Sentence::Vbw {
+            water_along: opt_num(line, &f, 0, "water speed along")?,
+            water_across: opt_num(line, &f, 1, "water speed across")?,
+            water_valid: letter(&f, 2) == Some('A'),
+            ground_along: opt_num(line, &f, 3, "ground speed along")?,
+            ground_across: opt_num(line, &f, 4, "ground speed across")?,
+            ground_valid: letter(&f, 5) == Some('A'),
+        },
+        b"RSA" => Sentence::Rsa {
+            starboard: opt_num(line, &f, 0, "starboard rudder")?,
+            starboard_valid: letter(&f, 1) == Some('A'),
+            port: opt_num(line, &f, 2, "port rudder")?,
+            port_valid: letter(&f, 3) == Some('A'),
+        },
+        b"XTE" => xte(line, &f)?,
+        b"THS" => Sentence::Ths {
+            heading: opt_num(line, &f, 0, "heading")?,
+            mode: letter(&f, 1).unwrap_or('V'),
+        },
         b"HDG" => Sentence::Hdg {
             heading: opt_num(line, &f, 0, "heading")?,
             deviation: east_west(line, &f, 1, "deviation")?,
@@ -497,10 +723,10 @@ mod tests {
             panic!()
         };
         assert_eq!(h.heading, Some(274.07));
-        let Sentence::Dpt(d) = p("SDDPT,17.5,0.3,100").sentence else {
+        let Sentence::Dpt { depth, offset, .. } = p("SDDPT,17.5,0.3,100").sentence else {
             panic!()
         };
-        assert_eq!((d.water_depth, d.offset), (Some(17.5), Some(0.3)));
+        assert_eq!((depth, offset), (Some(17.5), Some(0.3)));
         let Sentence::Mtw(m) = p("YXMTW,17.9,C").sentence else {
             panic!()
         };
@@ -563,7 +789,10 @@ mod tests {
         };
         assert!(close(g.lat, 43.0 + 30.48 / 60.0), "{g:?}");
         assert!(close(g.lon, 16.0 + 26.4 / 60.0), "{g:?}");
-        assert_eq!((g.nsattelites, g.hdop, g.alt), (11, Some(0.8), Some(12.5)));
+        assert_eq!(
+            (g.satellites, g.hdop, g.alt, g.mode.as_str()),
+            (Some(11), Some(0.8), Some(12.5), "AA")
+        );
         let Sentence::Dbs(d) = p("SDDBS,39.4,f,12.0,M,6.6,F").sentence else {
             panic!()
         };
@@ -666,12 +895,148 @@ mod tests {
     }
 
     #[test]
+    fn dpt_and_gns_read_the_crates_vectors_and_the_forms_it_refuses() {
+        // the nmea crate's own test sentences, whole (checksums as the crate has them)
+        for (l, depth, offset) in [
+            ("$SDDPT,2.4,,*53", Some(2.4), None),
+            ("$SDDPT,15.2,0.5*64", Some(15.2), Some(0.5)),
+            ("$SDDPT,17.3,0.5*67", Some(17.3), Some(0.5)),
+        ] {
+            let Sentence::Dpt {
+                depth: d,
+                offset: o,
+                range,
+            } = parse(l).unwrap().sentence
+            else {
+                panic!("{l}")
+            };
+            assert_eq!((d, o, range), (depth, offset, None), "{l}");
+        }
+        let keel = p("SDDPT,12.0,-1.5,100");
+        assert_eq!(
+            keel.sentence,
+            Sentence::Dpt {
+                depth: Some(12.0),
+                offset: Some(-1.5),
+                range: Some(100.0)
+            }
+        );
+        let l = "$GPGNS,224749.00,3333.4268304,N,11153.3538273,W,D,19,0.6,406.110,-26.294,6.0,0138,S,*46";
+        let Sentence::Gns(g) = parse(l).unwrap().sentence else {
+            panic!()
+        };
+        assert!((g.lat.unwrap() - (33.0 + 33.4268304 / 60.0)).abs() < 1e-12);
+        assert!((g.lon.unwrap() + (111.0 + 53.3538273 / 60.0)).abs() < 1e-12);
+        assert_eq!(
+            (g.mode.as_str(), g.satellites, g.hdop, g.alt, g.status),
+            ("D", Some(19), Some(0.6), Some(406.11), Some('S'))
+        );
+        let Sentence::Gns(g) =
+            p("GNGNS,101530.00,4330.4800,N,01626.4000,E,AAN,14,0.7,12.5,41.2,,").sentence
+        else {
+            panic!()
+        };
+        assert_eq!((g.mode.as_str(), g.status, g.fixed()), ("AAN", None, true));
+        for (body, reason) in [
+            (
+                "GNGNS,101530.00,4330.4800,N,01626.4000,E,a1,14,0.7,12.5,41.2,,",
+                "GNS mode `a1` is not mode letters",
+            ),
+            (
+                "GNGNS,101530.00,4390.4800,N,01626.4000,E,A,14,0.7,12.5,41.2,,",
+                "latitude `4390.4800` is not ddmm.mmmm",
+            ),
+            (
+                "GNGNS,101530.00,4330.4800,N",
+                "GNS has 3 fields, 12 or more were expected",
+            ),
+            ("GPXTE,A,A,0.67,X,N", "XTE direction to steer is not L or R"),
+            ("GPXTE,A,A,0.67,L,K", "XTE unit is not N (nautical miles)"),
+        ] {
+            let e = parse(line(b'$', body)).unwrap_err();
+            assert!(e.reason.contains(reason), "{body}: {e}");
+        }
+    }
+
+    #[test]
+    fn marine_sentences_the_crate_lacks_parse_field_by_field() {
+        assert_eq!(
+            p("WIMWD,180.0,T,175.0,M,12.0,N,6.2,M").sentence,
+            Sentence::Mwd {
+                true_direction: Some(180.0),
+                magnetic_direction: Some(175.0),
+                knots: Some(12.0),
+                mps: Some(6.2)
+            }
+        );
+        assert_eq!(
+            p("VDVBW,3.0,-0.4,A,3.1,-0.5,V").sentence,
+            Sentence::Vbw {
+                water_along: Some(3.0),
+                water_across: Some(-0.4),
+                water_valid: true,
+                ground_along: Some(3.1),
+                ground_across: Some(-0.5),
+                ground_valid: false
+            }
+        );
+        assert_eq!(
+            p("AGRSA,-12.5,A,,V").sentence,
+            Sentence::Rsa {
+                starboard: Some(-12.5),
+                starboard_valid: true,
+                port: None,
+                port_valid: false
+            }
+        );
+        assert_eq!(
+            p("GPXTE,A,A,0.67,L,N,D").sentence,
+            Sentence::Xte {
+                error: Some(0.67),
+                valid: true,
+                mode: Some('D')
+            }
+        );
+        assert_eq!(
+            p("GPXTE,A,A,0.67,R,N,N").sentence,
+            Sentence::Xte {
+                error: Some(-0.67),
+                valid: false,
+                mode: Some('N')
+            }
+        );
+        assert_eq!(
+            p("HETHS,77.52,E").sentence,
+            Sentence::Ths {
+                heading: Some(77.52),
+                mode: 'E'
+            }
+        );
+        let Sentence::Mwv(w) = p("WIMWV,214.8,R,0.1,K,A").sentence else {
+            panic!()
+        };
+        assert_eq!(
+            (w.wind_direction, w.wind_speed, w.data_valid),
+            (Some(214.8), Some(0.1), true)
+        );
+        let Sentence::Txt(t) = p("GPTXT,01,01,02,u-blox ag - www.u-blox.com").sentence else {
+            panic!()
+        };
+        assert_eq!(
+            (t.count, t.seq, t.text_ident, t.text.as_str()),
+            (1, 1, 2, "u-blox ag - www.u-blox.com")
+        );
+    }
+
+    #[test]
     fn bad_fields_are_errors_naming_the_field() {
         let e = parse(line(b'$', "HCHDG,east,,,,")).unwrap_err();
         assert!(e.reason.contains("heading `east` is not a number"), "{e}");
         let e = parse(line(b'$', "IIXDR,A,1,D")).unwrap_err();
         assert!(e.reason.contains("multiple of 4"), "{e}");
         assert!(parse(line(b'$', "GPGGA,garbage")).is_err());
+        let e = parse(line(b'$', "SDDPT,inf,0.5")).unwrap_err();
+        assert!(e.reason.contains("depth `inf` is not a number"), "{e}");
         assert!(parse("GPGGA,1*00").is_err());
     }
 
@@ -698,16 +1063,26 @@ mod tests {
     fn others_pass_through() {
         let a = parse(line(b'!', "AIVDM,1,1,,A,13aEOK?P00PD2wVMdLDRhgvL289?,0")).unwrap();
         assert_eq!((a.talker(), a.formatter()), ("", "AIVDM"));
-        assert_eq!(a.sentence, Sentence::Other);
+        let Sentence::Fields(f) = &a.sentence else {
+            panic!("{a:?}")
+        };
+        assert_eq!(f.len(), 6);
+        assert_eq!(&*f[4], "13aEOK?P00PD2wVMdLDRhgvL289?");
         let o = parse(line(b'$', "OSI,8080808080,S,1")).unwrap();
-        assert_eq!((o.formatter(), &o.sentence), ("OSI", &Sentence::Other));
+        assert_eq!(o.formatter(), "OSI");
         let x = parse(line(b'$', "PGRME,15.0,M,45.0,M,25.0,M")).unwrap();
-        assert_eq!((x.formatter(), &x.sentence), ("PGRME", &Sentence::Other));
+        assert_eq!(x.formatter(), "PGRME");
+        assert!(matches!(&x.sentence, Sentence::Fields(f) if f.len() == 6));
         let long = parse(line(b'$', "PABCDEFGHIJKLMNOPQRS,1")).unwrap();
         assert_eq!(
             long.formatter(),
             "PABCDEFGHIJKLMN",
             "cut to {MAX_ADDRESS} letters"
+        );
+        let unread = parse(line(b'$', "GPAAM,A,A,0.10,N,WPTNME")).unwrap();
+        assert_eq!(
+            (unread.formatter(), &unread.sentence),
+            ("AAM", &Sentence::Other)
         );
     }
 
