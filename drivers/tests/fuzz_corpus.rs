@@ -12,6 +12,9 @@ seed_tests! {
     /// NMEA sentences parse or are refused without a panic, as they are and as the body of a
     /// sentence; a built sentence carries a correct checksum.
     nmea_sentence_seeds => nmea_sentence,
+    /// Proprietary attitude tables read or are refused with a placed error, and a table reads any
+    /// fields to finite angles.
+    nmea_attitude_table_seeds => nmea_attitude_table,
     /// Remote Helm sentences read as frontseat sentences and as commands without a panic, as they
     /// are and as the body of a sentence, and what reads survives a write/read round trip.
     remote_helm_seeds => remote_helm,

@@ -2,8 +2,11 @@
 //! panics when an input breaks a property and tells whether the input was a valid one.
 
 use seabus_drivers::iver::protocol::{DepthUnits, FromFront, parse_command, parse_front};
-use seabus_drivers::nmea::sentence::parse;
+use seabus_drivers::nmea::attitude::Table;
+use seabus_drivers::nmea::sensors::{Role, Sensor};
+use seabus_drivers::nmea::sentence::{Parsed, parse};
 use seabus_medium::framing::{self, ChecksumPolicy, check_nmea};
+use seabus_modules::{Catalogue, Params};
 
 /// `text` (without a leading `$` or, when `bang` is set, `!`) written as a `$` sentence with its
 /// checksum, when it is not already a whole sentence with a correct checksum and can be a sentence
@@ -20,15 +23,46 @@ fn wrapped(text: &str, bang: bool) -> Option<String> {
     printable.then(|| framing::nmea_sentence(b'$', body))
 }
 
-/// The NMEA 0183 sentence parser of the NMEA drivers: any text is read or refused without a panic.
-/// Text that is not a whole sentence with a correct checksum is also read as the body of one, so
-/// that the parsers behind a known address see well-framed sentences too; such a built sentence
-/// carries a correct checksum. True when `data` is UTF-8 text that parses as it is.
+/// Every NMEA driver reads `parsed`, and each dataset it makes is one the catalogue accepts: no
+/// value out of its range (a bearing past 360°, a negative depth, a DOP past 99.99) is published.
+fn every_driver_reads(parsed: &Parsed, text: &str) {
+    let cat = Catalogue::built_in();
+    let none = Params::from_pairs(&[]);
+    let now = tokio::time::Instant::now();
+    for role in [
+        Role::Gps,
+        Role::Heading,
+        Role::Sounder,
+        Role::Wind,
+        Role::Log,
+        Role::Steering,
+    ] {
+        let (mut sensor, _) = Sensor::new(&none, &cat, role).expect("a driver with no parameters");
+        // twice, so that pitch and roll kept from the first reading meet the second
+        for _ in 0..2 {
+            for (i, map) in sensor.read(parsed, now) {
+                let dataset = sensor.dataset_of(i).expect("an output of the driver");
+                if let Err(e) = cat.validate(dataset, &map) {
+                    panic!("{text:?} gave a {dataset} the catalogue refuses: {e}: {map:?}");
+                }
+            }
+        }
+    }
+}
+
+/// The NMEA 0183 sentence parser of the NMEA drivers: any text is read or refused without a panic,
+/// and what every driver makes of a sentence that reads is a dataset the catalogue accepts. Text
+/// that is not a whole sentence with a correct checksum is also read as the body of one, so that
+/// the parsers behind a known address see well-framed sentences too; such a built sentence carries
+/// a correct checksum. True when `data` is UTF-8 text that parses as it is.
 pub fn nmea_sentence(data: &[u8]) -> bool {
     let Ok(text) = std::str::from_utf8(data) else {
         return false;
     };
     let parsed = parse(text);
+    if let Ok(p) = &parsed {
+        every_driver_reads(p, text);
+    }
     if let Some(line) = wrapped(text, true) {
         if line.len() > 4 {
             assert_eq!(
@@ -37,9 +71,46 @@ pub fn nmea_sentence(data: &[u8]) -> bool {
                 "a built sentence carries a correct checksum: {line:?}"
             );
         }
-        let _ = parse(&line);
+        if let Ok(p) = parse(&line) {
+            every_driver_reads(&p, &line);
+        }
     }
     parsed.is_ok()
+}
+
+/// The proprietary attitude table: any text is read as a table or refused with an error placed in
+/// the file, without a panic; a table that reads reads any sentence's fields (the text's last line,
+/// split at commas, under each of its addresses) without a panic, to finite angles only. True when
+/// the text is a table.
+pub fn nmea_attitude_table(data: &[u8]) -> bool {
+    let Ok(text) = std::str::from_utf8(data) else {
+        return false;
+    };
+    let table = match Table::parse("table.xml", text) {
+        Ok(t) => t,
+        Err(e) => {
+            assert!(e.to_string().starts_with("table.xml:"), "{e}");
+            return false;
+        }
+    };
+    let fields: Vec<Box<str>> = text
+        .lines()
+        .last()
+        .unwrap_or_default()
+        .split(',')
+        .map(Box::from)
+        .collect();
+    for address in table.addresses() {
+        if let Some(Ok((angles, _))) = table.read(address, &fields) {
+            for a in [angles.pitch, angles.roll, angles.heading]
+                .into_iter()
+                .flatten()
+            {
+                assert!(a.is_finite(), "{address}: {a}");
+            }
+        }
+    }
+    true
 }
 
 /// The frontseat sentence written back, for the kinds the simulated frontseat sends.

@@ -107,6 +107,12 @@ impl Entry {
                 x = -x;
             }
             x *= v.scale;
+            if !x.is_finite() {
+                return Err(format!(
+                    "field {} `{text}` scaled is not finite",
+                    v.field + 1
+                ));
+            }
             match v.angle {
                 Angle::Pitch => out.pitch = Some(x),
                 Angle::Roll => out.roll = Some(x),

@@ -375,10 +375,16 @@ impl Sensor {
             } else {
                 sentence_list(p, s.list, s.default, s.readable)?
             };
+            // a speed log's velocity is through the water: not on the GPS's topic
+            let topic = if role == Role::Log {
+                p.topic_or(s.topic_param, s.topic)?
+            } else {
+                p.dataset_topic_or(s.topic_param, cat, s.dataset, s.topic)?
+            };
             outputs.push(Output {
                 feeds,
                 dataset: s.dataset,
-                topic: p.dataset_topic_or(s.topic_param, cat, s.dataset, s.topic)?,
+                topic,
             });
         }
         let mut decl = Declaration::new(ModuleKind::Driver)
@@ -416,6 +422,11 @@ impl Sensor {
             tally: Tally::new(),
         };
         Ok((sensor, decl))
+    }
+
+    /// The dataset output `i` publishes.
+    pub fn dataset_of(&self, i: usize) -> Option<&'static str> {
+        self.outputs.get(i).map(|o| o.dataset)
     }
 
     /// Whether sentences of `formatter` feed output `i`.
