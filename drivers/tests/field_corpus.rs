@@ -216,7 +216,8 @@ async fn replay(baud: u32) {
 
 /// Compares what was published, topic by topic in order, and the rejections by reason.
 fn check(entries: &[Entry], got: &[Message], rejected: &BTreeMap<String, u64>, baud: u32) {
-    let mut want: BTreeMap<&str, Vec<(&Entry, &[(String, Value)])>> = BTreeMap::new();
+    type Wanted<'a> = Vec<(&'a Entry, &'a [(String, Value)])>;
+    let mut want: BTreeMap<&str, Wanted> = BTreeMap::new();
     for e in entries {
         for (topic, f) in &e.published {
             want.entry(topic).or_default().push((e, f));
