@@ -8,7 +8,6 @@
 
 use super::sentence::{NmeaError, Parsed, address, parse, standard};
 use seabus_medium::{Ingress, Message};
-use std::collections::VecDeque;
 use std::sync::{Arc, Mutex};
 
 /// How many recent sentences are kept for the drivers that have not met them yet. The drivers on
@@ -28,9 +27,13 @@ pub struct Reader {
 struct State {
     /// Formatters (`GGA`) and non-standard addresses (`PRDID`) some driver reads.
     wanted: Vec<Box<str>>,
-    /// Recent parses by origin id and sequence number.
-    recent: VecDeque<(u64, u64, Read)>,
+    /// Recent sentences by sequence number (slot `seq % KEPT`), with their origin id and parse
+    /// (`None`: no driver read it when it came, while `wanted` was that long).
+    recent: Vec<Option<Recent>>,
 }
+
+/// A recent sentence: origin id, sequence number, parse, and how many kinds were wanted then.
+type Recent = (u64, u64, Option<Read>, usize);
 
 /// The formatter of a sentence as the drivers name it: the three letters after the talker of a
 /// standard address (`GPGGA` → `GGA`), or the whole address otherwise (`PRDID`, `OSI`).
@@ -54,26 +57,34 @@ impl Reader {
     /// The first caller parses it (and counts it on `ingress` when it cannot be read); later
     /// callers for the same message share that parse.
     pub fn read(&self, msg: &Message, line: &str, ingress: &Ingress) -> Option<Read> {
-        let key = (msg.provenance.origin.id, msg.provenance.seq);
+        let (origin, seq) = (msg.provenance.origin.id, msg.provenance.seq);
+        let slot = (seq % KEPT as u64) as usize;
         let mut st = self.state.lock().unwrap_or_else(|p| p.into_inner());
-        if let Some((.., read)) = st.recent.iter().rev().find(|(o, s, _)| (*o, *s) == key) {
-            return Some(read.clone());
+        if st.recent.is_empty() {
+            st.recent.resize(KEPT, None);
+        }
+        // (a sentence no driver read is looked at again once a driver that started since wants more)
+        if let Some((o, s, read, wanted)) = &st.recent[slot]
+            && (*o, *s) == (origin, seq)
+            && (read.is_some() || *wanted == st.wanted.len())
+        {
+            return read.clone();
         }
         let formatter = formatter_of(line);
-        if !st.wanted.iter().any(|w| &**w == formatter) {
-            return None;
-        }
-        // parsed under the lock, so that a sentence is parsed (and an unreadable one counted)
-        // once even when two drivers meet it at the same moment
-        let read = Arc::new(parse(line));
-        if let Err(e) = &*read {
-            ingress.reject("unreadable", e);
-        }
-        if st.recent.len() == KEPT {
-            st.recent.pop_front();
-        }
-        st.recent.push_back((key.0, key.1, read.clone()));
-        Some(read)
+        let read = if st.wanted.iter().any(|w| &**w == formatter) {
+            // parsed under the lock, so that a sentence is parsed (and an unreadable one
+            // counted) once even when two drivers meet it at the same moment
+            let read = Arc::new(parse(line));
+            if let Err(e) = &*read {
+                ingress.reject("unreadable", e);
+            }
+            Some(read)
+        } else {
+            None
+        };
+        let wanted = st.wanted.len();
+        st.recent[slot] = Some((origin, seq, read.clone(), wanted));
+        read
     }
 }
 

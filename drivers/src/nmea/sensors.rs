@@ -532,8 +532,30 @@ pub(super) fn checked(
     }
 }
 
+impl Sensor {
+    /// The parse shared by the drivers on `medium`, told what this one reads the first time.
+    fn reader(&mut self, medium: &seabus_medium::Medium) -> Arc<Reader> {
+        let outputs = &self.outputs;
+        self.reader
+            .get_or_insert_with(|| {
+                let r = medium.shared::<Reader>();
+                r.want(outputs.iter().flat_map(|o| o.feeds.iter().map(|f| &**f)));
+                r
+            })
+            .clone()
+    }
+}
+
 #[async_trait]
 impl Module for Sensor {
+    async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
+        // what this driver reads is known before its first sentence comes
+        if let Some(medium) = ctx.port(0).map(|p| p.medium().clone()) {
+            self.reader(&medium);
+        }
+        Ok(())
+    }
+
     async fn on_message(
         &mut self,
         ctx: &mut Context,
@@ -559,12 +581,7 @@ impl Module for Sensor {
         let Some(medium) = ctx.port(0).map(|p| p.medium().clone()) else {
             return Ok(());
         };
-        let outputs = &self.outputs;
-        let reader = self.reader.get_or_insert_with(|| {
-            let r = medium.shared::<Reader>();
-            r.want(outputs.iter().flat_map(|o| o.feeds.iter().map(|f| &**f)));
-            r
-        });
+        let reader = self.reader(&medium);
         let Some(read) = reader.read(&msg, line, &medium.ingress()) else {
             return Ok(());
         };
