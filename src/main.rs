@@ -66,6 +66,10 @@ enum Command {
         /// Print one JSON object per message instead of the table.
         #[arg(long)]
         json: bool,
+        /// Also print the medium's counters to stderr (received, rejected by reason, bytes
+        /// dropped, overruns, queue drops, …) every 5 seconds and when the spy ends.
+        #[arg(long)]
+        stats: bool,
         /// Only topics matching this pattern.
         #[arg(long, default_value = "**")]
         topics: String,
@@ -290,10 +294,11 @@ fn main() -> ExitCode {
                 url,
                 duration,
                 json,
+                stats,
                 topics,
                 lcm_types,
             } => match seconds(duration) {
-                Ok(d) => spy::spy(&url, d, json, &topics, &lcm_types).await,
+                Ok(d) => spy::spy(&url, d, json, stats, &topics, &lcm_types).await,
                 Err(code) => code,
             },
             Command::Pub(args) => publish(args).await,

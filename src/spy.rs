@@ -1,7 +1,8 @@
-//! `seabus spy`: a live table of the topics on a medium, or one JSON object per message.
+//! `seabus spy`: a live table of the topics on a medium, or one JSON object per message; with
+//! `--stats`, the medium's counters (what it read, rejected, dropped and lost) as well.
 
 use crate::lcmtypes::Types;
-use seabus_medium::{Message, Node, Payload, Topic};
+use seabus_medium::{Interface, Medium, MediumStats, Message, Node, Payload, Topic};
 use std::collections::BTreeMap;
 use std::io::{IsTerminal, Write};
 use std::process::ExitCode;
@@ -93,12 +94,67 @@ fn print_table(rows: &BTreeMap<Topic, Row>, types: &Types, out: &mut impl Write,
     let _ = out.flush();
 }
 
+/// How often `--stats` prints the medium's counters when the table is not drawn live.
+const STATS_EVERY: Duration = Duration::from_secs(5);
+
+/// The medium's counters as `--stats` prints them, on one line: `seabus spy: stats of URL after
+/// SECS s: ` and every counter `name=value` as `seabus.media` carries it (`received=…
+/// rejected={garbage=2} dropped_bytes=… overruns=… queue_dropped={spy=…} …`).
+fn stats_line(url: &str, after: Duration, st: &MediumStats) -> String {
+    format!(
+        "seabus spy: stats of {url} after {:.1} s: {}",
+        after.as_secs_f64(),
+        st.to_map()
+    )
+}
+
+/// Opens the medium and attaches the spy to it, subscribed to `topics`.
+fn open(url: &str, topics: &str) -> Result<(Medium, Interface), ExitCode> {
+    let node = Node::new(&format!("spy-{}", std::process::id()));
+    let medium = crate::media::schemes()
+        .open("spy", url, &node)
+        .map_err(|e| {
+            eprintln!("seabus spy: {e}");
+            ExitCode::from(2)
+        })?;
+    let port = medium
+        .attach_with("spy", 1 << 16, 1 << 10)
+        .subscribed(topics)
+        .map_err(|e| {
+            eprintln!("seabus spy: --topics: {e}");
+            ExitCode::from(2)
+        })?;
+    Ok((medium, port))
+}
+
+/// Counts `m` in the table.
+fn count(rows: &mut BTreeMap<Topic, Row>, m: Message) {
+    match rows.get_mut(&m.topic) {
+        Some(row) => {
+            row.count += 1;
+            row.last = m;
+        }
+        None => {
+            let row = Row {
+                count: 1,
+                counted_at_refresh: 0,
+                rate: 0.0,
+                last: m,
+            };
+            rows.insert(row.last.topic.clone(), row);
+        }
+    }
+}
+
 /// Runs the spy until `duration` passes (or Ctrl-C). LCM messages of the built-in types or those
-/// of `lcm_types` are shown decoded.
+/// of `lcm_types` are shown decoded. With `stats`, the medium's counters are printed to stderr
+/// ([`stats_line`]) every [`STATS_EVERY`] (under the table at each refresh when it is drawn live)
+/// and when the spy ends.
 pub async fn spy(
     url: &str,
     duration: Option<Duration>,
     json: bool,
+    stats: bool,
     topics: &str,
     lcm_types: &[std::path::PathBuf],
 ) -> ExitCode {
@@ -109,29 +165,17 @@ pub async fn spy(
             return ExitCode::from(2);
         }
     };
-    let node = Node::new(&format!("spy-{}", std::process::id()));
-    let medium = match crate::media::schemes().open("spy", url, &node) {
-        Ok(m) => m,
-        Err(e) => {
-            eprintln!("seabus spy: {e}");
-            return ExitCode::from(2);
-        }
+    let (medium, mut port) = match open(url, topics) {
+        Ok(opened) => opened,
+        Err(code) => return code,
     };
-    let mut port = match medium
-        .attach_with("spy", 1 << 16, 1 << 10)
-        .subscribed(topics)
-    {
-        Ok(p) => p,
-        Err(e) => {
-            eprintln!("seabus spy: --topics: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let deadline = duration.map(|d| Instant::now() + d);
+    let started = Instant::now();
+    let deadline = duration.map(|d| started + d);
     let live = !json && std::io::stdout().is_terminal();
     let mut rows: BTreeMap<Topic, Row> = BTreeMap::new();
     let mut refresh = tokio::time::interval(Duration::from_secs(1));
     let mut last_refresh = Instant::now();
+    let mut stats_every = tokio::time::interval_at(started + STATS_EVERY, STATS_EVERY);
     let stdout = std::io::stdout();
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
@@ -153,7 +197,13 @@ pub async fn spy(
                 }
                 if live {
                     print_table(&rows, &types, &mut stdout.lock(), true);
+                    if stats {
+                        eprintln!("{}", stats_line(url, started.elapsed(), &medium.stats()));
+                    }
                 }
+            }
+            _ = stats_every.tick(), if stats && !live => {
+                eprintln!("{}", stats_line(url, started.elapsed(), &medium.stats()));
             }
             m = port.recv() => {
                 let Some(m) = m else { break };
@@ -163,21 +213,7 @@ pub async fn spy(
                         break;
                     }
                 } else {
-                    match rows.get_mut(&m.topic) {
-                        Some(row) => {
-                            row.count += 1;
-                            row.last = m;
-                        }
-                        None => {
-                            let row = Row {
-                                count: 1,
-                                counted_at_refresh: 0,
-                                rate: 0.0,
-                                last: m,
-                            };
-                            rows.insert(row.last.topic.clone(), row);
-                        }
-                    }
+                    count(&mut rows, m);
                 }
             }
         }
@@ -185,13 +221,15 @@ pub async fn spy(
     if !json {
         print_table(&rows, &types, &mut stdout.lock(), false);
     }
-    let st = port.stats();
-    if st.dropped_oldest > 0 || medium.stats().rejected_total() > 0 {
+    let st = medium.stats();
+    if stats {
+        eprintln!("{}", stats_line(url, started.elapsed(), &st));
+    } else if st.queue_dropped_total() > 0 || st.rejected_total() > 0 {
         eprintln!(
-            "seabus spy: {} messages dropped (too slow), {} rejected from the wire: {:?}",
-            st.dropped_oldest,
-            medium.stats().rejected_total(),
-            medium.stats().rejected
+            "seabus spy: {} messages dropped (too slow), {} rejected from the wire: {:?} (--stats shows every counter)",
+            st.queue_dropped_total(),
+            st.rejected_total(),
+            st.rejected
         );
     }
     ExitCode::SUCCESS

@@ -558,6 +558,23 @@ async fn an_observer_is_offered_no_commands_and_a_forged_one_is_refused() {
     )
     .await;
     screenshot(&c, "observer.png").await;
+    // the media that lost anything, as the health monitor lists them, under the components
+    let media = js(
+        &c,
+        "const now = Date.now() / 1000;
+         window.seabusConsole.receive({type: 'data', now, topics: {'vehicle.health': {stamp: now,
+           fields: {severity: 'NONE', components: {Sensors: 'HEALTHY'}, reasons: {},
+             media: {sensors: {received: 24450, rejected: {garbage: 2}, dropped_bytes: 57,
+                               overruns: 0, queue_dropped: {gps: 412}}}}}}});
+         const t = document.querySelector('[data-kind=health] [data-testid=health-media]');
+         const r = t && t.querySelector('tr[data-medium=sensors]');
+         return {shown: !!t && !t.hidden, row: r && [...r.children].map((td) => td.textContent)};",
+    )
+    .await;
+    assert_eq!(
+        media,
+        json!({"shown": true, "row": ["sensors", "412 (gps 412)", "2 (garbage 2)", "57", "0"]})
+    );
     // a forged command over the page's own session: refused by the server
     js(
         &c,

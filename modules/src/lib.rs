@@ -12,7 +12,7 @@
 //!   `<module>`) or a [`system::BridgeSpec`].
 //! - [`system`] — system files: parsing, checking against a registry, route-cycle detection.
 //! - [`runtime`] — the container: opens media, starts services, supervises modules (restart with
-//!   back-off), shuts down on request.
+//!   back-off), publishes every medium's counters (`seabus.media`), shuts down on request.
 //! - [`datasets`] — the standard datasets of `configs/datasets.xml` and validation against them.
 //! - [`params`] — module parameters with their places in the file.
 //! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.

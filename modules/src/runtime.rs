@@ -6,13 +6,19 @@
 //! error or panics; the supervisor reports it (log, and a `seabus.module.<name>` status message on
 //! the default medium), waits (100 ms, doubling up to 30 s; reset after a minute of good running) and
 //! builds a fresh instance with fresh ports.
+//!
+//! The runtime also publishes every medium's counters ([`MediumStats`], each as
+//! [`MediumStats::to_map`]) on [`MEDIA_TOPIC`] on the default medium, at most once every
+//! [`MEDIA_EVERY`] and only when what a medium read or lost changed since (received, rejected,
+//! bytes dropped, overruns, queue drops, commands refused): a system with no traffic publishes
+//! nothing. The health monitor lists the media with losses from it, and any spy sees it.
 
 use crate::datasets::Catalogue;
 use crate::module::{Context, Event, Module, ModuleError, TICK};
 use crate::registry::{Built, Registry, Service};
 use crate::system::{SystemSpec, check};
 use seabus_medium::xml::{FileError, Pos};
-use seabus_medium::{DataMap, Interface, Kind, Medium, Node};
+use seabus_medium::{DataMap, Interface, Kind, Medium, MediumStats, Node, Value};
 use std::collections::BTreeMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -28,6 +34,10 @@ pub const FIRST_BACKOFF: Duration = Duration::from_millis(100);
 pub const MAX_BACKOFF: Duration = Duration::from_secs(30);
 /// Running this long without failing resets the back-off.
 pub const STABLE: Duration = Duration::from_secs(60);
+/// The topic every medium's counters are published on (dataset `media-stats`).
+pub const MEDIA_TOPIC: &str = "seabus.media";
+/// How often, at most, every medium's counters are published.
+pub const MEDIA_EVERY: Duration = Duration::from_secs(1);
 /// The name of the span the runtime runs each module in; its field `name` is the module's name
 /// (log layers name the module an event came from by it).
 pub const MODULE_SPAN: &str = "module";
@@ -131,6 +141,8 @@ pub struct Runtime {
     shutdown: watch::Sender<bool>,
     /// The services the system's sections started, in order.
     services: Vec<Box<dyn Service>>,
+    /// Publishes the media's counters (stopped with the runtime, however it ends).
+    media_task: AbortOnDrop,
 }
 
 fn open_error(pos: &Pos, e: impl std::fmt::Display) -> FileError {
@@ -212,6 +224,7 @@ impl Runtime {
             status_port,
         });
         let (shutdown, _) = watch::channel(false);
+        let media_task = AbortOnDrop(tokio::spawn(publish_media(shared.clone())).abort_handle());
         let mut supervisors = Vec::new();
         let mut order = Vec::new();
         for unit in units {
@@ -226,6 +239,7 @@ impl Runtime {
             supervisors,
             shutdown,
             services: Vec::new(),
+            media_task,
         }
     }
 
@@ -257,6 +271,7 @@ impl Runtime {
     /// [`SHUTDOWN_GRACE`], and closes the media.
     pub async fn shutdown(self) {
         let _ = self.shutdown.send(true);
+        drop(self.media_task);
         let deadline = Instant::now() + SHUTDOWN_GRACE;
         for (name, mut task) in self.supervisors {
             if tokio::time::timeout_at(deadline, &mut task).await.is_err() {
@@ -273,6 +288,52 @@ impl Runtime {
         }
         for m in self.shared.media.values() {
             m.close();
+        }
+    }
+}
+
+/// What a medium read and lost: what, when it changes, has the media's counters published again
+/// (not what sending them changes: published, delivered, transmitted).
+fn heard(s: &MediumStats) -> [u64; 6] {
+    [
+        s.received,
+        s.rejected_total(),
+        s.dropped_bytes,
+        s.overruns,
+        s.queue_dropped_total(),
+        s.commands_refused,
+    ]
+}
+
+/// Every medium's counters, by name, as [`MEDIA_TOPIC`] carries them.
+pub fn media_map<'a>(media: impl IntoIterator<Item = (&'a str, &'a MediumStats)>) -> DataMap {
+    let by_name: DataMap = media
+        .into_iter()
+        .map(|(name, st)| (name.to_string(), Value::Map(st.to_map())))
+        .collect();
+    DataMap::new().with("media", by_name)
+}
+
+/// Publishes the media's counters at most every [`MEDIA_EVERY`], when they changed.
+async fn publish_media(shared: Arc<Shared>) {
+    let mut every = tokio::time::interval(MEDIA_EVERY);
+    every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    let mut last: Vec<[u64; 6]> = Vec::new();
+    loop {
+        every.tick().await;
+        let now: Vec<(&str, MediumStats)> = shared
+            .media
+            .iter()
+            .map(|(name, m)| (name.as_str(), m.stats()))
+            .collect();
+        let seen: Vec<[u64; 6]> = now.iter().map(|(_, s)| heard(s)).collect();
+        if seen == last {
+            continue;
+        }
+        last = seen;
+        let map = media_map(now.iter().map(|(n, s)| (*n, s)));
+        if let Err(e) = shared.status_port.send(MEDIA_TOPIC, map).await {
+            tracing::debug!("media counters not published: {e}");
         }
     }
 }

@@ -2,8 +2,8 @@
 //! with back-off and reported, and shutdown within its grace even when a module hangs.
 
 use async_trait::async_trait;
-use seabus_medium::{DataMap, Medium, Message, Node};
-use seabus_modules::runtime::{FIRST_BACKOFF, State, Unit};
+use seabus_medium::{DataMap, Medium, MediumStats, Message, Node};
+use seabus_modules::runtime::{FIRST_BACKOFF, MEDIA_EVERY, MEDIA_TOPIC, State, Unit};
 use seabus_modules::{
     Built, Catalogue, Context, Declaration, Module, ModuleError, ModuleKind, Runtime, TimerId,
     TopicDecl,
@@ -333,5 +333,65 @@ async fn consumed_topics_take_data_only() {
     }
     tokio::time::sleep(Duration::from_millis(50)).await;
     assert_eq!(log.messages.load(Ordering::SeqCst), 1);
+    rt.shutdown().await;
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_media_counters_are_published_when_they_change_and_only_then() {
+    let node = Node::new("test");
+    let bus = Medium::in_process("bus", &node);
+    let line = Medium::in_process("line", &node);
+    let media = BTreeMap::from([
+        ("bus".to_string(), bus.clone()),
+        ("line".to_string(), line.clone()),
+    ]);
+    let mut watch = bus.attach("watch").subscribed(MEDIA_TOPIC).unwrap();
+    let rt = Runtime::with_units(node, media, "bus", Vec::new(), Catalogue::built_in());
+    let next = |watch: &mut seabus_medium::Interface| {
+        let m = watch.try_recv().expect("the media's counters");
+        let map = m.payload.as_map().unwrap().clone();
+        assert_eq!(Catalogue::built_in().validate("media-stats", &map), Ok(()));
+        let of = |name: &str| {
+            MediumStats::from_map(
+                map.get_path(&format!("media.{name}"))
+                    .and_then(|v| v.as_map())
+                    .unwrap(),
+            )
+        };
+        (of("bus"), of("line"))
+    };
+    // once at the start, all quiet
+    tokio::time::sleep(Duration::from_millis(10)).await;
+    let (_, first) = next(&mut watch);
+    assert_eq!(first, MediumStats::default());
+    // the line reads 10 messages, a receiver with room for 4 misses 6, and it drops garbage
+    let mut slow = line.attach_with("slow", 4, 4);
+    slow.subscribe("x").unwrap();
+    let ingress = line.ingress();
+    for _ in 0..10 {
+        ingress.originate(
+            seabus_medium::Topic::new("x").unwrap(),
+            DataMap::new().into(),
+        );
+    }
+    ingress.reject("garbage", "noise");
+    ingress.dropped(17);
+    ingress.overrun(3);
+    tokio::time::sleep(MEDIA_EVERY).await;
+    let (_, now) = next(&mut watch);
+    assert_eq!(now, line.stats());
+    assert_eq!(
+        (
+            now.received,
+            now.rejected_total(),
+            now.dropped_bytes,
+            now.overruns
+        ),
+        (10, 1, 17, 3)
+    );
+    assert_eq!(now.queue_dropped, BTreeMap::from([("slow".to_string(), 6)]));
+    // nothing read or lost since: nothing published, however long
+    tokio::time::sleep(MEDIA_EVERY * 5).await;
+    assert!(watch.try_recv().is_err(), "published without a change");
     rt.shutdown().await;
 }

@@ -1040,6 +1040,38 @@ function yesNo(v) {
   return el('span', { text: fmtValue(v) });
 }
 
+/** The sum of a map of counts (`{gps: 412, compass: 3}`), 0 for anything else. */
+function countSum(o) {
+  return o && typeof o === 'object' ? Object.values(o).reduce((a, v) => a + (Number(v) || 0), 0) : 0;
+}
+
+/** A count with its parts: `415 (gps 412, compass 3)`, or `0`. */
+function countText(o) {
+  const n = countSum(o);
+  return n ? `${n} (${Object.entries(o).map(([k, v]) => `${k} ${v}`).join(', ')})` : '0';
+}
+
+/**
+ * The health snapshot's `media` (the media that lost anything, each with its counters as the
+ * runtime publishes them on `seabus.media`) as rows: messages its receivers' full queues dropped,
+ * input rejected (by reason), bytes dropped, device overruns.
+ */
+function mediaRows(media) {
+  const rows = [];
+  if (!media || typeof media !== 'object' || Array.isArray(media)) return rows;
+  for (const [name, c] of Object.entries(media)) {
+    if (!c || typeof c !== 'object') continue;
+    const lost = countSum(c.queue_dropped);
+    rows.push(el('tr', { 'data-medium': name },
+      el('td', { text: name }),
+      el('td', { class: lost ? 'st-UNAVAILABLE' : '', text: countText(c.queue_dropped) }),
+      el('td', { text: countText(c.rejected) }),
+      el('td', { text: String(c.dropped_bytes ?? 0) }),
+      el('td', { class: Number(c.overruns) ? 'st-UNAVAILABLE' : '', text: String(c.overruns ?? 0) })));
+  }
+  return rows;
+}
+
 function health(ctx, node) {
   const names = node.bind ? topicNames(node.bind) : ['vehicle.health'];
   const b = parseBind(node.bind || 'vehicle.health');
@@ -1049,8 +1081,14 @@ function health(ctx, node) {
   const table = el('table', { class: 'tbl' },
     el('thead', {}, el('tr', {}, ['component', 'online', 'healthy', 'data', 'state', 'why'].map((h) => el('th', { scope: 'col', text: h })))),
     tbody);
+  // the media that lost anything: dropped for a receiver too slow, rejected, overrun
+  const mediaBody = el('tbody');
+  const mediaTable = el('table', { class: 'tbl health-media', 'data-testid': 'health-media', hidden: true },
+    el('caption', { text: 'media with losses' }),
+    el('thead', {}, el('tr', {}, ['medium', 'lost (queue full)', 'rejected', 'bytes dropped', 'overruns'].map((h) => el('th', { scope: 'col', text: h })))),
+    mediaBody);
   const extra = el('div', { class: 'fields' });
-  const body = el('div', { style: 'display:flex;flex-direction:column;gap:6px;flex:1;min-height:0' }, sev, el('div', { class: 'scroll' }, table, extra));
+  const body = el('div', { style: 'display:flex;flex-direction:column;gap:6px;flex:1;min-height:0' }, sev, el('div', { class: 'scroll' }, table, mediaTable, extra));
   if (!node.label) node = { ...node, label: 'Health' };
   let lastJson = '';
   return outputWidget(ctx, node, 'health', body, [topics], {
@@ -1061,6 +1099,8 @@ function health(ctx, node) {
       lastJson = j;
       tbody.replaceChildren();
       extra.replaceChildren();
+      mediaBody.replaceChildren(...mediaRows(m && m.media));
+      mediaTable.hidden = mediaBody.children.length === 0;
       if (!m || typeof m !== 'object') return;
       const severity = m.severity !== undefined ? m.severity : m.Severity;
       const sevName = typeof severity === 'number' ? ['NONE', 'WARN', 'ABORT', 'EMERGENCY'][severity] || String(severity) : String(severity ?? '—');
@@ -1093,7 +1133,7 @@ function health(ctx, node) {
         extra.append(el('div', { text: `components: ${fmtValue(comps)}` }));
       }
       for (const [k, v] of Object.entries(m)) {
-        if (['severity', 'Severity', 'components', 'Components', 'reasons'].includes(k)) continue;
+        if (['severity', 'Severity', 'components', 'Components', 'reasons', 'media'].includes(k)) continue;
         extra.append(el('div', { class: 'fields', text: `${k}: ${fmtValue(v)}` }));
       }
     },

@@ -9,6 +9,10 @@
 //! short. A sentence holds printable ASCII only, at most `max` bytes. Its checksum (`*hh`, the XOR of
 //! the bytes between the start character and `*`) is checked by policy; a sentence accepted without
 //! one gets its checksum added, so that every sentence handed out carries a correct `*hh`.
+//!
+//! A framer counts the bytes it drops ([`Framer::dropped`]): garbage outside frames, the bytes of
+//! a rejected frame, the skipped part of one longer than the limit. Line endings (CR, LF) and
+//! frame delimiters are never counted.
 
 use std::fmt;
 
@@ -259,6 +263,7 @@ pub struct Framer {
     buf: Vec<u8>,
     state: State,
     offset: u64,
+    dropped: u64,
 }
 
 const SLIP_END: u8 = 0xC0;
@@ -276,6 +281,7 @@ impl Framer {
             buf: Vec::with_capacity(128),
             state: State::Idle,
             offset: 0,
+            dropped: 0,
         }
     }
 
@@ -290,7 +296,11 @@ impl Framer {
             {
                 let line = trim_cr(&bytes[i..i + len]);
                 let offset = self.offset + len as u64;
-                out(check_nmea(line, self.policy).map_err(|reason| Rejected { reason, offset }));
+                let checked = check_nmea(line, self.policy);
+                if checked.is_err() {
+                    self.dropped += line.len() as u64;
+                }
+                out(checked.map_err(|reason| Rejected { reason, offset }));
                 self.state = State::Idle;
                 self.offset += len as u64 + 1;
                 i += len + 1;
@@ -339,6 +349,19 @@ impl Framer {
         self.buf.len()
     }
 
+    /// Bytes dropped so far: garbage outside frames, rejected frames, the skipped parts of frames
+    /// longer than the limit (line endings and delimiters not counted).
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Counts byte `b` as dropped, unless it ends a line.
+    fn drop_byte(&mut self, b: u8) {
+        if !matches!(b, b'\r' | b'\n') {
+            self.dropped += 1;
+        }
+    }
+
     fn start(&mut self, b: u8) {
         self.buf.clear();
         self.buf.push(b);
@@ -360,8 +383,10 @@ impl Framer {
         self.buf.len() >= self.max && !(text && b == b'\r' && self.buf.len() == self.max)
     }
 
-    /// Drops the frame in hand as too long and skips the rest of it.
+    /// Drops the frame in hand as too long, with the byte that did not fit, and skips the rest of
+    /// it.
     fn skip_too_long(&mut self, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
+        self.dropped += self.buf.len() as u64 + 1;
         self.buf.clear();
         self.state = State::Skipping;
         out(Err(Reject::TooLong));
@@ -374,28 +399,32 @@ impl Framer {
             State::Idle => {
                 if !matches!(b, b'\r' | b'\n') {
                     self.state = State::Garbage;
+                    self.dropped += 1;
                     out(Err(Reject::Garbage));
                 }
             }
-            State::Garbage => {
-                if b == b'\n' {
-                    self.state = State::Idle;
-                }
-            }
+            State::Garbage | State::Skipping if b == b'\n' => self.state = State::Idle,
+            State::Garbage => self.drop_byte(b),
             State::Skipping => {
                 if starts {
                     self.start(b);
-                } else if b == b'\n' {
-                    self.state = State::Idle;
+                } else {
+                    self.drop_byte(b);
                 }
             }
             State::In | State::Escaped => {
                 if starts {
+                    self.dropped += self.buf.len() as u64;
                     out(Err(Reject::Truncated));
                     self.start(b);
                 } else if b == b'\n' {
                     self.state = State::Idle;
-                    out(check_nmea(trim_cr(&self.buf), self.policy));
+                    let line = trim_cr(&self.buf);
+                    let checked = check_nmea(line, self.policy);
+                    if checked.is_err() {
+                        self.dropped += line.len() as u64;
+                    }
+                    out(checked);
                     self.buf.clear();
                 } else if self.overflows(b, true) {
                     self.skip_too_long(out);
@@ -408,11 +437,8 @@ impl Framer {
 
     fn line(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
         match self.state {
-            State::Skipping => {
-                if b == b'\n' {
-                    self.state = State::Idle;
-                }
-            }
+            State::Skipping if b == b'\n' => self.state = State::Idle,
+            State::Skipping => self.drop_byte(b),
             _ if b == b'\n' => {
                 // CRs at the end are line-ending noise: a line cannot carry them (see `encode`)
                 while self.buf.last() == Some(&b'\r') {
@@ -433,15 +459,16 @@ impl Framer {
 
     fn cobs(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
         match self.state {
-            State::Skipping => {
-                if b == 0 {
-                    self.state = State::Idle;
-                }
-            }
+            State::Skipping if b == 0 => self.state = State::Idle,
+            State::Skipping => self.dropped += 1,
             _ if b == 0 => {
                 self.state = State::Idle;
                 if !self.buf.is_empty() {
-                    out(cobs_decode(&self.buf).ok_or(Reject::BadEncoding));
+                    let decoded = cobs_decode(&self.buf);
+                    if decoded.is_none() {
+                        self.dropped += self.buf.len() as u64;
+                    }
+                    out(decoded.ok_or(Reject::BadEncoding));
                     self.buf.clear();
                 }
             }
@@ -455,11 +482,8 @@ impl Framer {
 
     fn slip(&mut self, b: u8, out: &mut impl FnMut(Result<Vec<u8>, Reject>)) {
         match self.state {
-            State::Skipping => {
-                if b == SLIP_END {
-                    self.state = State::Idle;
-                }
-            }
+            State::Skipping if b == SLIP_END => self.state = State::Idle,
+            State::Skipping => self.dropped += 1,
             State::Escaped => match b {
                 SLIP_ESC_END | SLIP_ESC_ESC => {
                     self.buf.push(if b == SLIP_ESC_END {
@@ -469,12 +493,15 @@ impl Framer {
                     });
                     self.state = State::In;
                 }
+                // the frame as decoded so far, and the escape byte (and the byte after it)
                 SLIP_END => {
+                    self.dropped += self.buf.len() as u64 + 1;
                     self.buf.clear();
                     self.state = State::Idle;
                     out(Err(Reject::BadEncoding));
                 }
                 _ => {
+                    self.dropped += self.buf.len() as u64 + 2;
                     self.buf.clear();
                     self.state = State::Skipping;
                     out(Err(Reject::BadEncoding));
@@ -713,6 +740,40 @@ mod tests {
                 Ok(good.into_bytes())
             ]
         );
+    }
+
+    #[test]
+    fn dropped_bytes_are_counted_whatever_the_chunking() {
+        let good = nmea_sentence(b'$', "GPHDT,2.0,T");
+        // 6 bytes of garbage, a sentence of 10 cut short, one of 15 with a wrong checksum, one of
+        // 12 without: 43 bytes; the good sentences and the line endings are not counted
+        let input = format!(
+            "\x00\x7fjunk\r\n$GPGGA,cut{good}\r\n$GPHDT,2.0,T*00\r\n$GPHDT,3.0,T\r\n{good}\r\n\r\n"
+        );
+        for chunk in [1, 2, 3, 7, 64, input.len()] {
+            let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, 100);
+            let mut good_ones = 0;
+            for piece in input.as_bytes().chunks(chunk) {
+                f.push(piece, &mut |o| good_ones += usize::from(o.is_ok()));
+            }
+            assert_eq!((f.dropped(), good_ones), (43, 2), "chunks of {chunk}");
+        }
+        // an over-long sentence: all of it, the part kept before the limit too
+        let mut f = Framer::new(Framing::Nmea, ChecksumPolicy::Require, 82);
+        f.push(b"$", &mut |_| {});
+        f.push(&[b'A'; 10_000], &mut |_| {});
+        f.push(format!("\r\n{good}\r\n").as_bytes(), &mut |_| {});
+        assert_eq!(f.dropped(), 10_001);
+        // the other framings
+        let dropped = |framing, max, input: &[u8]| {
+            let mut f = Framer::new(framing, ChecksumPolicy::Require, max);
+            f.push(input, &mut |_| {});
+            f.dropped()
+        };
+        assert_eq!(dropped(Framing::Lines, 8, b"ABCDEFGHIJ\r\nok\n"), 10);
+        assert_eq!(dropped(Framing::Cobs, 100, &[5, 1, 0, 2, 7, 0]), 2);
+        let slip = [SLIP_END, 1, 2, SLIP_ESC, 7, 8, SLIP_END, 3, SLIP_END];
+        assert_eq!(dropped(Framing::Slip, 100, &slip), 5);
     }
 
     #[test]

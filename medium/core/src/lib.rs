@@ -13,7 +13,9 @@
 //!   polls and pushes; the runtime of `seabus-modules` drives modules' handlers from them, the
 //!   active mode) and to its [`Transport`], if any, for the wire. Every interface has bounded
 //!   queues ([`queue`]: data drops oldest, commands hold the sender back) and drops duplicates by
-//!   provenance ([`dedup`]). Any medium can carry a fault stage ([`fault`]).
+//!   provenance ([`dedup`]). Any medium can carry a fault stage ([`fault`]). What a medium loses
+//!   (messages its receivers' full queues drop, characters a serial device overruns) is counted
+//!   in its [`MediumStats`] and warned of once per burst ([`loss`]).
 //! - [`caps`] — what a transport declares it can do ([`Capabilities`]); code asks these, never a
 //!   URL's scheme.
 //! - [`schemes`] — the registry of URL schemes ([`Schemes`]): each medium crate adds its own with
@@ -39,6 +41,7 @@ pub mod framing;
 pub mod fs;
 pub mod json;
 pub mod link;
+pub mod loss;
 pub mod medium;
 pub mod message;
 pub mod net;

@@ -9,7 +9,9 @@
 //! medium kind only implements its transport: its wire format and its I/O tasks.
 
 use crate::caps::Capabilities;
+use crate::datamap::{DataMap, Value};
 use crate::fault::{FaultConfig, Faults};
+use crate::loss::Losses;
 use crate::message::{Kind, Message, Origin, Provenance, Stamp};
 use crate::payload::{ConvertError, Format, Payload};
 use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queue};
@@ -317,6 +319,7 @@ struct Counters {
     received: AtomicU64,
     tx_errors: AtomicU64,
     commands_refused: AtomicU64,
+    dropped_bytes: AtomicU64,
 }
 
 pub(crate) struct Inner {
@@ -331,6 +334,8 @@ pub(crate) struct Inner {
     faults: Option<Faults>,
     counters: Counters,
     rejected: Tally,
+    /// Messages receivers' full queues dropped and characters the device lost.
+    losses: Arc<Losses>,
     link: watch::Sender<LinkState>,
     tasks: Mutex<Vec<AbortHandle>>,
     closed: AtomicBool,
@@ -425,6 +430,7 @@ impl Builder {
         let (link, _) = watch::channel(LinkState::Up);
         let inner = Arc::new(Inner {
             origin: Origin::new(&self.node.name, &self.name, self.node.boot),
+            losses: Losses::new(self.name.clone()),
             name: self.name,
             url: self.url,
             node: self.node,
@@ -526,7 +532,11 @@ impl Medium {
         command_capacity: usize,
     ) -> Interface {
         let id = self.inner.next_id.fetch_add(1, Ordering::Relaxed);
-        let queue = Arc::new(Queue::new(data_capacity, command_capacity));
+        let label: Arc<str> = Arc::from(label);
+        let queue = Arc::new(
+            Queue::new(data_capacity, command_capacity)
+                .counted_in(self.inner.losses.clone(), label.clone()),
+        );
         self.inner.update_subs(|subs| {
             subs.push(Sub {
                 id,
@@ -541,7 +551,7 @@ impl Medium {
         Interface {
             medium: self.clone(),
             id,
-            label: Arc::from(label),
+            label,
             queue,
             patterns: Vec::new(),
             accept: None,
@@ -570,6 +580,9 @@ impl Medium {
             fault_duplicated: f.1,
             fault_delayed: f.2,
             rejected: self.inner.rejected.counts(),
+            dropped_bytes: c.dropped_bytes.load(Ordering::Relaxed),
+            overruns: self.inner.losses.overruns(),
+            queue_dropped: self.inner.losses.by_receiver(),
         }
     }
 
@@ -660,14 +673,103 @@ pub struct MediumStats {
     pub fault_duplicated: u64,
     /// Messages the fault stage delayed or held back.
     pub fault_delayed: u64,
-    /// Input rejected from the wire, by reason.
+    /// Input rejected from the wire, by reason (a serial line's `garbage`, `too-long`,
+    /// `bad-checksum`, …: one count per run of garbage or per frame).
     pub rejected: BTreeMap<String, u64>,
+    /// Bytes read from the wire that went into no message: garbage between frames, the skipped
+    /// part of a frame longer than the limit, the bytes of a rejected frame, a frame cut off when
+    /// the link went down. Line endings and frame delimiters are not counted.
+    pub dropped_bytes: u64,
+    /// Characters the device lost before seabus read them: a serial device's overruns (in its
+    /// hardware and in the kernel's buffer, as the kernel counts them). A device that does not
+    /// count them (a pseudo-terminal) leaves it 0.
+    pub overruns: u64,
+    /// Data messages dropped because a receiver's queue was full (the oldest first), by receiver:
+    /// the name its interface was attached with (a module's name).
+    pub queue_dropped: BTreeMap<String, u64>,
+}
+
+/// A count as a datamap value.
+fn count(n: u64) -> Value {
+    Value::Int(i64::try_from(n).unwrap_or(i64::MAX))
+}
+
+/// Counts by name as a datamap.
+fn counts(by: &BTreeMap<String, u64>) -> Value {
+    Value::Map(by.iter().map(|(k, n)| (k.clone(), count(*n))).collect())
 }
 
 impl MediumStats {
     /// Total input rejected from the wire.
     pub fn rejected_total(&self) -> u64 {
         self.rejected.values().sum()
+    }
+
+    /// Total data messages dropped from full queues.
+    pub fn queue_dropped_total(&self) -> u64 {
+        self.queue_dropped.values().sum()
+    }
+
+    /// Whether anything read from the wire was lost or refused: rejected input, bytes dropped,
+    /// overruns, messages dropped from full queues, commands refused.
+    pub fn has_losses(&self) -> bool {
+        self.rejected_total() > 0
+            || self.dropped_bytes > 0
+            || self.overruns > 0
+            || self.queue_dropped_total() > 0
+            || self.commands_refused > 0
+    }
+
+    /// The counters as a datamap, each field named as here (`rejected` and `queue_dropped` as
+    /// maps of counts by name): what `seabus.media` carries and `seabus spy --stats` prints.
+    pub fn to_map(&self) -> DataMap {
+        DataMap::new()
+            .and("received", count(self.received))
+            .and("rejected", counts(&self.rejected))
+            .and("dropped_bytes", count(self.dropped_bytes))
+            .and("overruns", count(self.overruns))
+            .and("queue_dropped", counts(&self.queue_dropped))
+            .and("commands_refused", count(self.commands_refused))
+            .and("published", count(self.published))
+            .and("delivered", count(self.delivered))
+            .and("transmitted", count(self.transmitted))
+            .and("tx_errors", count(self.tx_errors))
+            .and("fault_lost", count(self.fault_lost))
+            .and("fault_duplicated", count(self.fault_duplicated))
+            .and("fault_delayed", count(self.fault_delayed))
+    }
+
+    /// The counters of a datamap made by [`to_map`](Self::to_map); a field absent or of another
+    /// type reads as 0 (or none).
+    pub fn from_map(map: &DataMap) -> MediumStats {
+        let n = |k: &str| map.get_i64(k).map_or(0, |v| u64::try_from(v).unwrap_or(0));
+        let by = |k: &str| -> BTreeMap<String, u64> {
+            map.get(k)
+                .and_then(Value::as_map)
+                .map(|m| {
+                    m.iter()
+                        .filter_map(|(k, v)| {
+                            Some((k.to_string(), u64::try_from(v.as_i64()?).ok()?))
+                        })
+                        .collect()
+                })
+                .unwrap_or_default()
+        };
+        MediumStats {
+            published: n("published"),
+            delivered: n("delivered"),
+            transmitted: n("transmitted"),
+            received: n("received"),
+            tx_errors: n("tx_errors"),
+            commands_refused: n("commands_refused"),
+            fault_lost: n("fault_lost"),
+            fault_duplicated: n("fault_duplicated"),
+            fault_delayed: n("fault_delayed"),
+            rejected: by("rejected"),
+            dropped_bytes: n("dropped_bytes"),
+            overruns: n("overruns"),
+            queue_dropped: by("queue_dropped"),
+        }
     }
 }
 
@@ -884,6 +986,25 @@ impl Ingress {
                 reason,
                 format_args!("rejected input: {detail}"),
             );
+        }
+    }
+
+    /// Counts `bytes` read from the wire that went into no message (see
+    /// [`MediumStats::dropped_bytes`]).
+    pub fn dropped(&self, bytes: u64) {
+        if let Some(inner) = self.inner.upgrade() {
+            inner
+                .counters
+                .dropped_bytes
+                .fetch_add(bytes, Ordering::Relaxed);
+        }
+    }
+
+    /// Counts `n` characters the device lost before they were read (see
+    /// [`MediumStats::overruns`]); a burst of them is logged once it ends.
+    pub fn overrun(&self, n: u64) {
+        if let Some(inner) = self.inner.upgrade() {
+            inner.losses.overrun(n);
         }
     }
 

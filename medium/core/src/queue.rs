@@ -9,13 +9,17 @@
 //! Duplicates are dropped as messages arrive, in arrival order, by the queue's per-origin window
 //! ([`crate::dedup`]), so a duplicate never takes a slot. The receiver takes data in batches (one
 //! lock per batch); what it holds in hand counts against the capacity like what still waits.
+//!
+//! Every data message a queue drops is counted in the queue and, under the receiver's name, in
+//! its medium's [`Losses`], which warns of a burst of them when it ends.
 
 use crate::dedup::{Dedup, Seen};
+use crate::loss::Losses;
 use crate::message::{Kind, Message};
 use atomic_waker::AtomicWaker;
 use std::collections::VecDeque;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use tokio::sync::Notify;
 
@@ -66,6 +70,8 @@ pub(crate) struct Queue {
     data_cap: usize,
     cmd_cap: usize,
     pub counters: QueueCounters,
+    /// the medium's losses and the receiver's name there, for the data messages dropped
+    losses: Option<(Arc<Losses>, Arc<str>)>,
 }
 
 impl Queue {
@@ -85,6 +91,21 @@ impl Queue {
             data_cap: data_cap.max(1),
             cmd_cap: cmd_cap.max(1),
             counters: QueueCounters::default(),
+            losses: None,
+        }
+    }
+
+    /// The same queue, counting what it drops in `losses` as `receiver`'s.
+    pub fn counted_in(mut self, losses: Arc<Losses>, receiver: Arc<str>) -> Queue {
+        self.losses = Some((losses, receiver));
+        self
+    }
+
+    /// Counts `n` data messages dropped.
+    fn dropped(&self, n: u64) {
+        self.counters.dropped_oldest.fetch_add(n, Ordering::Relaxed);
+        if let Some((losses, receiver)) = &self.losses {
+            losses.queue_full(receiver, n);
         }
     }
 
@@ -154,7 +175,7 @@ impl Queue {
             }
         };
         if let Pushed::DroppedOldest = result {
-            self.counters.dropped_oldest.fetch_add(1, Ordering::Relaxed);
+            self.dropped(1);
         }
         self.waker.wake();
         result
@@ -216,9 +237,7 @@ impl Queue {
         let excess = excess.min(batch.len().saturating_sub(1));
         if excess > 0 {
             batch.drain(..excess);
-            self.counters
-                .dropped_oldest
-                .fetch_add(excess as u64, Ordering::Relaxed);
+            self.dropped(excess as u64);
         }
         batch.pop_front()
     }

@@ -21,6 +21,12 @@
 //! the link goes down, sends fail at once with [`SendError::LinkDown`], and the medium keeps trying
 //! to reopen it; nothing else waits meanwhile.
 //!
+//! What is lost is counted in the medium's [`MediumStats`](seabus_medium::MediumStats): input the
+//! framing rejects, by reason (`too-long` for a line over `max`), and the bytes it drops; for a
+//! serial device, the characters it lost before seabus read them (its overruns, read from the
+//! kernel after reads, at most every [`OVERRUN_LOOK`]); and, as on every medium, the sentences a
+//! receiver's full queue drops.
+//!
 //! Who may depend on it: the program, to register the schemes. It depends on the core and
 //! `seabus-tty`.
 
@@ -33,9 +39,10 @@ use seabus_medium::{
     Ingress, LinkState, Message, OpenError, Opened, Opening, Payload, Scheme, Schemes, SendError,
     Topic,
 };
-use seabus_tty::{PtyLink, device_path};
+use seabus_tty::{Overruns, PtyLink, device_path};
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::time::Duration;
 use tokio::io::{AsyncRead, AsyncReadExt, AsyncWrite, AsyncWriteExt};
 use tokio_serial::{DataBits, FlowControl, Parity, StopBits};
 
@@ -55,6 +62,10 @@ const OPTIONS: [&str; 11] = [
 
 /// Frames waiting to be written; a sender waits when the line is this far behind.
 const WRITE_QUEUE: usize = 64;
+
+/// How long after a read a serial device's overrun counters are read (once for all the reads
+/// meanwhile): a line that sends nothing costs nothing.
+pub const OVERRUN_LOOK: Duration = Duration::from_millis(100);
 
 /// A serial medium's settings, read from its URL.
 #[derive(Debug, Clone, PartialEq)]
@@ -339,8 +350,10 @@ fn open_serial(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
         },
         move |port, queue| {
             let (cfg, ingress) = (running.clone(), ingress.clone());
+            // a device that keeps overrun counters (not a pseudo-terminal) has them read
+            let overruns = Overruns::of(&port);
             // each opening starts framing afresh
-            Box::pin(async move { pump(port, &cfg, queue, &ingress).await })
+            Box::pin(async move { pump(port, &cfg, queue, &ingress, overruns).await })
         },
     );
     Ok(Arc::new(Linked::new(
@@ -350,44 +363,74 @@ fn open_serial(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
 }
 
 /// Reads frames into the medium and writes queued frames out, until the stream fails; returns why.
+/// The device's `overruns`, when it keeps them, are read [`OVERRUN_LOOK`] after a read.
 async fn pump<P: AsyncRead + AsyncWrite>(
     port: P,
     cfg: &SerialConfig,
     queue: &mut LinkQueue<Bytes>,
     ingress: &Ingress,
+    mut overruns: Option<Overruns>,
 ) -> String {
     let (mut reader, mut writer) = tokio::io::split(port);
     let mut framer = Framer::new(cfg.framing, cfg.checksum, cfg.max);
     let mut buf = vec![0u8; 4096];
     let mut topics = FrameTopics::new(cfg);
     let path = cfg.path.display();
-    loop {
+    // bytes the framer dropped, as counted in the medium so far
+    let mut dropped = 0;
+    // when the overrun counters are next read, while reads have not been followed by a look
+    let mut look: Option<tokio::time::Instant> = None;
+    let reason = loop {
         tokio::select! {
             n = reader.read(&mut buf) => match n {
-                Ok(0) => return format!("{path}: end of stream"),
+                Ok(0) => break format!("{path}: end of stream"),
                 Ok(n) => {
                     framer.push(&buf[..n], &mut |out| match out {
                         Ok(frame) => match topics.topic_of(&frame) {
                             Some(topic) => {
                                 ingress.originate(topic, Payload::from(frame));
                             }
-                            None => ingress.reject("no-address", format_args!("{path}: a sentence without an address")),
+                            None => {
+                                ingress.dropped(frame.len() as u64);
+                                ingress.reject("no-address", format_args!("{path}: a sentence without an address"));
+                            }
                         },
                         Err(r) => ingress.reject(r.reason.reason(), format_args!("{path} at byte {}", r.offset)),
                     });
+                    if framer.dropped() != dropped {
+                        ingress.dropped(framer.dropped() - dropped);
+                        dropped = framer.dropped();
+                    }
+                    if overruns.is_some() && look.is_none() {
+                        look = Some(tokio::time::Instant::now() + OVERRUN_LOOK);
+                    }
                 }
-                Err(e) => return format!("{path}: {e}"),
+                Err(e) => break format!("{path}: {e}"),
             },
+            _ = async { tokio::time::sleep_until(look.unwrap_or_else(tokio::time::Instant::now)).await }, if look.is_some() => {
+                look = None;
+                if let Some(o) = overruns.as_mut() {
+                    ingress.overrun(o.take());
+                }
+            }
             frame = queue.recv() => match frame {
                 Some(frame) => {
                     if let Err(reason) = queue.write(&path, writer.write_all(&frame)).await {
-                        return reason;
+                        break reason;
                     }
                 }
-                None => return format!("{path}: closed"),
+                None => break format!("{path}: closed"),
             },
         }
+    };
+    // what the device lost last, and the frame the link's end cut off
+    if let Some(o) = overruns.as_mut() {
+        ingress.overrun(o.take());
     }
+    if framer.pending() > 0 {
+        ingress.dropped(framer.pending() as u64);
+    }
+    reason
 }
 
 /// Opens a `pty://` medium: a new pseudo-terminal whose other end is linked at the URL's path.
@@ -397,7 +440,7 @@ fn open_pty(mut o: Opening) -> Result<Arc<SerialTransport>, OpenError> {
     let (line, queue) = link_queue(&o.name, path, WRITE_QUEUE);
     let (running, ingress) = (cfg.clone(), o.ingress.clone());
     let pty = seabus_tty::run_pty(&o, &cfg.path, queue, move |port, queue| {
-        Box::pin(async move { pump(port, &running, queue, &ingress).await })
+        Box::pin(async move { pump(port, &running, queue, &ingress, None).await })
     })?;
     Ok(Arc::new(Linked::new(
         SerialEncoder {

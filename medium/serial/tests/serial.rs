@@ -122,6 +122,15 @@ async fn garbage_and_bad_sentences_are_counted_and_the_next_one_arrives() {
     assert_eq!(st.get("bad-checksum"), Some(&1), "{st:?}");
     assert_eq!(st.get("truncated"), Some(&1), "{st:?}");
     assert_eq!(st.get("too-long"), Some(&1), "{st:?}");
+    // every byte of them is counted as dropped: 7 + 10 000 of garbage, the 15 of the bad
+    // checksum, the 16 cut short and the 10 007 of the sentence too long (line endings aside)
+    let dropped = async {
+        while back.stats().dropped_bytes < 20_045 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    };
+    let _ = timeout(WAIT, dropped).await;
+    assert_eq!(back.stats().dropped_bytes, 20_045);
     drop(held);
 }
 

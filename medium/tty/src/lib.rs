@@ -7,12 +7,15 @@
 //! - [`run_pty`] makes a pseudo-terminal whose other end is linked at a path of the user's choice,
 //!   for any program to open as if it were a device, and runs a session on it; [`PtyLink`] removes
 //!   that link when the medium closes.
+//! - [`Overruns`] reads how many characters a serial device lost before they were read: the
+//!   kernel's overrun counters (`TIOCGICOUNT`), where the device's driver keeps them.
 //!
 //! Who may depend on it: medium crates whose wire is a serial line. It depends on the core only.
 
 use seabus_medium::link::LinkQueue;
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{BoxFuture, LinkState, OpenError, Opening};
+use std::os::fd::{AsRawFd, RawFd};
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 pub use tokio_serial::SerialStream;
@@ -39,6 +42,81 @@ pub fn open_device(
     let builder = configure(tokio_serial::new(name.as_ref(), baud));
     tokio_serial::SerialPortBuilderExt::open_native_async(builder)
         .map_err(|e| format!("cannot open {name}: {e}"))
+}
+
+/// The overrun counters of a serial device, as the kernel keeps them: characters the UART's
+/// hardware FIFO lost (`overrun`) and characters the kernel's buffer had no room for
+/// (`buf_overrun`). A device whose driver keeps no counters (a pseudo-terminal, some USB
+/// adapters) has none: [`Overruns::of`] says so once, and nothing is asked again.
+#[derive(Debug)]
+pub struct Overruns {
+    fd: RawFd,
+    /// the sum of both counters when last read
+    last: u32,
+}
+
+impl Overruns {
+    /// The counters of the device open as `port`, read now so that later reads count from here;
+    /// `None` when the device keeps none. `port` must stay open while this is used.
+    pub fn of(port: &impl AsRawFd) -> Option<Overruns> {
+        let fd = port.as_raw_fd();
+        overrun_count(fd).ok().map(|last| Overruns { fd, last })
+    }
+
+    /// Characters lost since the last look (0 when the device can no longer be asked).
+    pub fn take(&mut self) -> u64 {
+        match overrun_count(self.fd) {
+            Ok(now) => {
+                let new = since(self.last, now);
+                self.last = now;
+                new
+            }
+            Err(_) => 0,
+        }
+    }
+}
+
+/// How far a kernel counter (a C `int` that wraps) went from `before` to `now`.
+fn since(before: u32, now: u32) -> u64 {
+    u64::from(now.wrapping_sub(before))
+}
+
+/// `struct serial_icounter_struct` of `<linux/serial.h>`.
+#[cfg(target_os = "linux")]
+#[repr(C)]
+#[derive(Default)]
+struct IcounterStruct {
+    cts: libc::c_int,
+    dsr: libc::c_int,
+    rng: libc::c_int,
+    dcd: libc::c_int,
+    rx: libc::c_int,
+    tx: libc::c_int,
+    frame: libc::c_int,
+    overrun: libc::c_int,
+    parity: libc::c_int,
+    brk: libc::c_int,
+    buf_overrun: libc::c_int,
+    reserved: [libc::c_int; 9],
+}
+
+/// The device's `overrun` and `buf_overrun` counters, summed (wrapping as the kernel's do); an
+/// error when its driver keeps none (`EINVAL`, `ENOTTY`: a pseudo-terminal).
+#[cfg(target_os = "linux")]
+fn overrun_count(fd: RawFd) -> std::io::Result<u32> {
+    let mut counts = IcounterStruct::default();
+    // SAFETY: TIOCGICOUNT writes one serial_icounter_struct, which `counts` is, and nothing else
+    let r = unsafe { libc::ioctl(fd, libc::TIOCGICOUNT, &mut counts as *mut IcounterStruct) };
+    if r < 0 {
+        return Err(std::io::Error::last_os_error());
+    }
+    Ok((counts.overrun as u32).wrapping_add(counts.buf_overrun as u32))
+}
+
+/// Elsewhere the counters are not read.
+#[cfg(not(target_os = "linux"))]
+fn overrun_count(_: RawFd) -> std::io::Result<u32> {
+    Err(std::io::Error::from(std::io::ErrorKind::Unsupported))
 }
 
 /// The link at which a pseudo-terminal's other end is found, removed when the medium closes.
@@ -136,6 +214,24 @@ mod tests {
                 .reason
                 .contains("three slashes")
         );
+    }
+
+    #[test]
+    fn overrun_counts_go_on_across_the_wrap_of_the_kernels_counters() {
+        assert_eq!(since(10, 10), 0);
+        assert_eq!(since(10, 17), 7);
+        assert_eq!(since(u32::MAX - 2, 4), 7);
+        assert_eq!(since(i32::MAX as u32, i32::MIN as u32), 1);
+    }
+
+    #[tokio::test]
+    async fn a_pseudo_terminal_keeps_no_overrun_counters() {
+        let (master, slave) = SerialStream::pair().unwrap();
+        assert!(Overruns::of(&master).is_none());
+        assert!(Overruns::of(&slave).is_none());
+        // nor does a file that is no terminal
+        let file = tempfile::tempfile().unwrap();
+        assert!(Overruns::of(&file).is_none());
     }
 
     #[test]

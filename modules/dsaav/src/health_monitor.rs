@@ -13,8 +13,12 @@
 //! - the topics of its `data` components: each message is heard, and a topic silent too long
 //!   makes its component UNAVAILABLE, then OFFLINE (a frontseat whose serial line is open but
 //!   sends no navigation);
+//! - `seabus.media` — the runtime's counters of every medium: the media that lost or refused
+//!   anything (rejected input, bytes dropped, overruns, messages dropped from full queues,
+//!   commands refused) are listed in the snapshot's `media`, each with its counters;
 //!
-//! and publishes the health snapshot (`severity`, `components`, `reasons`) on the rules' topic at
+//! and publishes the health snapshot (`severity`, `components`, `reasons`, and `media` when a
+//! medium lost anything) on the rules' topic at
 //! their period and at once on every change of a component's state, and the emergency action as a
 //! command on entry into EMERGENCY. Its other media are watched for `link` components: a link that
 //! goes down makes the component OFFLINE (a serial driver whose device is unplugged).
@@ -29,14 +33,14 @@ use crate::health_service::{self, Status};
 use crate::rpc::{CallOptions, RpcClient};
 use async_trait::async_trait;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Medium, Message, Topic};
+use seabus_medium::{DataMap, Medium, MediumStats, Message, Topic, Value};
 use seabus_medium_dsaav::wire::Address;
 use seabus_modules::datasets::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
 };
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
-use seabus_modules::runtime::AbortOnDrop;
+use seabus_modules::runtime::{AbortOnDrop, MEDIA_TOPIC};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
@@ -64,6 +68,8 @@ struct HealthMonitor {
     dsaav: Option<(usize, u16)>,
     /// The health service, while it runs.
     service: Option<Service>,
+    /// The media that lost anything, by name, with their counters (from `seabus.media`).
+    media: DataMap,
 }
 
 /// The DSAAV side: reports and poll answers arrive on `updates`; status calls are answered from
@@ -109,6 +115,7 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
     let mut decl = Declaration::new(ModuleKind::Service)
         .consumes(TopicDecl::topic("seabus.module.*"))
         .consumes(TopicDecl::topic("seabus.health.*"))
+        .consumes(TopicDecl::topic(MEDIA_TOPIC))
         .produces(TopicDecl::topic(rules.publish.as_str()));
     for c in &rules.components {
         if let Mode::Data { topics } = &c.mode {
@@ -128,8 +135,25 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
                 .map_err(|e| cfg.pos.error(e.to_string()))?,
             dsaav,
             service: None,
+            media: DataMap::new(),
         }),
     })
+}
+
+/// The media of a `seabus.media` message that lost or refused anything, with their counters.
+fn media_with_losses(map: &DataMap) -> DataMap {
+    let Some(media) = map.get("media").and_then(Value::as_map) else {
+        return DataMap::new();
+    };
+    media
+        .iter()
+        .filter_map(|(name, counters)| {
+            let counters = counters.as_map()?;
+            MediumStats::from_map(counters)
+                .has_losses()
+                .then(|| (name.to_string(), Value::Map(counters.clone())))
+        })
+        .collect()
 }
 
 fn module_state(state: &str) -> Option<ComponentState> {
@@ -227,7 +251,11 @@ impl HealthMonitor {
     async fn publish(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
         if let Some(m) = &self.monitor {
             let topic = m.rules().publish.clone();
-            ctx.publish(&topic, m.snapshot()).await?;
+            let mut snapshot = m.snapshot();
+            if !self.media.is_empty() {
+                snapshot.insert("media", self.media.clone());
+            }
+            ctx.publish(&topic, snapshot).await?;
         }
         Ok(())
     }
@@ -362,6 +390,11 @@ impl Module for HealthMonitor {
         let Some(map) = msg.payload.as_map() else {
             return Ok(());
         };
+        if topic == MEDIA_TOPIC {
+            // said in the next snapshot
+            self.media = media_with_losses(map);
+            return Ok(());
+        }
         let report = if let Some(module) = topic.strip_prefix("seabus.module.") {
             map.get_str("state")
                 .and_then(module_state)
@@ -398,6 +431,36 @@ impl Module for HealthMonitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_media_with_losses_are_listed_with_their_counters() {
+        let lossy = MediumStats {
+            received: 40,
+            queue_dropped: [("gps".to_string(), 12)].into(),
+            ..MediumStats::default()
+        };
+        let rejecting = MediumStats {
+            rejected: [("garbage".to_string(), 2)].into(),
+            dropped_bytes: 9,
+            ..MediumStats::default()
+        };
+        let quiet = MediumStats {
+            received: 1000,
+            published: 10,
+            ..MediumStats::default()
+        };
+        let published = seabus_modules::runtime::media_map([
+            ("bus", &quiet),
+            ("gps-line", &lossy),
+            ("serial", &rejecting),
+        ]);
+        let listed = media_with_losses(&published);
+        let names: Vec<&str> = listed.iter().map(|(k, _)| k).collect();
+        assert_eq!(names, ["gps-line", "serial"]);
+        let back = MediumStats::from_map(listed.get("gps-line").unwrap().as_map().unwrap());
+        assert_eq!(back, lossy);
+        assert!(media_with_losses(&DataMap::new()).is_empty());
+    }
 
     #[test]
     fn module_states_map_to_component_states() {

@@ -11,7 +11,8 @@
 //! datasets, actuator commands to set calls); [`ecomms`] queues messages for external links;
 //! [`udp_bridge`] lets control stations on an allow-list reach the vehicle's services over UDP.
 //! The `health-monitor` module ([`health_monitor`]) applies the health rules to every module and
-//! medium of a system, and serves them over DSAAV ([`health_service`]); [`central`] sends every
+//! medium of a system, lists the media that lost anything, and serves them over DSAAV
+//! ([`health_service`]); [`central`] sends every
 //! module's log records to the central log (a system's `<log>`).
 //!
 //! Who may depend on it: the program, which registers its types ([`register`]). It depends on the

@@ -287,6 +287,37 @@ mod tests {
         assert_eq!(f.hub.data_for(&mut ana), None);
     }
 
+    #[test]
+    fn a_health_table_gets_the_snapshot_whole_with_the_media_that_lost_anything() {
+        let diag = r#"<layout name="diag" roles="observer"><health/></layout>"#;
+        let f = Fixture::with_layouts(&[("diag.xml", diag)]);
+        let mut ivo = f.hub.connect(f.session("ivo"));
+        let opened = f.hub.open(&mut ivo, "diag", &BTreeMap::new());
+        assert_eq!(opened["type"], "layout", "{opened}");
+        let lossy = seabus_medium::MediumStats {
+            received: 24_450,
+            queue_dropped: [("gps".to_string(), 412)].into(),
+            rejected: [("garbage".to_string(), 2)].into(),
+            dropped_bytes: 57,
+            ..Default::default()
+        };
+        let snapshot = DataMap::new()
+            .with("severity", "NONE")
+            .with("components", DataMap::new().with("Sensors", "HEALTHY"))
+            .with("media", DataMap::new().with("gps-line", lossy.to_map()));
+        let health = Topic::new("vehicle.health").unwrap();
+        f.hub.observe(&health, Stamp(5_000_000_000), &snapshot);
+        let data = f.hub.data_for(&mut ivo).unwrap();
+        let line = &data["topics"]["vehicle.health"]["fields"]["media"]["gps-line"];
+        assert_eq!(line["queue_dropped"], json!({"gps": 412}), "{data}");
+        assert_eq!(line["rejected"], json!({"garbage": 2}), "{data}");
+        assert_eq!(
+            (&line["received"], &line["dropped_bytes"], &line["overruns"]),
+            (&json!(24_450), &json!(57), &json!(0)),
+            "{data}"
+        );
+    }
+
     #[tokio::test]
     async fn a_page_that_missed_events_is_sent_what_was_commanded_and_kept() {
         let f = Fixture::new();

@@ -51,9 +51,19 @@ pub struct Fixture {
 
 impl Fixture {
     pub fn new() -> Fixture {
+        Fixture::with_layouts(&[])
+    }
+
+    /// A hub with [`PILOT`] and the layouts `(file name, text)` of `more`.
+    pub fn with_layouts(more: &[(&str, &str)]) -> Fixture {
         let dir = tempfile::tempdir().unwrap();
         let d = dir.path().to_path_buf();
         std::fs::write(d.join("pilot.xml"), PILOT).unwrap();
+        let mut layouts = vec![d.join("pilot.xml")];
+        for (file, text) in more {
+            std::fs::write(d.join(file), text).unwrap();
+            layouts.push(d.join(file));
+        }
         let bus = Medium::in_process("bus", &Node::new("t"));
         let settings = Settings {
             listen: "127.0.0.1:0".parse().unwrap(),
@@ -61,7 +71,7 @@ impl Fixture {
             lease_role: "pilot".into(),
             designer_role: "designer".into(),
             log: Some(d.join("commands.csv")),
-            layouts: vec![d.join("pilot.xml")],
+            layouts,
             history: Duration::from_secs(600),
         };
         let hub = Hub::new(
