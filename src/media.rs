@@ -27,6 +27,7 @@ media! {
     "lcm" => seabus_medium_lcm ["udpm"];
     "dsaav" => seabus_medium_dsaav ["dsaav+eth", "dsaav+udp", "dsaav+inproc"];
     "moos" => seabus_medium_moos ["moos"];
+    "zenoh" => seabus_medium_zenoh ["zenoh"];
 }
 
 /// What `seabus --version` says: the version and the media compiled in.

@@ -6,7 +6,7 @@ mod common;
 use common::*;
 
 /// Every scheme of the default build with its family, in the order `seabus schemes` lists them.
-const SCHEMES: [(&str, &str); 13] = [
+const SCHEMES: [(&str, &str); 14] = [
     ("inproc", "inproc"),
     ("udp", "udp"),
     ("serial", "serial"),
@@ -20,6 +20,7 @@ const SCHEMES: [(&str, &str); 13] = [
     ("dsaav+udp", "dsaav"),
     ("dsaav+inproc", "dsaav"),
     ("moos", "moos"),
+    ("zenoh", "zenoh"),
 ];
 
 fn stdout_of(args: &[&str]) -> String {
@@ -73,7 +74,7 @@ fn version_names_the_version_and_the_media_compiled_in() {
         media,
         "media: inproc (inproc) udp (udp) serial (serial, pty) \
          can (slcan, slcan+pty, cannelloni, socketcan) lcm (udpm) \
-         dsaav (dsaav+eth, dsaav+udp, dsaav+inproc) moos (moos)",
+         dsaav (dsaav+eth, dsaav+udp, dsaav+inproc) moos (moos) zenoh (zenoh)",
         "{text}"
     );
     // the families, without their schemes
@@ -86,7 +87,9 @@ fn version_names_the_version_and_the_media_compiled_in() {
         .collect();
     assert_eq!(
         families,
-        ["inproc", "udp", "serial", "can", "lcm", "dsaav", "moos"]
+        [
+            "inproc", "udp", "serial", "can", "lcm", "dsaav", "moos", "zenoh"
+        ]
     );
     assert_eq!(lines.next(), None, "no family is left out: {text}");
 }

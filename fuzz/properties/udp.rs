@@ -1,7 +1,7 @@
 //! Properties of the UDP medium's datagram codec that every input must keep.
 
 use bytes::Bytes;
-use seabus_medium_udp::wire;
+use seabus_medium::datagram as wire;
 
 /// The UDP datagram decoder: any datagram decodes or is rejected without a panic, and every message
 /// it accepts encodes back to a datagram that decodes to the same message. True when `data`

@@ -21,7 +21,8 @@
 //! - [`schemes`] — the registry of URL schemes ([`Schemes`]): each medium crate adds its own with
 //!   `register(&mut Schemes)`; the in-process medium (`inproc://`) is built in.
 //! - Shared machinery of the medium crates: [`link`] (one reconnect loop with back-off and link
-//!   state), [`wire`] (one error type for input a wire delivered), [`net`] (UDP endpoints and
+//!   state), [`wire`] (one error type for input a wire delivered), [`datagram`] (a whole message
+//!   with its provenance in bytes, as the UDP and Zenoh media carry it), [`net`] (UDP endpoints and
 //!   socket options), [`framing`] (NMEA, line, COBS and SLIP framing of byte streams), [`url`]
 //!   (medium URLs), [`tally`] (rate-limited counting of rejected input).
 //! - Files: [`csv`] (table cells), [`xml`] (a small positioned XML tree for the files users write: every error names file,
@@ -33,6 +34,7 @@
 pub mod binary;
 pub mod caps;
 pub mod csv;
+pub mod datagram;
 pub mod datamap;
 pub mod dedup;
 pub mod eventlog;

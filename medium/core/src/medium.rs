@@ -180,9 +180,12 @@ pub trait Transport: Send + Sync + 'static {
     fn flush(&self) -> BoxFuture<'_, ()> {
         Box::pin(std::future::ready(()))
     }
-    /// A local interface subscribed to something: a transport that listens to its wire only
-    /// while someone here wants what it hears (joining a multicast group) starts listening now.
-    fn subscribed(&self) {}
+    /// A local interface subscribed to `pattern`: a transport that listens to its wire only
+    /// while someone here wants what it hears (joining a multicast group) starts listening now,
+    /// and one whose wire routes by subscription (Zenoh) asks for what the pattern matches.
+    fn subscribed(&self, pattern: &Pattern) {
+        let _ = pattern;
+    }
     /// A fingerprint of what the wire carries of a message on `topic` with `payload`, the same for
     /// a message sent and that message read back (a CAN frame by its identifier and data, whatever
     /// else its datamap held); `None` (the default) when the topic and payload as they are say it.
@@ -246,7 +249,7 @@ pub(crate) trait Wire: Send + Sync {
     fn local_copy(&self, msg: Message, frame: &Frame) -> Option<Message>;
     fn close(&self);
     fn flush(&self) -> BoxFuture<'_, ()>;
-    fn subscribed(&self);
+    fn subscribed(&self, pattern: &Pattern);
     fn fingerprint(&self, topic: &Topic, payload: &Payload) -> Option<u64>;
 }
 
@@ -285,8 +288,8 @@ impl<T: Transport> Wire for T {
         Transport::flush(self)
     }
 
-    fn subscribed(&self) {
-        Transport::subscribed(self)
+    fn subscribed(&self, pattern: &Pattern) {
+        Transport::subscribed(self, pattern)
     }
 
     fn fingerprint(&self, topic: &Topic, payload: &Payload) -> Option<u64> {
@@ -953,12 +956,18 @@ impl Ingress {
     /// Delivers a message that starts on this medium (a frame from a wire without headers, such
     /// as a serial line): it gets this medium's origin and next sequence number.
     pub fn originate(&self, topic: Topic, payload: Payload) -> bool {
+        self.originate_as(Kind::Data, topic, payload)
+    }
+
+    /// [`Ingress::originate`] for a message of `kind` (a command from a program that writes the
+    /// wire without seabus's header but says what it sends).
+    pub fn originate_as(&self, kind: Kind, topic: Topic, payload: Payload) -> bool {
         let Some(inner) = self.inner.upgrade() else {
             return false;
         };
         let msg = Message {
             topic,
-            kind: Kind::Data,
+            kind,
             provenance: Provenance {
                 origin: inner.origin.clone(),
                 seq: inner.next_seq(),
@@ -1171,11 +1180,11 @@ impl Interface {
     pub fn subscribe_kind(&mut self, pattern: &str, kind: Option<Kind>) -> Result<(), TopicError> {
         let sub = (Pattern::new(pattern)?, kind);
         if !self.patterns.contains(&sub) {
+            if let Some(t) = self.medium.inner.transport.get() {
+                t.subscribed(&sub.0);
+            }
             self.patterns.push(sub);
             self.publish_patterns();
-            if let Some(t) = self.medium.inner.transport.get() {
-                t.subscribed();
-            }
         }
         Ok(())
     }

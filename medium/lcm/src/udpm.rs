@@ -32,7 +32,7 @@ use seabus_medium::medium::{
 };
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::payload::{Format, Payload};
-use seabus_medium::topic::{ChannelRegex, Topic};
+use seabus_medium::topic::{ChannelRegex, Pattern, Topic};
 use seabus_medium::url::{MediumUrl, UrlError};
 use socket2::{Domain, Protocol, SockRef, Socket, Type};
 use std::collections::HashMap;
@@ -434,7 +434,7 @@ impl Transport for LcmTransport {
 
     /// Joins the group, unless the medium is closed: a medium only publishing never makes the
     /// kernel copy the group's traffic to it.
-    fn subscribed(&self) {
+    fn subscribed(&self, _pattern: &Pattern) {
         let listen = self.listen.lock().unwrap_or_else(|p| p.into_inner());
         let Some(socket) = listen.as_deref() else {
             return;

@@ -17,10 +17,9 @@
 //! Who may depend on it: the program, to register `udp://` ([`register`]). It depends on the core
 //! only.
 
-pub mod wire;
-
 use bytes::{Bytes, BytesMut};
 use seabus_medium::caps::{Capabilities, Carries, Framing};
+use seabus_medium::datagram as wire;
 use seabus_medium::net::{self, MAX_DATAGRAM, UdpEndpoint};
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{

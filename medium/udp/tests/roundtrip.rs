@@ -4,11 +4,11 @@
 
 use bytes::Bytes;
 use proptest::prelude::*;
+use seabus_medium::datagram as wire;
 use seabus_medium::datamap::MAX_DEPTH;
 use seabus_medium::dedup::{Dedup, Seen, WINDOW};
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::{DataMap, Format, Pattern, Payload, Topic, Value, binary, json, xmlform};
-use seabus_medium_udp::wire;
 use std::collections::BTreeSet;
 
 fn scalar() -> impl Strategy<Value = Value> {

@@ -1,4 +1,5 @@
-//! The seabus UDP datagram (documented byte by byte in `docs/wire-formats.md`).
+//! The seabus datagram: one whole message with its provenance, as the UDP and Zenoh media carry it
+//! (documented byte by byte in `docs/wire-formats.md`).
 //!
 //! ```text
 //! off  size  field
@@ -20,9 +21,9 @@
 //!        …  payload to the end of the datagram: raw bytes, a binary datamap, or UTF-8 XML
 //! ```
 
+use crate::binary;
+use crate::{Kind, Message, Origin, Payload, Provenance, Stamp, Topic, WireError};
 use bytes::{BufMut, Bytes, BytesMut};
-use seabus_medium::binary;
-use seabus_medium::{Kind, Message, Origin, Payload, Provenance, Stamp, Topic, WireError};
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -262,7 +263,7 @@ pub fn decode(datagram: &Bytes, origins: &mut Origins) -> Result<(u64, Message),
 #[cfg(test)]
 mod tests {
     use super::*;
-    use seabus_medium::datamap::{DataMap, Value};
+    use crate::datamap::{DataMap, Value};
 
     fn msg(payload: Payload) -> Message {
         Message {
@@ -295,7 +296,7 @@ mod tests {
     fn lists_and_maps_too_deep_for_receivers_are_refused_at_send() {
         for maps in [false, true] {
             let mut v = Value::Int(1);
-            for _ in 0..=seabus_medium::datamap::MAX_DEPTH {
+            for _ in 0..=crate::datamap::MAX_DEPTH {
                 v = if maps {
                     Value::Map(DataMap::new().with("k", v))
                 } else {
@@ -321,7 +322,7 @@ mod tests {
                         .with("tags", Value::List(vec![DataMap::new().into()])),
                 ),
             ),
-            seabus_medium::payload::xml("<a>é</a>"),
+            crate::payload::xml("<a>é</a>"),
         ] {
             let m = msg(p);
             let d = encode(&m, 9).unwrap();

@@ -1,0 +1,529 @@
+//! seabus-medium-zenoh, the Zenoh medium: seabus messages over Eclipse Zenoh, for fleets and shore
+//! stations beyond one LAN (routing, discovery across subnets, reconnection through routers).
+//!
+//! ```text
+//! zenoh://?prefix=fleet/auv1&connect=tcp/10.0.0.1:7447          a vehicle, a peer reaching a router
+//! zenoh://?mode=client&connect=tcp/shore:7447&prefix=fleet/auv2  a client of a router
+//! zenoh://?mode=router&listen=tcp/0.0.0.0:7447&prefix=fleet      a shore station that routes
+//! zenoh://?config=zenoh.json5&prefix=fleet                       Zenoh's own configuration file
+//! ```
+//! Options: `mode` (`peer`, the default, `client` or `router`), `connect` and `listen` (Zenoh
+//! endpoints such as `tcp/127.0.0.1:7447`, repeatable or comma-separated), `prefix` (the key
+//! space this medium's topics live in, default `seabus`; see [`keys`]), `config` (a Zenoh
+//! configuration file, JSON5, relative to the working directory; the other options are applied
+//! over it), `scout` (multicast scouting for peers on the LAN, default on unless `connect` is
+//! given), `json` (datamaps are published as JSON so that any Zenoh program reads them; default
+//! off).
+//!
+//! **Wire.** A message is published on its topic's key as a seabus datagram
+//! ([`seabus_medium::datagram`]: provenance, kind, stamp, payload) with the encoding
+//! `application/octet-stream;seabus`, so bridges stay loop-safe and receivers exactly-once across
+//! redundant paths. With `json`, a datamap goes as its JSON object (`application/json`) and the
+//! datagram without the payload rides as the sample's attachment. A sample from a program that is
+//! not seabus is taken as it is: JSON text as a datamap, anything else as bytes, a command when its
+//! encoding's schema says `command` (`application/json;command`), data otherwise; a sample that
+//! says it is seabus's but does not decode, or whose key is no topic, is counted by reason and
+//! dropped.
+//!
+//! **Quality of service** from the message kind: a command is sent reliably, blocking when the
+//! network is congested, at interactive-high priority and without batching (express); data is
+//! dropped under congestion, at data priority.
+//!
+//! **Link state**: up while the session is connected to a router or a peer (or is itself a
+//! router), down otherwise, checked every second.
+//!
+//! Who may depend on it: the program, to register `zenoh://` ([`register`]). It depends on the core
+//! only.
+
+pub mod keys;
+
+use bytes::Bytes;
+use seabus_medium::caps::{Capabilities, Carries, Framing};
+use seabus_medium::datagram;
+use seabus_medium::url::{MediumUrl, UrlError};
+use seabus_medium::{
+    BoxFuture, Ingress, Kind, LinkState, Message, OpenError, Opened, Opening, Pattern, Payload,
+    Scheme, Schemes, SendError, Transport,
+};
+use std::collections::{HashMap, HashSet};
+use std::sync::{Arc, LazyLock, Mutex};
+use std::time::Duration;
+use tokio::sync::watch;
+use zenoh::bytes::{Encoding, ZBytes};
+use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::sample::{Locality, Sample};
+use zenoh::{Config, Session};
+
+/// How a Zenoh medium connects: its mode and endpoints, prefix and payload form.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ZenohConfig {
+    /// `peer`, `client` or `router`.
+    pub mode: String,
+    /// Endpoints to connect to.
+    pub connect: Vec<String>,
+    /// Endpoints to listen on.
+    pub listen: Vec<String>,
+    /// The key space of this medium's topics.
+    pub prefix: String,
+    /// A Zenoh configuration file applied first.
+    pub config: Option<String>,
+    /// Multicast scouting.
+    pub scout: bool,
+    /// Datamaps published as JSON.
+    pub json: bool,
+}
+
+const OPTIONS: &[&str] = &[
+    "mode", "connect", "listen", "prefix", "config", "scout", "json",
+];
+
+/// The encoding of a seabus datagram.
+static DATAGRAM: LazyLock<Encoding> =
+    LazyLock::new(|| Encoding::APPLICATION_OCTET_STREAM.with_schema("seabus"));
+
+/// Endpoints listed in option `name` (repeated or comma-separated), each checked.
+fn endpoints(url: &mut MediumUrl, name: &str) -> Result<Vec<String>, UrlError> {
+    let mut out = Vec::new();
+    for value in url.take_all(name) {
+        for ep in value.split(',').map(str::trim).filter(|e| !e.is_empty()) {
+            if ep.parse::<zenoh::config::EndPoint>().is_err() {
+                return Err(url.error(format!(
+                    "option `{name}={ep}`: not a Zenoh endpoint (such as tcp/127.0.0.1:7447)"
+                )));
+            }
+            out.push(ep.to_string());
+        }
+    }
+    Ok(out)
+}
+
+impl ZenohConfig {
+    /// Reads the settings from a `zenoh://` URL (taking its options).
+    pub fn from_url(url: &mut MediumUrl) -> Result<ZenohConfig, UrlError> {
+        if !url.host.is_empty() || url.port.is_some() {
+            return Err(url.error(
+                "a zenoh:// URL names no host: say where to connect with ?connect=tcp/HOST:PORT",
+            ));
+        }
+        let mode = url.take("mode").unwrap_or_else(|| "peer".to_string());
+        if !matches!(mode.as_str(), "peer" | "client" | "router") {
+            return Err(url.error(format!(
+                "option `mode={mode}`: expected peer, client or router"
+            )));
+        }
+        let connect = endpoints(url, "connect")?;
+        let listen = endpoints(url, "listen")?;
+        let prefix = url.take("prefix").unwrap_or_else(|| "seabus".to_string());
+        let prefix = prefix.trim_matches('/').to_string();
+        keys::check_prefix(&prefix).map_err(|e| url.error(format!("option `prefix`: {e}")))?;
+        let config = url.take("config");
+        let scout = url.take_flag("scout")?.unwrap_or(connect.is_empty());
+        let json = url.take_flag("json")?.unwrap_or(false);
+        if mode == "client" && connect.is_empty() && config.is_none() && !scout {
+            return Err(url.error("a client needs a router to connect to: ?connect=tcp/HOST:PORT"));
+        }
+        url.finish(OPTIONS)?;
+        Ok(ZenohConfig {
+            mode,
+            connect,
+            listen,
+            prefix,
+            config,
+            scout,
+            json,
+        })
+    }
+
+    /// What a Zenoh medium can do: whole seabus messages with provenance, any payload, a link
+    /// that goes down and up; its own messages never come back to it.
+    pub fn capabilities(&self) -> Capabilities {
+        Capabilities {
+            provenance: true,
+            framing: Framing::Datagram,
+            max_frame: None,
+            hears_own: false,
+            carries: Carries::Any,
+            link_state: true,
+            native: None,
+        }
+    }
+
+    /// The Zenoh configuration: the file's, then these settings over it.
+    pub fn zenoh(&self) -> Result<Config, String> {
+        let mut c = match &self.config {
+            Some(path) => Config::from_file(path).map_err(|e| format!("{path}: {e}"))?,
+            None => Config::default(),
+        };
+        let json = |v: &[String]| serde_json::to_string(v).unwrap_or_default();
+        let mut set = |key: &str, value: String| {
+            c.insert_json5(key, &value)
+                .map_err(|e| format!("setting {key} = {value}: {e}"))
+        };
+        set("mode", format!("\"{}\"", self.mode))?;
+        if !self.connect.is_empty() {
+            set("connect/endpoints", json(&self.connect))?;
+        }
+        if !self.listen.is_empty() {
+            set("listen/endpoints", json(&self.listen))?;
+        }
+        if self.config.is_none() || !self.scout {
+            set("scouting/multicast/enabled", self.scout.to_string())?;
+        }
+        Ok(c)
+    }
+}
+
+/// Adds `zenoh://`.
+pub fn register(schemes: &mut Schemes) {
+    schemes.add(Scheme {
+        name: "zenoh",
+        family: "zenoh",
+        summary: "seabus messages over Eclipse Zenoh (peer, client or router): fleets and shore",
+        check: |url| {
+            let cfg = ZenohConfig::from_url(url)?;
+            cfg.zenoh().map_err(|e| url.error(e))?;
+            Ok(cfg.capabilities())
+        },
+        open: |o| Ok(Opened::from(open(o)?)),
+    });
+}
+
+/// A registry with `zenoh://` and the in-process medium, for a program or test that uses only
+/// these.
+pub fn schemes() -> Schemes {
+    Schemes::with(&[register])
+}
+
+/// What a message becomes: its key, the bytes, and how they are sent.
+#[derive(Clone)]
+pub struct Frame {
+    key: String,
+    payload: Bytes,
+    command: bool,
+    /// `Some(datagram without payload)` for a datamap sent as JSON
+    attachment: Option<Bytes>,
+}
+
+/// Publishers kept per key and kind; beyond this many, messages are put without one.
+const MAX_PUBLISHERS: usize = 4096;
+/// How long a send waits for the session to open.
+const OPEN_WAIT: Duration = Duration::from_secs(5);
+
+/// The Zenoh transport.
+pub struct ZenohTransport {
+    name: Arc<str>,
+    prefix: Arc<str>,
+    json: bool,
+    /// this medium instance, to know its own datagrams
+    sender: u64,
+    caps: Capabilities,
+    session: watch::Receiver<Option<Session>>,
+    publishers: tokio::sync::Mutex<HashMap<(String, bool), Publisher<'static>>>,
+    hearing: Hearing,
+}
+
+/// What the medium hears: the key expressions asked for, their subscribers once the session is
+/// open, and where what they hear goes.
+#[derive(Clone)]
+struct Hearing {
+    prefix: Arc<str>,
+    /// this medium instance, to know its own datagrams
+    sender: u64,
+    ingress: Ingress,
+    subscriptions: Arc<Mutex<Subscriptions>>,
+}
+
+#[derive(Default)]
+struct Subscriptions {
+    keys: HashSet<String>,
+    declared: Vec<Subscriber<()>>,
+}
+
+impl Hearing {
+    fn subscriptions(&self) -> std::sync::MutexGuard<'_, Subscriptions> {
+        self.subscriptions.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Declares a subscriber on `key` that hands what it hears to the medium.
+    async fn declare(&self, session: &Session, key: String) {
+        let me = self.clone();
+        let declared = session
+            .declare_subscriber(key.clone())
+            .allowed_origin(Locality::Remote)
+            .callback(move |sample| me.receive(&sample))
+            .await;
+        match declared {
+            Ok(s) => self.subscriptions().declared.push(s),
+            Err(e) => self
+                .ingress
+                .set_link(LinkState::Down(format!("cannot subscribe to {key}: {e}"))),
+        }
+    }
+
+    /// Declares the subscribers asked for before the session opened.
+    async fn declare_pending(&self, session: &Session) {
+        let keys: Vec<String> = self.subscriptions().keys.iter().cloned().collect();
+        for key in keys {
+            self.declare(session, key).await;
+        }
+    }
+
+    /// Hands a sample to the medium, or counts why it cannot be.
+    fn receive(&self, sample: &Sample) {
+        if let Err((reason, why)) = read_sample(sample, &self.prefix, self.sender, &self.ingress) {
+            self.ingress.reject(
+                reason,
+                format_args!("sample on {}: {why}", sample.key_expr()),
+            );
+        }
+    }
+}
+
+/// Opens a Zenoh medium: the session opens in the background (the link is down until it has).
+fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
+    let cfg = ZenohConfig::from_url(&mut o.url)?;
+    let zconfig = cfg.zenoh().map_err(|e| OpenError::Url(o.url.error(e)))?;
+    let (tx, rx) = watch::channel(None);
+    let prefix: Arc<str> = Arc::from(cfg.prefix.as_str());
+    let sender = fastrand::u64(1..);
+    let transport = Arc::new(ZenohTransport {
+        name: o.name.clone(),
+        prefix: prefix.clone(),
+        json: cfg.json,
+        sender,
+        caps: cfg.capabilities(),
+        session: rx,
+        publishers: tokio::sync::Mutex::new(HashMap::new()),
+        hearing: Hearing {
+            prefix,
+            sender,
+            ingress: o.ingress.clone(),
+            subscriptions: Arc::default(),
+        },
+    });
+    o.ingress
+        .init_link(LinkState::Down("the Zenoh session is opening".to_string()));
+    let hearing = transport.hearing.clone();
+    let router = cfg.mode == "router";
+    let task = tokio::spawn(async move {
+        let session = match zenoh::open(zconfig).await {
+            Ok(s) => s,
+            Err(e) => {
+                hearing.ingress.set_link(LinkState::Down(format!(
+                    "cannot open the Zenoh session: {e}"
+                )));
+                return;
+            }
+        };
+        let _ = tx.send(Some(session.clone()));
+        hearing.declare_pending(&session).await;
+        watch_link(&session, &hearing.ingress, router).await;
+    });
+    o.ingress.own_task(task.abort_handle());
+    Ok(transport)
+}
+
+/// Keeps the link state: up while connected to a router or a peer (a router is up by itself).
+async fn watch_link(session: &Session, ingress: &Ingress, router: bool) {
+    loop {
+        let connected = router
+            || session.info().routers_zid().await.next().is_some()
+            || session.info().peers_zid().await.next().is_some();
+        ingress.set_link(if connected {
+            LinkState::Up
+        } else {
+            LinkState::Down("no Zenoh router or peer connected".to_string())
+        });
+        if !ingress.is_open() {
+            return;
+        }
+        tokio::time::sleep(Duration::from_secs(1)).await;
+    }
+}
+
+impl ZenohTransport {
+    /// The open session, waiting for it to open at most [`OPEN_WAIT`].
+    async fn session(&self) -> Result<Session, SendError> {
+        let mut rx = self.session.clone();
+        let got = tokio::time::timeout(OPEN_WAIT, rx.wait_for(Option::is_some)).await;
+        match got {
+            Ok(Ok(s)) => Ok(s.clone().expect("waited for")),
+            _ => Err(SendError::LinkDown {
+                medium: self.name.to_string(),
+                reason: "the Zenoh session is not open".to_string(),
+            }),
+        }
+    }
+
+    fn send_error(&self, reason: impl std::fmt::Display) -> SendError {
+        SendError::Io {
+            medium: self.name.to_string(),
+            reason: reason.to_string(),
+        }
+    }
+}
+
+/// Why a sample was dropped: a reason to count under, and what was wrong.
+type Dropped = (&'static str, String);
+
+/// Reads a sample: a seabus datagram (its own are skipped), a datamap seabus sent as JSON, or
+/// what a program that is not seabus sent.
+fn read_sample(sample: &Sample, prefix: &str, me: u64, ingress: &Ingress) -> Result<(), Dropped> {
+    let topic = keys::key_topic(prefix, sample.key_expr().as_str())
+        .map_err(|e| ("bad-key", e.to_string()))?;
+    let bytes = Bytes::from(sample.payload().to_bytes().into_owned());
+    let encoding = sample.encoding();
+    if *encoding == *DATAGRAM {
+        let (sender, mut msg) = datagram::decode(&bytes, &mut datagram::Origins::default())
+            .map_err(|e| (e.kind(), e.to_string()))?;
+        if sender != me {
+            msg.topic = topic;
+            ingress.deliver(msg);
+        }
+        return Ok(());
+    }
+    let json = *encoding == Encoding::APPLICATION_JSON
+        || encoding.to_string().starts_with("application/json");
+    // a datamap sent as JSON by seabus: its provenance in the attachment
+    if let Some(att) = sample.attachment() {
+        let att = Bytes::from(att.to_bytes().into_owned());
+        if let Ok((sender, mut msg)) = datagram::decode(&att, &mut datagram::Origins::default()) {
+            if sender == me {
+                return Ok(());
+            }
+            let text = std::str::from_utf8(&bytes).map_err(|e| ("bad-json", e.to_string()))?;
+            let map =
+                seabus_medium::json::from_json(text).map_err(|e| ("bad-json", e.to_string()))?;
+            msg.topic = topic;
+            msg.payload = Payload::from(map);
+            ingress.deliver(msg);
+            return Ok(());
+        }
+    }
+    // a program that is not seabus
+    let kind = if encoding.to_string().ends_with(";command") {
+        Kind::Command
+    } else {
+        Kind::Data
+    };
+    let payload = match std::str::from_utf8(&bytes) {
+        Ok(text) if json || text.trim_start().starts_with('{') => {
+            match seabus_medium::json::from_json(text) {
+                Ok(map) => Payload::from(map),
+                Err(e) if json => return Err(("bad-json", e.to_string())),
+                Err(_) => Payload::Bytes(bytes),
+            }
+        }
+        _ => Payload::Bytes(bytes),
+    };
+    ingress.originate_as(kind, topic, payload);
+    Ok(())
+}
+
+impl Transport for ZenohTransport {
+    type Frame = Frame;
+
+    fn capabilities(&self) -> Capabilities {
+        self.caps
+    }
+
+    fn encode(&self, msg: &Message) -> Result<Frame, SendError> {
+        let key = keys::topic_key(&self.prefix, &msg.topic).map_err(|e| self.send_error(e))?;
+        let command = msg.kind == Kind::Command;
+        if self.json
+            && let Payload::Map(map) = &msg.payload
+        {
+            let text = seabus_medium::json::to_json(map).map_err(|e| self.send_error(e))?;
+            let mut header = msg.clone();
+            header.payload = Payload::Bytes(Bytes::new());
+            let attachment =
+                datagram::encode(&header, self.sender).map_err(|e| self.send_error(e))?;
+            return Ok(Frame {
+                key,
+                payload: Bytes::from(text),
+                command,
+                attachment: Some(attachment),
+            });
+        }
+        let payload = datagram::encode(msg, self.sender).map_err(|e| self.send_error(e))?;
+        Ok(Frame {
+            key,
+            payload,
+            command,
+            attachment: None,
+        })
+    }
+
+    fn transmit(&self, frame: Frame) -> BoxFuture<'_, Result<(), SendError>> {
+        Box::pin(async move {
+            let session = self.session().await?;
+            let encoding = if frame.attachment.is_some() {
+                Encoding::APPLICATION_JSON
+            } else {
+                DATAGRAM.clone()
+            };
+            let mut publishers = self.publishers.lock().await;
+            let slot = (frame.key.clone(), frame.command);
+            if !publishers.contains_key(&slot) && publishers.len() < MAX_PUBLISHERS {
+                let builder = session.declare_publisher(frame.key.clone());
+                let builder = if frame.command {
+                    builder
+                        .congestion_control(CongestionControl::Block)
+                        .priority(Priority::InteractiveHigh)
+                        .express(true)
+                } else {
+                    builder
+                        .congestion_control(CongestionControl::Drop)
+                        .priority(Priority::Data)
+                };
+                let p = builder.await.map_err(|e| self.send_error(e))?;
+                publishers.insert(slot.clone(), p);
+            }
+            let payload = ZBytes::from(frame.payload);
+            let put = match publishers.get(&slot) {
+                Some(p) => {
+                    let put = p.put(payload).encoding(encoding);
+                    match frame.attachment {
+                        Some(a) => put.attachment(ZBytes::from(a)).await,
+                        None => put.await,
+                    }
+                }
+                None => {
+                    let put = session.put(frame.key.clone(), payload).encoding(encoding);
+                    match frame.attachment {
+                        Some(a) => put.attachment(ZBytes::from(a)).await,
+                        None => put.await,
+                    }
+                }
+            };
+            put.map_err(|e| self.send_error(format!("publishing on {}: {e}", frame.key)))
+        })
+    }
+
+    fn subscribed(&self, pattern: &Pattern) {
+        let key = match keys::pattern_key(&self.prefix, pattern) {
+            Ok(k) => k,
+            Err(e) => {
+                self.hearing.ingress.reject("bad-pattern", e);
+                return;
+            }
+        };
+        let fresh = self.hearing.subscriptions().keys.insert(key.clone());
+        // (before the session opens, it declares what was asked for when it does)
+        let session = self.session.borrow().clone();
+        if let (true, Some(session)) = (fresh, session) {
+            let hearing = self.hearing.clone();
+            tokio::spawn(async move { hearing.declare(&session, key).await });
+        }
+    }
+
+    fn close(&self) {
+        self.hearing.subscriptions().declared.clear();
+        if let Some(session) = self.session.borrow().clone() {
+            tokio::spawn(async move {
+                let _ = session.close().await;
+            });
+        }
+    }
+}

@@ -1,0 +1,265 @@
+//! The Zenoh medium between two seabus nodes on loopback (a vehicle listening, a shore station
+//! connecting), and against a bare Zenoh session standing for a program that is not seabus.
+
+use seabus_medium::{DataMap, Interface, Kind, LinkState, Medium, Node, Payload, Value};
+use std::time::Duration;
+use tokio::time::timeout;
+
+const WAIT: Duration = Duration::from_secs(10);
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn open(name: &str, node: &str, url: &str) -> Medium {
+    seabus_medium_zenoh::schemes()
+        .open(name, url, &Node::new(node))
+        .unwrap_or_else(|e| panic!("{url}: {e}"))
+}
+
+async fn wait_link(m: &Medium, up: bool) {
+    let mut w = m.watch_link();
+    let res = timeout(WAIT, w.wait_for(|s| matches!(s, LinkState::Up) == up)).await;
+    assert!(
+        res.is_ok(),
+        "{} never {}: {:?}",
+        m.name(),
+        if up { "up" } else { "down" },
+        m.link_state()
+    );
+}
+
+async fn next(port: &mut Interface) -> seabus_medium::Message {
+    timeout(WAIT, port.recv())
+        .await
+        .expect("a message arrives")
+        .expect("open")
+}
+
+/// Sends `map` on `topic` from `tx` until `rx` hears something (subscriptions take a moment to
+/// reach the other side), then returns what it heard.
+async fn send_until_heard(
+    tx: &Interface,
+    rx: &mut Interface,
+    kind: Kind,
+    topic: &str,
+    map: &DataMap,
+) -> seabus_medium::Message {
+    for _ in 0..100 {
+        match kind {
+            Kind::Data => tx.send(topic, Payload::from(map.clone())).await.unwrap(),
+            Kind::Command => tx.command(topic, Payload::from(map.clone())).await.unwrap(),
+        }
+        if let Ok(Some(m)) = timeout(Duration::from_millis(100), rx.recv()).await {
+            return m;
+        }
+    }
+    panic!("nothing heard on {topic}");
+}
+
+fn pair(json: bool) -> (Medium, Medium) {
+    let port = free_port();
+    let vehicle = open(
+        "net",
+        "auv1",
+        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false&json={json}"),
+    );
+    let shore = open(
+        "net",
+        "shore",
+        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    (vehicle, shore)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_vehicle_and_a_shore_station_exchange_data_and_commands_with_provenance() {
+    let (vehicle, shore) = pair(false);
+    wait_link(&vehicle, true).await;
+    wait_link(&shore, true).await;
+    let mut heard = shore.attach("watch").subscribed("*.nav.**").unwrap();
+    let mut commands = vehicle.attach("driver").subscribed("cmd.**").unwrap();
+    let mut own = vehicle.attach("own").subscribed("nav.**").unwrap();
+    let tx = vehicle.attach("nav");
+    let att = DataMap::new()
+        .and("yaw", 12.5)
+        .and("pitch", -1.0)
+        .and("roll", 0.25);
+    let m = send_until_heard(&tx, &mut heard, Kind::Data, "nav.attitude", &att).await;
+    assert_eq!(
+        m.topic.as_str(),
+        "auv1.nav.attitude",
+        "the vehicle's name first on shore"
+    );
+    assert_eq!(m.kind, Kind::Data);
+    assert_eq!(*m.payload.to_map().unwrap(), att);
+    let o = m.origin();
+    assert_eq!(
+        (&*o.node, &*o.medium),
+        ("auv1", "net"),
+        "provenance rides along"
+    );
+    // the vehicle's own interface hears its sends locally, once, not back from Zenoh
+    let mine = next(&mut own).await;
+    assert_eq!((mine.topic.as_str(), mine.seq()), ("nav.attitude", 1));
+    // a command from shore reaches the vehicle as a command on its own topic
+    let course = DataMap::new()
+        .and("heading", 90.0)
+        .and("depth", 2.0)
+        .and("speed", 1.2);
+    let c = send_until_heard(
+        &shore.attach("pilot"),
+        &mut commands,
+        Kind::Command,
+        "auv1.cmd.course",
+        &course,
+    )
+    .await;
+    assert_eq!((c.topic.as_str(), c.kind), ("cmd.course", Kind::Command));
+    assert_eq!(*c.payload.to_map().unwrap(), course);
+    assert_eq!(&*c.origin().node, "shore");
+    // the link follows the connection
+    vehicle.close();
+    wait_link(&shore, false).await;
+    shore.close();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn datamaps_as_json_keep_their_provenance() {
+    let (vehicle, shore) = pair(true);
+    wait_link(&shore, true).await;
+    let mut heard = shore.attach("watch").subscribed("**").unwrap();
+    let pos = DataMap::new()
+        .and("lat", 43.5)
+        .and("lon", 16.44)
+        .and("fix", 4i64)
+        .and("source", "rtk");
+    let m = send_until_heard(
+        &vehicle.attach("gps"),
+        &mut heard,
+        Kind::Data,
+        "nav.position",
+        &pos,
+    )
+    .await;
+    assert_eq!(m.topic.as_str(), "auv1.nav.position");
+    assert_eq!(*m.payload.to_map().unwrap(), pos);
+    assert_eq!(&*m.origin().node, "auv1");
+    // bytes still go as a datagram
+    vehicle
+        .attach("raw")
+        .send("nav.raw", Payload::from(b"\x01\x02".as_slice()))
+        .await
+        .unwrap();
+    let raw = loop {
+        let m = next(&mut heard).await;
+        if m.topic.as_str() == "auv1.nav.raw" {
+            break m;
+        }
+    };
+    assert_eq!(raw.payload.as_bytes().unwrap().as_ref(), b"\x01\x02");
+    vehicle.close();
+    shore.close();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn what_other_zenoh_programs_send_is_read_or_counted() {
+    let port = free_port();
+    let shore = open(
+        "net",
+        "shore",
+        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    let mut heard = shore.attach("watch").subscribed("**").unwrap();
+    let mut cfg = zenoh::Config::default();
+    cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
+        .unwrap();
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    let other = zenoh::open(cfg).await.unwrap();
+    wait_link(&shore, true).await;
+    // JSON text is a datamap; until the subscription has reached the other side, put again
+    let mut got = None;
+    for _ in 0..100 {
+        other
+            .put("fleet/usv9/env/wind", r#"{"speed": 5.5, "angle": 45.0}"#)
+            .encoding(zenoh::bytes::Encoding::APPLICATION_JSON)
+            .await
+            .unwrap();
+        if let Ok(Some(m)) = timeout(Duration::from_millis(100), heard.recv()).await {
+            got = Some(m);
+            break;
+        }
+    }
+    let m = got.expect("the JSON sample is heard");
+    assert_eq!((m.topic.as_str(), m.kind), ("usv9.env.wind", Kind::Data));
+    assert_eq!(
+        m.payload.to_map().unwrap().get("speed"),
+        Some(&Value::Float(5.5))
+    );
+    assert_eq!(
+        &*m.origin().medium,
+        "net",
+        "numbered by the medium that heard it"
+    );
+    // a command says so in its encoding's schema
+    other
+        .put("fleet/usv9/cmd/stop", r#"{"action": "stop"}"#)
+        .encoding(zenoh::bytes::Encoding::from("application/json;command"))
+        .await
+        .unwrap();
+    let c = next(&mut heard).await;
+    assert_eq!((c.topic.as_str(), c.kind), ("usv9.cmd.stop", Kind::Command));
+    // other bytes are bytes
+    other
+        .put("fleet/usv9/log", vec![0u8, 159, 146, 150])
+        .await
+        .unwrap();
+    let b = next(&mut heard).await;
+    assert_eq!(
+        b.payload.as_bytes().unwrap().as_ref(),
+        &[0u8, 159, 146, 150]
+    );
+    // junk that says it is a seabus datagram, and a key that is no topic: counted, nothing else
+    other
+        .put("fleet/usv9/nav/x", vec![b'S', b'B', 9])
+        .encoding(zenoh::bytes::Encoding::APPLICATION_OCTET_STREAM.with_schema("seabus"))
+        .await
+        .unwrap();
+    other.put("fleet/usv9/a b", "x").await.unwrap();
+    other.put("fleet/usv9/after", "still here").await.unwrap();
+    let after = next(&mut heard).await;
+    assert_eq!(
+        after.topic.as_str(),
+        "usv9.after",
+        "the junk delivered nothing"
+    );
+    let rejected = shore.stats().rejected;
+    assert_eq!(rejected.get("bad-key"), Some(&1), "{rejected:?}");
+    assert_eq!(rejected.values().sum::<u64>(), 2, "{rejected:?}");
+    other.close().await.unwrap();
+    shore.close();
+}
+
+#[test]
+fn urls_say_what_is_wrong() {
+    let err = |u: &str| {
+        seabus_medium_zenoh::ZenohConfig::from_url(
+            &mut seabus_medium::url::MediumUrl::parse(u).unwrap(),
+        )
+        .unwrap_err()
+        .to_string()
+    };
+    assert!(
+        err("zenoh://?mode=hub").contains("option `mode=hub`: expected peer, client or router")
+    );
+    assert!(err("zenoh://?connect=tcp:1.2.3.4").contains("not a Zenoh endpoint"));
+    assert!(err("zenoh://?prefix=fleet/*").contains("option `prefix`"));
+    assert!(err("zenoh://host:7447").contains("names no host"));
+    assert!(err("zenoh://?mode=client&scout=false").contains("a client needs a router"));
+    assert!(err("zenoh://?colour=red").contains("unknown option"));
+}
