@@ -105,6 +105,16 @@ fn bad_urls_say_what_is_wrong() {
         "<seabus>\n  <medium name=\"net\" url=\"239.255.42.1:47800\"/>\n</seabus>\n",
         "2:22: bad medium URL `239.255.42.1:47800`: expected `scheme://…` (for example udp://239.255.42.1:47800)",
     );
+    expect_error(
+        "<seabus>\n  <medium name=\"fleet\" url=\"zenoh://?prefix=fleet/auv*\"/>\n</seabus>\n",
+        "2:24: bad medium URL `zenoh://?prefix=fleet/auv*`: option `prefix`: prefix `fleet/auv*`: \
+         `auv*` holds `*`, which Zenoh reserves",
+    );
+    expect_error(
+        "<seabus>\n  <medium name=\"fleet\" url=\"zenoh://?connect=tcp:shore\"/>\n</seabus>\n",
+        "2:24: bad medium URL `zenoh://?connect=tcp:shore`: option `connect=tcp:shore`: not a Zenoh \
+         endpoint (such as tcp/127.0.0.1:7447)",
+    );
 }
 
 #[test]

@@ -152,7 +152,9 @@ impl ZenohConfig {
     /// The Zenoh configuration: the file's, then these settings over it.
     pub fn zenoh(&self) -> Result<Config, String> {
         let mut c = match &self.config {
-            Some(path) => Config::from_file(path).map_err(|e| format!("{path}: {e}"))?,
+            Some(path) => {
+                Config::from_file(path).map_err(|e| config_error(path, &e.to_string()))?
+            }
             None => Config::default(),
         };
         let json = |v: &[String]| serde_json::to_string(v).unwrap_or_default();
@@ -171,6 +173,30 @@ impl ZenohConfig {
             set("scouting/multicast/enabled", self.scout.to_string())?;
         }
         Ok(c)
+    }
+}
+
+/// A Zenoh configuration file's error as `FILE:LINE:COL: what was expected` where Zenoh's message
+/// places it (` --> LINE:COL` … `= expected …`), else `FILE: the message's first line`.
+pub fn config_error(path: &str, message: &str) -> String {
+    let place = message.split(" --> ").nth(1).and_then(|rest| {
+        let pos = rest.split_whitespace().next()?;
+        let (line, col) = pos.split_once(':')?;
+        Some((line.parse::<u32>().ok()?, col.parse::<u32>().ok()?))
+    });
+    let what = message
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("= "))
+        .unwrap_or_else(|| message.lines().next().unwrap_or_default().trim());
+    // (Zenoh ends some messages with the place in its own source: not the user's business)
+    let what = what
+        .split(" at /")
+        .next()
+        .unwrap_or(what)
+        .trim_end_matches('.');
+    match place {
+        Some((line, col)) => format!("{path}:{line}:{col}: {what}"),
+        None => format!("{path}: {what}"),
     }
 }
 
@@ -325,16 +351,25 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
 }
 
 /// Keeps the link state: up while connected to a router or a peer (a router is up by itself).
+/// Waiting for the first connection is no alarm; losing one is.
 async fn watch_link(session: &Session, ingress: &Ingress, router: bool) {
+    let (mut was_up, mut waiting) = (false, false);
     loop {
         let connected = router
             || session.info().routers_zid().await.next().is_some()
             || session.info().peers_zid().await.next().is_some();
-        ingress.set_link(if connected {
-            LinkState::Up
+        if connected {
+            ingress.set_link(LinkState::Up);
+            was_up = true;
         } else {
-            LinkState::Down("no Zenoh router or peer connected".to_string())
-        });
+            let down = LinkState::Down("no Zenoh router or peer connected".to_string());
+            if was_up {
+                ingress.set_link(down);
+            } else if !waiting {
+                ingress.init_link(down);
+                waiting = true;
+            }
+        }
         if !ingress.is_open() {
             return;
         }

@@ -263,3 +263,34 @@ fn urls_say_what_is_wrong() {
     assert!(err("zenoh://?mode=client&scout=false").contains("a client needs a router"));
     assert!(err("zenoh://?colour=red").contains("unknown option"));
 }
+
+#[test]
+fn a_bad_zenoh_configuration_file_is_placed() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("zenoh.json5");
+    std::fs::write(
+        &path,
+        "{\n  mode: \"peer\",\n  connect: { endpoints: [\"tcp/1.2.3.4:7447\",] \n  bogus: 3,\n}\n",
+    )
+    .unwrap();
+    let p = path.display().to_string();
+    let url = format!("zenoh://?config={p}");
+    let err = seabus_medium_zenoh::ZenohConfig::from_url(
+        &mut seabus_medium::url::MediumUrl::parse(&url).unwrap(),
+    )
+    .unwrap()
+    .zenoh()
+    .unwrap_err();
+    assert!(
+        err.starts_with(&format!("{p}:3:45: expected array")),
+        "{err}"
+    );
+    assert!(!err.contains(".cargo"), "{err}");
+    let missing = seabus_medium_zenoh::ZenohConfig::from_url(
+        &mut seabus_medium::url::MediumUrl::parse("zenoh://?config=/nonexistent/z.json5").unwrap(),
+    )
+    .unwrap()
+    .zenoh()
+    .unwrap_err();
+    assert!(missing.starts_with("/nonexistent/z.json5: "), "{missing}");
+}
