@@ -35,6 +35,7 @@
 //! Who may depend on it: the program, to register `zenoh://` ([`register`]). It depends on the core
 //! only.
 
+pub mod fleet;
 pub mod keys;
 
 use bytes::Bytes;
@@ -72,6 +73,10 @@ pub struct ZenohConfig {
     pub scout: bool,
     /// Datamaps published as JSON.
     pub json: bool,
+    /// The fleet's key space, where each node's liveliness token lives.
+    pub fleet: String,
+    /// How soon a silent connection counts as lost, when no configuration file sets it.
+    pub lease: Duration,
 }
 
 const OPTIONS: &[&str] = &[
@@ -120,6 +125,21 @@ impl ZenohConfig {
         let config = url.take("config");
         let scout = url.take_flag("scout")?.unwrap_or(connect.is_empty());
         let json = url.take_flag("json")?.unwrap_or(false);
+        let fleet = match url.take("fleet") {
+            Some(f) => f.trim_matches('/').to_string(),
+            None => prefix.split('/').next().unwrap_or_default().to_string(),
+        };
+        keys::check_prefix(&fleet).map_err(|e| url.error(format!("option `fleet`: {e}")))?;
+        let lease = match url.take("lease") {
+            Some(text) => seabus_medium::parse::parse_duration(&text)
+                .filter(|d| *d >= Duration::from_millis(100))
+                .ok_or_else(|| {
+                    url.error(format!(
+                        "option `lease={text}`: expected a duration of 100ms or more"
+                    ))
+                })?,
+            None => Duration::from_secs(3),
+        };
         if mode == "client" && connect.is_empty() && config.is_none() && !scout {
             return Err(url.error("a client needs a router to connect to: ?connect=tcp/HOST:PORT"));
         }
@@ -132,6 +152,8 @@ impl ZenohConfig {
             config,
             scout,
             json,
+            fleet,
+            lease,
         })
     }
 
@@ -171,6 +193,12 @@ impl ZenohConfig {
         }
         if self.config.is_none() || !self.scout {
             set("scouting/multicast/enabled", self.scout.to_string())?;
+        }
+        if self.config.is_none() {
+            set(
+                "transport/link/tx/lease",
+                self.lease.as_millis().to_string(),
+            )?;
         }
         Ok(c)
     }
@@ -258,6 +286,8 @@ struct Hearing {
     sender: u64,
     ingress: Ingress,
     subscriptions: Arc<Mutex<Subscriptions>>,
+    /// the fleet's members, as their liveliness tokens come and go
+    fleet: fleet::Fleet,
 }
 
 #[derive(Default)]
@@ -297,7 +327,7 @@ impl Hearing {
 
     /// Hands a sample to the medium, or counts why it cannot be.
     fn receive(&self, sample: &Sample) {
-        if let Err((reason, why)) = read_sample(sample, &self.prefix, self.sender, &self.ingress) {
+        if let Err((reason, why)) = read_sample(sample, self) {
             self.ingress.reject(
                 reason,
                 format_args!("sample on {}: {why}", sample.key_expr()),
@@ -326,35 +356,75 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
             sender,
             ingress: o.ingress.clone(),
             subscriptions: Arc::default(),
+            fleet: fleet::Fleet::new(&cfg.fleet, o.ingress.clone()),
         },
     });
     o.ingress
         .init_link(LinkState::Down("the Zenoh session is opening".to_string()));
     let hearing = transport.hearing.clone();
     let router = cfg.mode == "router";
-    let task = tokio::spawn(async move {
-        let session = match zenoh::open(zconfig).await {
-            Ok(s) => s,
-            Err(e) => {
-                hearing.ingress.set_link(LinkState::Down(format!(
-                    "cannot open the Zenoh session: {e}"
-                )));
-                return;
-            }
+    let token = format!("{}/{}", cfg.fleet, o.node.name);
+    let members = transport.hearing.fleet.clone();
+    // The session's task is not aborted when the medium closes: a Zenoh session dropped while it
+    // opens would keep what it had bound. It ends by itself, closing the session, once the
+    // medium is closed.
+    tokio::spawn(async move {
+        let Some(session) = open_session(zconfig, &hearing.ingress).await else {
+            return;
         };
-        let _ = tx.send(Some(session.clone()));
-        hearing.declare_pending(&session).await;
-        watch_link(&session, &hearing.ingress, router).await;
+        if hearing.ingress.is_open() {
+            let _ = tx.send(Some(session.clone()));
+            hearing.declare_pending(&session).await;
+            // (held while the session lasts: dropped, it tells the fleet this node is gone)
+            let _membership = members.join(&session, &token).await;
+            watch_link(&session, &hearing.ingress, router, &members).await;
+        }
+        let _ = session.close().await;
     });
-    o.ingress.own_task(task.abort_handle());
     Ok(transport)
+}
+
+/// Opens the session, trying again while it cannot be (a client started before its router, a
+/// port still held): the link says why meanwhile, logged once. `None` once the medium is closed.
+async fn open_session(config: Config, ingress: &Ingress) -> Option<Session> {
+    let mut wait = Duration::from_millis(250);
+    let mut said = false;
+    loop {
+        match zenoh::open(config.clone()).await {
+            Ok(s) => return Some(s),
+            Err(e) => {
+                let why = e.to_string();
+                let why = why.split(" at /").next().unwrap_or(&why).trim().to_string();
+                let down = LinkState::Down(format!(
+                    "cannot open the Zenoh session (trying again): {why}"
+                ));
+                if said {
+                    ingress.init_link(down);
+                } else {
+                    ingress.set_link(down);
+                    said = true;
+                }
+            }
+        }
+        if !ingress.is_open() {
+            return None;
+        }
+        tokio::time::sleep(wait).await;
+        wait = (wait * 2).min(Duration::from_secs(4));
+    }
 }
 
 /// Keeps the link state: up while connected to a router or a peer (a router is up by itself).
 /// Waiting for the first connection is no alarm; losing one is.
-async fn watch_link(session: &Session, ingress: &Ingress, router: bool) {
+/// Every [`fleet::EVERY`] it also says who is in the fleet.
+async fn watch_link(session: &Session, ingress: &Ingress, router: bool, members: &fleet::Fleet) {
     let (mut was_up, mut waiting) = (false, false);
+    let mut ticks = 0u32;
     loop {
+        ticks = ticks.wrapping_add(1);
+        if ticks % fleet::EVERY_TICKS == 0 {
+            members.announce_all();
+        }
         let connected = router
             || session.info().routers_zid().await.next().is_some()
             || session.info().peers_zid().await.next().is_some();
@@ -404,7 +474,8 @@ type Dropped = (&'static str, String);
 
 /// Reads a sample: a seabus datagram (its own are skipped), a datamap seabus sent as JSON, or
 /// what a program that is not seabus sent.
-fn read_sample(sample: &Sample, prefix: &str, me: u64, ingress: &Ingress) -> Result<(), Dropped> {
+fn read_sample(sample: &Sample, hearing: &Hearing) -> Result<(), Dropped> {
+    let (prefix, me, ingress) = (&*hearing.prefix, hearing.sender, &hearing.ingress);
     let topic = keys::key_topic(prefix, sample.key_expr().as_str())
         .map_err(|e| ("bad-key", e.to_string()))?;
     let bytes = Bytes::from(sample.payload().to_bytes().into_owned());
@@ -413,6 +484,7 @@ fn read_sample(sample: &Sample, prefix: &str, me: u64, ingress: &Ingress) -> Res
         let (sender, mut msg) = datagram::decode(&bytes, &mut datagram::Origins::default())
             .map_err(|e| (e.kind(), e.to_string()))?;
         if sender != me {
+            hearing.fleet.heard(&msg);
             msg.topic = topic;
             ingress.deliver(msg);
         }
@@ -555,6 +627,7 @@ impl Transport for ZenohTransport {
 
     fn close(&self) {
         self.hearing.subscriptions().declared.clear();
+        // (a session still opening is closed by its task when it has opened)
         if let Some(session) = self.session.borrow().clone() {
             tokio::spawn(async move {
                 let _ = session.close().await;

@@ -104,8 +104,16 @@ async fn a_vehicle_and_a_shore_station_exchange_data_and_commands_with_provenanc
         "provenance rides along"
     );
     // the vehicle's own interface hears its sends locally, once, not back from Zenoh
-    let mine = next(&mut own).await;
-    assert_eq!((mine.topic.as_str(), mine.seq()), ("nav.attitude", 1));
+    let mut seqs = Vec::new();
+    while seqs.last() != Some(&m.seq()) {
+        let mine = next(&mut own).await;
+        assert_eq!(mine.topic.as_str(), "nav.attitude");
+        seqs.push(mine.seq());
+    }
+    assert!(
+        seqs.windows(2).all(|w| w[0] < w[1]),
+        "each send once: {seqs:?}"
+    );
     // a command from shore reaches the vehicle as a command on its own topic
     let course = DataMap::new()
         .and("heading", 90.0)
@@ -132,7 +140,7 @@ async fn a_vehicle_and_a_shore_station_exchange_data_and_commands_with_provenanc
 async fn datamaps_as_json_keep_their_provenance() {
     let (vehicle, shore) = pair(true);
     wait_link(&shore, true).await;
-    let mut heard = shore.attach("watch").subscribed("**").unwrap();
+    let mut heard = shore.attach("watch").subscribed("auv1.**").unwrap();
     let pos = DataMap::new()
         .and("lat", 43.5)
         .and("lon", 16.44)
@@ -174,7 +182,7 @@ async fn what_other_zenoh_programs_send_is_read_or_counted() {
         "shore",
         &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
     );
-    let mut heard = shore.attach("watch").subscribed("**").unwrap();
+    let mut heard = shore.attach("watch").subscribed("usv9.**").unwrap();
     let mut cfg = zenoh::Config::default();
     cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
         .unwrap();
@@ -293,4 +301,98 @@ fn a_bad_zenoh_configuration_file_is_placed() {
     .zenoh()
     .unwrap_err();
     assert!(missing.starts_with("/nonexistent/z.json5: "), "{missing}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_shore_sees_which_vehicles_are_in_the_fleet_and_which_left() {
+    let port = free_port();
+    let shore = open(
+        "fleet",
+        "shore",
+        &format!("zenoh://?mode=router&listen=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    let mut fleet = shore.attach("watch").subscribed("seabus.fleet").unwrap();
+    let vehicles: Vec<Medium> = (1..=3)
+        .map(|i| {
+            open(
+                "fleet",
+                &format!("auv{i}"),
+                &format!("zenoh://?mode=client&connect=tcp/127.0.0.1:{port}&prefix=fleet/auv{i}"),
+            )
+        })
+        .collect();
+    // every vehicle comes online
+    let mut online = std::collections::BTreeSet::new();
+    for _ in 0..50 {
+        if online.len() == 3 {
+            break;
+        }
+        let m = next(&mut fleet).await;
+        let map = m.payload.to_map().unwrap();
+        let node = map.get_str("node").unwrap().to_string();
+        if map.get_bool("online") == Some(true) && node.starts_with("auv") {
+            online.insert(node);
+        }
+    }
+    assert_eq!(online.len(), 3, "{online:?}");
+    // one leaves: it is offline within 5 s, the others stay
+    let left_at = tokio::time::Instant::now();
+    let mut gone = false;
+    vehicles[1].close();
+    for _ in 0..50 {
+        let m = next(&mut fleet).await;
+        let map = m.payload.to_map().unwrap();
+        if map.get_str("node") == Some("auv2") && map.get_bool("online") == Some(false) {
+            gone = true;
+            break;
+        }
+        assert_ne!(
+            map.get_bool("online"),
+            Some(false),
+            "only auv2 leaves: {map:?}"
+        );
+    }
+    assert!(gone, "auv2 is shown offline");
+    assert!(
+        left_at.elapsed() < Duration::from_secs(5),
+        "{:?}",
+        left_at.elapsed()
+    );
+    for v in [&vehicles[0], &vehicles[2]] {
+        v.close();
+    }
+    shore.close();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_vehicle_started_before_its_router_connects_when_the_router_comes() {
+    let port = free_port();
+    let vehicle = open(
+        "fleet",
+        "auv1",
+        &format!("zenoh://?mode=client&connect=tcp/127.0.0.1:{port}&prefix=fleet/auv1"),
+    );
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    assert!(
+        matches!(vehicle.link_state(), LinkState::Down(_)),
+        "{:?}",
+        vehicle.link_state()
+    );
+    let router = open(
+        "fleet",
+        "shore",
+        &format!("zenoh://?mode=router&listen=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    wait_link(&vehicle, true).await;
+    // and when the router goes and comes back, it reconnects by itself
+    router.close();
+    wait_link(&vehicle, false).await;
+    let again = open(
+        "fleet",
+        "shore",
+        &format!("zenoh://?mode=router&listen=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    wait_link(&vehicle, true).await;
+    vehicle.close();
+    again.close();
 }

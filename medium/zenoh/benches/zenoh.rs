@@ -1,0 +1,913 @@
+//! The Zenoh medium against the bare `zenoh` crate on loopback, side by side in one run.
+//!
+//! 1. **Throughput** (peer mode, one session listening on `tcp/127.0.0.1:PORT`, the other
+//!    connecting): a publisher sends a fixed number of 64 B or 4 kB messages on one key as fast as
+//!    it can; the subscriber counts what arrives. Both sides use seabus's quality of service for
+//!    data (`CongestionControl::Drop`, `Priority::Data`, not express), so a publisher that outruns
+//!    the link loses messages; the figure is the *delivered* rate, from the first message sent to
+//!    the last one received (the drain ends when nothing more arrives for 300 ms), and how many of
+//!    those sent arrived is printed beside it. Seabus: `Interface::send` of a bytes payload on one
+//!    `zenoh://` medium, the messages taken from an interface subscribed to the topic on the other
+//!    (the same key expression as bare's). Bare: a declared publisher's `put`, counted in the
+//!    subscriber's callback. Also shown: bare Zenoh with the subscriber's samples taken from a
+//!    FIFO channel by a task (the hand-over from Zenoh's thread to the program's that a seabus
+//!    interface also makes), and both subscribed by wildcard (`**`, key `bench/**`), as a shore
+//!    station subscribes. Best of [`ROUNDS`] rounds taken in turn.
+//! 2. **Latency**: the same pairs, 1000 messages of 64 B at 500 per second, one-way (the sender's
+//!    wall clock in the payload, read against the receiver's in the same process); best p50 and
+//!    best p99 of [`LAT_ROUNDS`] rounds taken in turn.
+//! 3. **Fleet**: a bare Zenoh router on `tcp/127.0.0.1:PORT`; 20 vehicles, clients of the router,
+//!    each publishing navigation (position, attitude, velocity: three small datamaps) at 10 Hz; one
+//!    shore station, a client of the router, subscribed to the whole fleet. The shore runs in a
+//!    child process (this binary again), so its CPU time (`getrusage`) is its own; it also reads
+//!    the bytes its TCP connection received (`TCP_INFO`). Seabus: 20 `zenoh://` media with prefix
+//!    `fleet/auvN` sending datamaps, a shore medium with prefix `fleet` and one interface taking
+//!    everything (binary datagrams, and again with `json=true`). Bare: 20 sessions putting the
+//!    same datamaps as JSON text, the shore's callback parsing each into a `serde_json::Value`.
+//!    Payload bytes are what the samples carried: the JSON text for bare; for seabus the datagram
+//!    (or the JSON text and the attached datagram), its length found again on the shore from the
+//!    message received. The medium's own `seabus.fleet` announcements are not counted.
+//!
+//! Every session has multicast scouting off and listens on loopback only.
+//!
+//! ```text
+//! cargo bench -p seabus-medium-zenoh --bench zenoh [-- throughput|latency|fleet]
+//! ```
+//!
+//! `-- profile [SIZE]` runs only seabus's flood (64 B unless SIZE is given), five times, to be
+//! profiled (`perf record -g`).
+
+#[path = "../../core/benches/common.rs"]
+mod common;
+
+use bytes::Bytes;
+use seabus_medium::{DataMap, Interface, LinkState, Medium, Node, Payload, Stamp, Topic};
+use std::collections::HashSet;
+use std::io::BufRead;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, LazyLock, Mutex};
+use std::time::{Duration, Instant};
+use tokio::io::{AsyncBufReadExt, AsyncWriteExt};
+use zenoh::bytes::{Encoding, ZBytes};
+use zenoh::handlers::FifoChannel;
+use zenoh::pubsub::Publisher;
+use zenoh::qos::{CongestionControl, Priority};
+use zenoh::{Config, Session};
+
+/// Rounds of each throughput run, taken in turn.
+const ROUNDS: usize = 3;
+/// Rounds of each latency run, taken in turn.
+const LAT_ROUNDS: usize = 3;
+const LAT_N: usize = 1000;
+const LAT_RATE: f64 = 500.0;
+const LAT_SIZE: usize = 64;
+/// The drain ends when nothing arrives for this long.
+const QUIET: Duration = Duration::from_millis(300);
+/// The key (and seabus topic `bench.data` under prefix `bench`) of the pair.
+const KEY: &str = "bench/bench/data";
+
+const VEHICLES: usize = 20;
+const NAV_HZ: f64 = 10.0;
+const FLEET_SECONDS: f64 = 4.0;
+const FLEET_ROUNDS: usize = 3;
+
+static T0: LazyLock<Instant> = LazyLock::new(Instant::now);
+
+fn since_t0() -> u64 {
+    T0.elapsed().as_nanos() as u64
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .map(|a| a.port())
+        .expect("an ephemeral port")
+}
+
+/// A Zenoh configuration: `mode`, loopback endpoints, multicast scouting off.
+fn zconfig(mode: &str, listen: &[String], connect: &[String]) -> Config {
+    let mut c = Config::default();
+    let list = |v: &[String]| serde_json::to_string(v).expect("json");
+    c.insert_json5("mode", &format!("\"{mode}\""))
+        .expect("mode");
+    c.insert_json5("scouting/multicast/enabled", "false")
+        .expect("scouting");
+    c.insert_json5("listen/endpoints", &list(listen))
+        .expect("listen");
+    c.insert_json5("connect/endpoints", &list(connect))
+        .expect("connect");
+    c
+}
+
+fn open_medium(node: &str, url: &str) -> Medium {
+    seabus_medium_zenoh::schemes()
+        .open("net", url, &Node::new(node))
+        .unwrap_or_else(|e| panic!("{url}: {e}"))
+}
+
+/// What a receiver saw.
+#[derive(Default)]
+struct Seen {
+    count: AtomicU64,
+    /// when the last message arrived, ns since [`T0`]
+    last: AtomicU64,
+    /// one-way latencies (ns), when kept
+    latencies: Mutex<Vec<u64>>,
+    keep_latencies: bool,
+}
+
+impl Seen {
+    fn new(keep_latencies: bool) -> Arc<Seen> {
+        Arc::new(Seen {
+            keep_latencies,
+            ..Seen::default()
+        })
+    }
+
+    fn hit(&self, data: &[u8]) {
+        if self.keep_latencies && data.len() >= 8 {
+            let sent = i64::from_le_bytes(data[..8].try_into().expect("8 bytes"));
+            let lat = (Stamp::now().0 - sent).max(0) as u64;
+            self.latencies.lock().expect("lock").push(lat);
+        }
+        self.last.store(since_t0(), Ordering::Relaxed);
+        self.count.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Side {
+    /// two seabus `zenoh://` media, the interface subscribed to the topic
+    Seabus,
+    /// two bare sessions, the subscriber's callback counting
+    Bare,
+    /// two bare sessions, samples taken from a FIFO channel by a task
+    BareChannel,
+    /// seabus, the interface subscribed to `**` (key `bench/**`), as a shore station subscribes
+    SeabusWild,
+    /// bare, the callback's subscriber on `bench/**`
+    BareWild,
+}
+
+impl Side {
+    fn label(self) -> &'static str {
+        match self {
+            Side::Seabus => "seabus",
+            Side::Bare => "bare (callback)",
+            Side::BareChannel => "bare (channel)",
+            Side::SeabusWild => "seabus, on **",
+            Side::BareWild => "bare, on bench/**",
+        }
+    }
+}
+
+/// A publisher and a subscriber on loopback.
+enum Pair {
+    Seabus {
+        tx: Interface,
+        topic: Topic,
+        media: [Medium; 2],
+    },
+    Bare {
+        publisher: Publisher<'static>,
+        sessions: [Session; 2],
+        _subscriber: Box<dyn Send>,
+    },
+}
+
+impl Pair {
+    async fn open(side: Side, seen: Arc<Seen>, capacity: usize) -> Pair {
+        let port = free_port();
+        let listen = format!("tcp/127.0.0.1:{port}");
+        match side {
+            Side::Seabus | Side::SeabusWild => {
+                let rx = open_medium(
+                    "rx",
+                    &format!("zenoh://?listen={listen}&prefix=bench&scout=false"),
+                );
+                let tx = open_medium(
+                    "tx",
+                    &format!(
+                        "zenoh://?connect={listen}&listen=tcp/127.0.0.1:0&prefix=bench&scout=false"
+                    ),
+                );
+                let mut port = rx
+                    .attach_with("rx", capacity, 16)
+                    .subscribed(if side == Side::Seabus {
+                        "bench.data"
+                    } else {
+                        "**"
+                    })
+                    .expect("pattern");
+                tokio::spawn(async move {
+                    while let Some(m) = port.recv().await {
+                        seen.hit(m.payload.as_bytes().map_or(&[][..], |b| &b[..]));
+                    }
+                });
+                Pair::Seabus {
+                    tx: tx.attach("tx"),
+                    topic: Topic::new("bench.data").expect("topic"),
+                    media: [rx, tx],
+                }
+            }
+            Side::Bare | Side::BareChannel | Side::BareWild => {
+                let rx = zenoh::open(zconfig("peer", std::slice::from_ref(&listen), &[]))
+                    .await
+                    .expect("session");
+                let tx = zenoh::open(zconfig("peer", &["tcp/127.0.0.1:0".to_string()], &[listen]))
+                    .await
+                    .expect("session");
+                let subscriber: Box<dyn Send> = if side != Side::BareChannel {
+                    let seen = seen.clone();
+                    let key = if side == Side::Bare { KEY } else { "bench/**" };
+                    Box::new(
+                        rx.declare_subscriber(key)
+                            .callback(move |s| seen.hit(&s.payload().to_bytes()))
+                            .await
+                            .expect("subscriber"),
+                    )
+                } else {
+                    let sub = rx
+                        .declare_subscriber(KEY)
+                        .with(FifoChannel::new(capacity))
+                        .await
+                        .expect("subscriber");
+                    let handler = sub.handler().clone();
+                    tokio::spawn(async move {
+                        while let Ok(s) = handler.recv_async().await {
+                            seen.hit(&s.payload().to_bytes());
+                        }
+                    });
+                    Box::new(sub)
+                };
+                let publisher = tx
+                    .declare_publisher(KEY)
+                    .congestion_control(CongestionControl::Drop)
+                    .priority(Priority::Data)
+                    .await
+                    .expect("publisher");
+                Pair::Bare {
+                    publisher,
+                    sessions: [rx, tx],
+                    _subscriber: subscriber,
+                }
+            }
+        }
+    }
+
+    async fn put(&self, data: &Bytes) {
+        match self {
+            Pair::Seabus { tx, topic, .. } => {
+                let _ = tx.send(topic, Payload::from(data.clone())).await;
+            }
+            Pair::Bare { publisher, .. } => {
+                let _ = publisher.put(ZBytes::from(data.clone())).await;
+            }
+        }
+    }
+
+    /// Sends until the subscriber hears, then lets the warm-up drain and clears the count.
+    async fn warm_up(&self, seen: &Seen, data: &Bytes) {
+        let deadline = Instant::now() + Duration::from_secs(15);
+        while seen.count.load(Ordering::Relaxed) == 0 {
+            assert!(Instant::now() < deadline, "the pair never connected");
+            self.put(data).await;
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        seen.count.store(0, Ordering::Relaxed);
+        seen.latencies.lock().expect("lock").clear();
+    }
+
+    async fn close(self) {
+        match self {
+            Pair::Seabus { media, .. } => {
+                for m in media {
+                    m.close();
+                }
+            }
+            Pair::Bare {
+                publisher,
+                sessions,
+                _subscriber,
+            } => {
+                drop(publisher);
+                drop(_subscriber);
+                for s in sessions {
+                    let _ = s.close().await;
+                }
+            }
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// Waits until `seen` has `n` messages or nothing arrives for [`QUIET`].
+async fn drain(seen: &Seen, n: u64) {
+    let mut last_count = u64::MAX;
+    let mut still_since = Instant::now();
+    loop {
+        let c = seen.count.load(Ordering::Relaxed);
+        if c >= n {
+            return;
+        }
+        if c != last_count {
+            last_count = c;
+            still_since = Instant::now();
+        } else if still_since.elapsed() >= QUIET {
+            return;
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+}
+
+struct Flood {
+    /// sent per second
+    offered: f64,
+    /// delivered per second
+    delivered: f64,
+    arrived: u64,
+}
+
+async fn flood(side: Side, size: usize, n: usize) -> Flood {
+    let seen = Seen::new(false);
+    let pair = Pair::open(side, seen.clone(), n + 16).await;
+    let data = Bytes::from(vec![0x5au8; size]);
+    pair.warm_up(&seen, &data).await;
+    let start = since_t0();
+    for _ in 0..n {
+        pair.put(&data).await;
+    }
+    let sent = since_t0();
+    drain(&seen, n as u64).await;
+    let arrived = seen.count.load(Ordering::Relaxed);
+    let last = seen.last.load(Ordering::Relaxed).max(start + 1);
+    pair.close().await;
+    Flood {
+        offered: n as f64 / ((sent - start) as f64 * 1e-9),
+        delivered: arrived as f64 / ((last - start) as f64 * 1e-9),
+        arrived,
+    }
+}
+
+async fn one_way(side: Side) -> (f64, f64) {
+    let seen = Seen::new(true);
+    let pair = Pair::open(side, seen.clone(), LAT_N + 16).await;
+    let mut data = vec![0u8; LAT_SIZE];
+    let stamped = |data: &mut Vec<u8>| {
+        data[..8].copy_from_slice(&Stamp::now().0.to_le_bytes());
+        Bytes::copy_from_slice(data)
+    };
+    pair.warm_up(&seen, &stamped(&mut data)).await;
+    let start = tokio::time::Instant::now();
+    for i in 0..LAT_N {
+        tokio::time::sleep_until(start + Duration::from_secs_f64(i as f64 / LAT_RATE)).await;
+        pair.put(&stamped(&mut data)).await;
+    }
+    drain(&seen, LAT_N as u64).await;
+    pair.close().await;
+    let mut l: Vec<Duration> = std::mem::take(&mut *seen.latencies.lock().expect("lock"))
+        .into_iter()
+        .map(Duration::from_nanos)
+        .collect();
+    assert!(
+        l.len() >= LAT_N * 9 / 10,
+        "only {} of {LAT_N} arrived",
+        l.len()
+    );
+    l.sort();
+    (common::quantile_us(&l, 0.5), common::quantile_us(&l, 0.99))
+}
+
+const PAIR_SIDES: [Side; 3] = [Side::Bare, Side::BareChannel, Side::Seabus];
+const FLOOD_SIDES: [Side; 5] = [
+    Side::Bare,
+    Side::BareChannel,
+    Side::Seabus,
+    Side::BareWild,
+    Side::SeabusWild,
+];
+
+async fn throughput() {
+    println!(
+        "Throughput, peer to peer on loopback, CongestionControl::Drop on both sides, best of {ROUNDS} rounds taken in turn:"
+    );
+    for (size, n) in [(64usize, 200_000usize), (4096, 50_000)] {
+        let mut best: Vec<Option<Flood>> = (0..FLOOD_SIDES.len()).map(|_| None).collect();
+        for _ in 0..ROUNDS {
+            for (i, side) in FLOOD_SIDES.iter().enumerate() {
+                let f = flood(*side, size, n).await;
+                if best[i].as_ref().is_none_or(|b| f.delivered > b.delivered) {
+                    best[i] = Some(f);
+                }
+            }
+        }
+        let best: Vec<Flood> = best.into_iter().map(|b| b.expect("a round")).collect();
+        for (side, f) in FLOOD_SIDES.iter().zip(&best) {
+            println!(
+                "  {size:>4} B {:<17} delivered {:>12} ({} of {n} arrived; offered {})",
+                side.label(),
+                common::rate(f.delivered),
+                f.arrived,
+                common::rate(f.offered),
+            );
+        }
+        println!(
+            "  {size:>4} B ratio seabus / bare (callback) {:.2}, seabus / bare (channel) {:.2} (target: at least 0.80 of bare)",
+            best[2].delivered / best[0].delivered,
+            best[2].delivered / best[1].delivered
+        );
+        println!(
+            "  {size:>4} B ratio seabus on ** / bare on bench/** {:.2}",
+            best[4].delivered / best[3].delivered
+        );
+    }
+}
+
+async fn latency() {
+    println!(
+        "One-way latency, peer to peer on loopback, {LAT_N} messages of {LAT_SIZE} B at {LAT_RATE} per second, best of {LAT_ROUNDS} rounds taken in turn:"
+    );
+    let mut best = [(f64::MAX, f64::MAX); 3];
+    for _ in 0..LAT_ROUNDS {
+        for (i, side) in PAIR_SIDES.iter().enumerate() {
+            let (p50, p99) = one_way(*side).await;
+            best[i] = (best[i].0.min(p50), best[i].1.min(p99));
+        }
+    }
+    for (side, (p50, p99)) in PAIR_SIDES.iter().zip(best) {
+        println!("  {:<17} p50 {p50:.1} us  p99 {p99:.1} us", side.label());
+    }
+    println!(
+        "  ratio seabus / bare (callback) p50 {:.2} p99 {:.2}; seabus / bare (channel) p50 {:.2} p99 {:.2} (target: within 1.30 of bare)",
+        best[2].0 / best[0].0,
+        best[2].1 / best[0].1,
+        best[2].0 / best[1].0,
+        best[2].1 / best[1].1
+    );
+}
+
+// ---------------------------------------------------------------- fleet
+
+/// A vehicle's navigation at tick `n`: three small datamaps.
+fn navigation(v: usize, n: u64) -> [(&'static str, DataMap); 3] {
+    let t = n as f64 * 0.1 + v as f64;
+    [
+        (
+            "nav.position",
+            DataMap::new()
+                .with("lat", 43.508_123 + t * 1e-6)
+                .with("lon", 16.440_234 + t * 1e-6)
+                .with("depth", 12.5 + (t * 0.1).sin())
+                .with("altitude", 8.25 - (t * 0.1).cos()),
+        ),
+        (
+            "nav.attitude",
+            DataMap::new()
+                .with("roll", 0.5 * (t * 0.3).sin())
+                .with("pitch", -1.5 + 0.2 * (t * 0.2).cos())
+                .with("yaw", (t * 3.0) % 360.0),
+        ),
+        (
+            "nav.velocity",
+            DataMap::new()
+                .with("u", 1.5 + 0.01 * (t * 0.7).sin())
+                .with("v", 0.02 * (t * 0.5).cos())
+                .with("w", -0.01),
+        ),
+    ]
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Fleet {
+    Seabus,
+    SeabusJson,
+    Bare,
+}
+
+impl Fleet {
+    fn arg(self) -> &'static str {
+        match self {
+            Fleet::Seabus => "seabus",
+            Fleet::SeabusJson => "seabus-json",
+            Fleet::Bare => "bare",
+        }
+    }
+
+    fn label(self) -> &'static str {
+        match self {
+            Fleet::Seabus => "seabus (datagrams)",
+            Fleet::SeabusJson => "seabus (json=true)",
+            Fleet::Bare => "bare (JSON)",
+        }
+    }
+}
+
+/// The vehicles of one fleet run: their publishing tasks and what to close.
+struct Vehicles {
+    tasks: Vec<tokio::task::JoinHandle<()>>,
+    media: Vec<Medium>,
+    sessions: Vec<Session>,
+}
+
+impl Vehicles {
+    async fn start(kind: Fleet, router: &str) -> Vehicles {
+        let mut v = Vehicles {
+            tasks: Vec::new(),
+            media: Vec::new(),
+            sessions: Vec::new(),
+        };
+        let period = Duration::from_secs_f64(1.0 / NAV_HZ);
+        for i in 0..VEHICLES {
+            // the vehicles' ticks spread over the period
+            let phase = period.mul_f64(i as f64 / VEHICLES as f64);
+            if kind == Fleet::Bare {
+                let s = zenoh::open(zconfig("client", &[], &[router.to_string()]))
+                    .await
+                    .expect("vehicle session");
+                let mut pubs = Vec::new();
+                for (topic, _) in navigation(i, 0) {
+                    let key = format!("fleet/auv{i}/{}", topic.replace('.', "/"));
+                    pubs.push(
+                        s.declare_publisher(key)
+                            .congestion_control(CongestionControl::Drop)
+                            .priority(Priority::Data)
+                            .encoding(Encoding::APPLICATION_JSON)
+                            .await
+                            .expect("publisher"),
+                    );
+                }
+                v.sessions.push(s);
+                v.tasks.push(tokio::spawn(async move {
+                    tokio::time::sleep(phase).await;
+                    let mut tick = tokio::time::interval(period);
+                    for n in 0.. {
+                        tick.tick().await;
+                        for (p, (_, map)) in pubs.iter().zip(navigation(i, n)) {
+                            let text = seabus_medium::json::to_json(&map).expect("json");
+                            let _ = p.put(text).await;
+                        }
+                    }
+                }));
+            } else {
+                let json = kind == Fleet::SeabusJson;
+                let m = open_medium(
+                    &format!("auv{i}"),
+                    &format!(
+                        "zenoh://?mode=client&connect={router}&prefix=fleet/auv{i}&scout=false&json={json}"
+                    ),
+                );
+                let tx = m.attach("nav");
+                v.media.push(m);
+                v.tasks.push(tokio::spawn(async move {
+                    tokio::time::sleep(phase).await;
+                    let mut tick = tokio::time::interval(period);
+                    for n in 0.. {
+                        tick.tick().await;
+                        for (topic, map) in navigation(i, n) {
+                            let _ = tx.send(topic, map).await;
+                        }
+                    }
+                }));
+            }
+        }
+        v
+    }
+
+    async fn stop(self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+        for m in self.media {
+            m.close();
+        }
+        for s in self.sessions {
+            let _ = s.close().await;
+        }
+    }
+}
+
+/// What the shore reported for one fleet run.
+struct ShoreFigures {
+    cpu_share: f64,
+    messages: u64,
+    payload_bytes: u64,
+    tcp_bytes: u64,
+    seconds: f64,
+    vehicles: u64,
+}
+
+impl ShoreFigures {
+    fn per_vehicle(&self, bytes: u64) -> f64 {
+        bytes as f64 / self.seconds / VEHICLES as f64
+    }
+}
+
+async fn fleet_run(kind: Fleet, router_port: u16) -> ShoreFigures {
+    let router = format!("tcp/127.0.0.1:{router_port}");
+    let mut child = tokio::process::Command::new(std::env::current_exe().expect("this binary"))
+        .args(["--shore", kind.arg(), &router])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .kill_on_drop(true)
+        .spawn()
+        .expect("the shore starts");
+    let mut stdin = child.stdin.take().expect("stdin");
+    let mut lines = tokio::io::BufReader::new(child.stdout.take().expect("stdout")).lines();
+    let ready = tokio::time::timeout(Duration::from_secs(20), lines.next_line())
+        .await
+        .expect("the shore is ready in time")
+        .expect("the shore's output");
+    assert_eq!(ready.as_deref(), Some("ready"));
+    let vehicles = Vehicles::start(kind, &router).await;
+    // sessions open, subscriptions reach the vehicles, the first ticks pass
+    tokio::time::sleep(Duration::from_millis(1200)).await;
+    stdin.write_all(b"go\n").await.expect("go");
+    stdin.flush().await.expect("go");
+    tokio::time::sleep(Duration::from_secs_f64(FLEET_SECONDS)).await;
+    stdin.write_all(b"stop\n").await.expect("stop");
+    stdin.flush().await.expect("stop");
+    let result = tokio::time::timeout(Duration::from_secs(10), lines.next_line())
+        .await
+        .expect("the shore answers in time")
+        .expect("the shore's output")
+        .expect("a result line");
+    vehicles.stop().await;
+    let _ = tokio::time::timeout(Duration::from_secs(5), child.wait()).await;
+    let f: Vec<f64> = result
+        .split_whitespace()
+        .map(|x| x.parse().expect("a number"))
+        .collect();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    ShoreFigures {
+        cpu_share: 100.0 * f[3] / f[4],
+        messages: f[0] as u64,
+        payload_bytes: f[1] as u64,
+        tcp_bytes: f[2] as u64,
+        seconds: f[4],
+        vehicles: f[5] as u64,
+    }
+}
+
+async fn fleet() {
+    let port = free_port();
+    let router = zenoh::open(zconfig("router", &[format!("tcp/127.0.0.1:{port}")], &[]))
+        .await
+        .expect("the router opens");
+    println!(
+        "Fleet: {VEHICLES} vehicles × 3 navigation topics at {NAV_HZ} Hz through one router into one shore station (its own process), {FLEET_SECONDS} s per run, lowest shore CPU of {FLEET_ROUNDS} rounds taken in turn:"
+    );
+    let kinds = [Fleet::Bare, Fleet::Seabus, Fleet::SeabusJson];
+    let mut best: Vec<Option<ShoreFigures>> = kinds.iter().map(|_| None).collect();
+    for _ in 0..FLEET_ROUNDS {
+        for (i, kind) in kinds.iter().enumerate() {
+            let f = fleet_run(*kind, port).await;
+            if best[i].as_ref().is_none_or(|b| f.cpu_share < b.cpu_share) {
+                best[i] = Some(f);
+            }
+        }
+    }
+    let expected = (VEHICLES as f64 * 3.0 * NAV_HZ * FLEET_SECONDS).round() as u64;
+    let best: Vec<ShoreFigures> = best.into_iter().map(|b| b.expect("a round")).collect();
+    for (kind, f) in kinds.iter().zip(&best) {
+        println!(
+            "  {:<19} shore CPU {:.2} % of a core; per vehicle: payload {:.0} B/s, TCP {:.0} B/s; {} messages (about {expected} sent) from {} vehicles",
+            kind.label(),
+            f.cpu_share,
+            f.per_vehicle(f.payload_bytes),
+            f.per_vehicle(f.tcp_bytes),
+            f.messages,
+            f.vehicles
+        );
+    }
+    for (i, kind) in kinds.iter().enumerate().skip(1) {
+        println!(
+            "  ratio {} / bare: shore CPU {:.2}, payload bytes {:.2}, TCP bytes {:.2}",
+            kind.label(),
+            best[i].cpu_share / best[0].cpu_share,
+            best[i].per_vehicle(best[i].payload_bytes) / best[0].per_vehicle(best[0].payload_bytes),
+            best[i].per_vehicle(best[i].tcp_bytes) / best[0].per_vehicle(best[0].tcp_bytes),
+        );
+    }
+    let _ = router.close().await;
+}
+
+// ---------------------------------------------------------------- the shore (child process)
+
+fn cpu_seconds() -> f64 {
+    // SAFETY: getrusage fills the struct we own
+    let mut u: libc::rusage = unsafe { std::mem::zeroed() };
+    unsafe { libc::getrusage(libc::RUSAGE_SELF, &mut u) };
+    let t = |v: libc::timeval| v.tv_sec as f64 + v.tv_usec as f64 * 1e-6;
+    t(u.ru_utime) + t(u.ru_stime)
+}
+
+/// Bytes received so far on this process's TCP sockets (`TCP_INFO`'s `tcpi_bytes_received`).
+fn tcp_bytes_received() -> u64 {
+    let Ok(dir) = std::fs::read_dir("/proc/self/fd") else {
+        return 0;
+    };
+    let mut total = 0;
+    for e in dir.flatten() {
+        let is_socket = std::fs::read_link(e.path())
+            .map(|l| l.to_string_lossy().starts_with("socket:"))
+            .unwrap_or(false);
+        let Some(fd) = e.file_name().to_str().and_then(|n| n.parse::<i32>().ok()) else {
+            continue;
+        };
+        if !is_socket {
+            continue;
+        }
+        // SAFETY: getsockopt writes at most `len` bytes into the struct we own
+        let mut info: libc::tcp_info = unsafe { std::mem::zeroed() };
+        let mut len = std::mem::size_of::<libc::tcp_info>() as libc::socklen_t;
+        let r = unsafe {
+            libc::getsockopt(
+                fd,
+                libc::IPPROTO_TCP,
+                libc::TCP_INFO,
+                (&mut info as *mut libc::tcp_info).cast(),
+                &mut len,
+            )
+        };
+        if r == 0 {
+            total += info.tcpi_bytes_received;
+        }
+    }
+    total
+}
+
+#[derive(Default)]
+struct ShoreSeen {
+    messages: AtomicU64,
+    bytes: AtomicU64,
+    vehicles: Mutex<HashSet<String>>,
+}
+
+impl ShoreSeen {
+    fn hit(&self, vehicle: &str, bytes: usize) {
+        self.messages.fetch_add(1, Ordering::Relaxed);
+        self.bytes.fetch_add(bytes as u64, Ordering::Relaxed);
+        let mut v = self.vehicles.lock().expect("lock");
+        if !v.contains(vehicle) {
+            v.insert(vehicle.to_string());
+        }
+    }
+}
+
+/// The shore station: opens, says `ready`, measures between `go` and `stop` on stdin, prints
+/// `messages payload-bytes tcp-bytes cpu-seconds wall-seconds vehicles`.
+fn shore(kind: &str, router: &str) {
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let seen = Arc::new(ShoreSeen::default());
+    let keep: Box<dyn std::any::Any> = rt.block_on(async {
+        if kind == "bare" {
+            let s = zenoh::open(zconfig("client", &[], &[router.to_string()]))
+                .await
+                .expect("shore session");
+            let seen = seen.clone();
+            let sub = s
+                .declare_subscriber("fleet/**")
+                .callback(move |sample| {
+                    let payload = sample.payload().to_bytes();
+                    let value: serde_json::Value =
+                        serde_json::from_slice(&payload).unwrap_or_default();
+                    std::hint::black_box(value);
+                    let vehicle = sample.key_expr().as_str().split('/').nth(1).unwrap_or("");
+                    let att = sample.attachment().map_or(0, |a| a.len());
+                    seen.hit(vehicle, payload.len() + att);
+                })
+                .await
+                .expect("subscriber");
+            Box::new((s, sub)) as Box<dyn std::any::Any>
+        } else {
+            let url = format!("zenoh://?mode=client&connect={router}&prefix=fleet&scout=false");
+            let m = open_medium("shore", &url);
+            let mut port = m
+                .attach_with("shore", 4096, 16)
+                .subscribed("**")
+                .expect("pattern");
+            let json = kind == "seabus-json";
+            let seen = seen.clone();
+            tokio::spawn(async move {
+                while let Some(mut msg) = port.recv().await {
+                    // what the wire carried: the datagram with the sender's own topic (the
+                    // shore's has the vehicle's name in front), or the JSON text and the
+                    // datagram without payload
+                    // (the medium's own announcements, `seabus.fleet`, are not the vehicles')
+                    let Some((vehicle, sent)) = msg
+                        .topic
+                        .as_str()
+                        .split_once('.')
+                        .filter(|(v, _)| v.starts_with("auv"))
+                    else {
+                        continue;
+                    };
+                    let vehicle = vehicle.to_string();
+                    let sent_topic = Topic::new(sent).expect("topic");
+                    msg.topic = sent_topic;
+                    let bytes = if json {
+                        let map = msg.payload.to_map().expect("a datamap");
+                        let text = seabus_medium::json::to_json(&map).expect("json");
+                        msg.payload = Payload::Bytes(Bytes::new());
+                        text.len()
+                            + seabus_medium::datagram::encode(&msg, 0)
+                                .expect("datagram")
+                                .len()
+                    } else {
+                        seabus_medium::datagram::encode(&msg, 0)
+                            .expect("datagram")
+                            .len()
+                    };
+                    seen.hit(&vehicle, bytes);
+                }
+            });
+            let mut link = m.watch_link();
+            let _ = tokio::time::timeout(
+                Duration::from_secs(10),
+                link.wait_for(|s| matches!(s, LinkState::Up)),
+            )
+            .await;
+            Box::new(m) as Box<dyn std::any::Any>
+        }
+    });
+    println!("ready");
+    let stdin = std::io::stdin();
+    let mut line = String::new();
+    let _ = stdin.lock().read_line(&mut line);
+    let (cpu0, t0, tcp0) = (cpu_seconds(), Instant::now(), tcp_bytes_received());
+    let (m0, b0) = (
+        seen.messages.load(Ordering::Relaxed),
+        seen.bytes.load(Ordering::Relaxed),
+    );
+    line.clear();
+    let _ = stdin.lock().read_line(&mut line);
+    let (cpu, wall, tcp) = (
+        cpu_seconds() - cpu0,
+        t0.elapsed().as_secs_f64(),
+        tcp_bytes_received() - tcp0,
+    );
+    let (m, b) = (
+        seen.messages.load(Ordering::Relaxed) - m0,
+        seen.bytes.load(Ordering::Relaxed) - b0,
+    );
+    let vehicles = seen.vehicles.lock().expect("lock").len();
+    println!("{m} {b} {tcp} {cpu} {wall} {vehicles}");
+    use std::io::Write;
+    let _ = std::io::stdout().flush();
+    // the sessions end with the process
+    let _ = keep;
+    std::process::exit(0);
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("--shore") {
+        shore(&args[1], &args[2]);
+        return;
+    }
+    let parts = ["throughput", "latency", "fleet"];
+    let chosen: Vec<&str> = parts
+        .iter()
+        .copied()
+        .filter(|p| args.iter().any(|a| a == p))
+        .collect();
+    let profile = args.iter().any(|a| a == "profile");
+    let run = |p: &str| !profile && (chosen.is_empty() || chosen.contains(&p));
+    LazyLock::force(&T0);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let started = Instant::now();
+    rt.block_on(async {
+        if run("throughput") {
+            throughput().await;
+        }
+        if run("latency") {
+            latency().await;
+        }
+        if run("fleet") {
+            fleet().await;
+        }
+        if profile {
+            // seabus's flood alone, for `perf record`
+            let size = args.iter().find_map(|a| a.parse().ok()).unwrap_or(64usize);
+            for _ in 0..5 {
+                let f = flood(Side::Seabus, size, 200_000).await;
+                println!(
+                    "seabus {size} B: delivered {}, {} arrived",
+                    common::rate(f.delivered),
+                    f.arrived
+                );
+            }
+        }
+    });
+    println!("(bench took {:.0} s)", started.elapsed().as_secs_f64());
+    rt.shutdown_timeout(Duration::from_secs(1));
+}
