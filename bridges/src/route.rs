@@ -6,9 +6,13 @@
 //! 2. the bridge keeps one more window over both sides, so a message it has seen on either side is
 //!    forwarded at most once, whichever way it comes back;
 //! 3. a message that has crossed `hops` bridges is not forwarded again;
-//! 4. a message is never sent to the medium it was first published on, nor back to the side it came
+//! 4. the bridges of one program that forward into the same medium share one more window
+//!    ([`Forwarded`], held by the medium): a message that reaches a program two ways (a vehicle
+//!    on seabus UDP and on Zenoh, each bridged into the shore's bus) is put on that medium once,
+//!    by whichever bridge has it first;
+//! 5. a message is never sent to the medium it was first published on, nor back to the side it came
 //!    from (a route leads from one medium to the other);
-//! 5. media whose wire carries no provenance (CAN, serial lines, MOOS, LCM: their
+//! 6. media whose wire carries no provenance (CAN, serial lines, MOOS, LCM: their
 //!    [`Capabilities`] say so) cannot say a message came from the bridge: the bridge remembers what
 //!    it sent to such a medium ([`EchoMemory`], by the medium's own fingerprint of a message) and
 //!    drops the same message coming back from it within [`ECHO_WINDOW`] — once per message sent,
@@ -173,6 +177,20 @@ struct Counters {
     echoes: u64,
     unrouted: u64,
     errors: u64,
+}
+
+/// What the bridges of this program forwarded into one medium (held by the medium, see
+/// [`Medium::shared`]): a message forwarded into it once is not forwarded into it again by
+/// another bridge.
+#[derive(Default)]
+pub struct Forwarded(std::sync::Mutex<Dedup>);
+
+impl Forwarded {
+    /// Whether `msg` was forwarded into this medium before (it is noted now if not).
+    pub fn already(&self, msg: &Message) -> bool {
+        let mut seen = self.0.lock().unwrap_or_else(|p| p.into_inner());
+        seen.check(msg) == Seen::Duplicate
+    }
 }
 
 /// The generic bridge.
@@ -535,6 +553,10 @@ impl Module for RouteBridge {
             let Some(iface) = ctx.port(to) else {
                 return Err(ModuleError::msg(format!("bridge has no port {to}")));
             };
+            if iface.medium().shared::<Forwarded>().already(&out) {
+                self.counters.duplicates += 1;
+                return Ok(());
+            }
             if let Err(e) = iface.forward(out).await {
                 self.counters.errors += 1;
                 tracing::warn!(bridge = ctx.name(), to = %self.media[to], "not forwarded: {e}");
