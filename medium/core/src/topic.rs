@@ -10,6 +10,10 @@ use std::fmt;
 use std::sync::Arc;
 use thiserror::Error;
 
+/// The topic on which a fleet medium (Zenoh) says which nodes are in the fleet: one message per
+/// node with `node`, `online`, `since` and, when measured, `latency`.
+pub const FLEET: &str = "seabus.fleet";
+
 /// Longest topic, in bytes.
 pub const MAX_TOPIC_LEN: usize = 255;
 

@@ -23,7 +23,7 @@ pub const EVERY: Duration = Duration::from_secs(5);
 pub(crate) const EVERY_TICKS: u32 = 5;
 
 /// The topic the fleet is announced on.
-pub const TOPIC: &str = "seabus.fleet";
+pub use seabus_medium::topic::FLEET as TOPIC;
 
 #[derive(Debug, Clone)]
 struct Member {

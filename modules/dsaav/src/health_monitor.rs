@@ -16,6 +16,9 @@
 //! - `seabus.media` — the runtime's counters of every medium: the media that lost or refused
 //!   anything (rejected input, bytes dropped, overruns, messages dropped from full queues,
 //!   commands refused) are listed in the snapshot's `media`, each with its counters;
+//! - `seabus.fleet` — which nodes a fleet medium (Zenoh) sees, bridged to the bus: a node online
+//!   reports HEALTHY and one gone OFFLINE, for a rules component called like the node (an
+//!   `active` component whose `timeout` is longer than the fleet's 5 s announcements);
 //!
 //! and publishes the health snapshot (`severity`, `components`, `reasons`, and `media` when a
 //! medium lost anything) on the rules' topic at
@@ -116,6 +119,7 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         .consumes(TopicDecl::topic("seabus.module.*"))
         .consumes(TopicDecl::topic("seabus.health.*"))
         .consumes(TopicDecl::topic(MEDIA_TOPIC))
+        .consumes(TopicDecl::topic(seabus_medium::topic::FLEET))
         .produces(TopicDecl::topic(rules.publish.as_str()));
     for c in &rules.components {
         if let Mode::Data { topics } = &c.mode {
@@ -154,6 +158,16 @@ fn media_with_losses(map: &DataMap) -> DataMap {
                 .then(|| (name.to_string(), Value::Map(counters.clone())))
         })
         .collect()
+}
+
+/// A node the fleet medium announced, as a component: online HEALTHY, gone OFFLINE.
+fn fleet_member(map: &DataMap) -> Option<(String, ComponentState)> {
+    let node = map.get_str("node")?;
+    let state = match map.get_bool("online")? {
+        true => ComponentState::Healthy,
+        false => ComponentState::Offline,
+    };
+    Some((node.to_string(), state))
 }
 
 fn module_state(state: &str) -> Option<ComponentState> {
@@ -395,7 +409,9 @@ impl Module for HealthMonitor {
             self.media = media_with_losses(map);
             return Ok(());
         }
-        let report = if let Some(module) = topic.strip_prefix("seabus.module.") {
+        let report = if topic == seabus_medium::topic::FLEET {
+            fleet_member(map)
+        } else if let Some(module) = topic.strip_prefix("seabus.module.") {
             map.get_str("state")
                 .and_then(module_state)
                 .map(|s| (module.to_string(), s))
