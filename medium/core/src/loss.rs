@@ -31,6 +31,8 @@ struct Burst {
     /// messages dropped from full queues, by receiver
     queues: BTreeMap<Arc<str>, u64>,
     overruns: u64,
+    /// messages the wire says were sent and never arrived
+    missed: u64,
 }
 
 impl Burst {
@@ -40,11 +42,12 @@ impl Burst {
             last: now,
             queues: BTreeMap::new(),
             overruns: 0,
+            missed: 0,
         }
     }
 
     fn is_empty(&self) -> bool {
-        self.overruns == 0 && self.queues.values().all(|n| *n == 0)
+        self.overruns == 0 && self.missed == 0 && self.queues.values().all(|n| *n == 0)
     }
 
     /// The warning's text; `going_on` for a loss that has not ended yet.
@@ -66,6 +69,10 @@ impl Burst {
         if self.overruns > 0 {
             let count = format!("{} characters", self.overruns);
             lost.push((count, "device overrun".to_string()));
+        }
+        if self.missed > 0 {
+            let count = format!("{} messages", self.missed);
+            lost.push((count, "missed on the wire".to_string()));
         }
         let when = if going_on {
             let secs = now.saturating_duration_since(self.first).as_secs_f64();
@@ -97,6 +104,8 @@ struct State {
     /// every message dropped from a full queue, by receiver
     queues: BTreeMap<Arc<str>, u64>,
     overruns: u64,
+    /// messages missed on the wire, by topic
+    missed: BTreeMap<String, u64>,
     /// the burst under way
     burst: Option<Burst>,
     /// whether a task waits for the burst's end
@@ -143,6 +152,23 @@ impl Losses {
             st.overruns += n;
             burst.overruns += n;
         });
+    }
+
+    /// Counts `n` messages of `topic` the wire says were sent and never arrived (a sender's
+    /// numbering skipped them).
+    pub fn missed(self: &Arc<Self>, topic: &str, n: u64) {
+        if n == 0 {
+            return;
+        }
+        self.note(|st, burst| {
+            *st.missed.entry(topic.to_string()).or_default() += n;
+            burst.missed += n;
+        });
+    }
+
+    /// Every message missed on the wire so far, by topic.
+    pub fn missed_by_topic(&self) -> BTreeMap<String, u64> {
+        self.lock().missed.clone()
     }
 
     /// Every message dropped from a full queue so far, by receiver.

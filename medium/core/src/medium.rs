@@ -586,6 +586,7 @@ impl Medium {
             dropped_bytes: c.dropped_bytes.load(Ordering::Relaxed),
             overruns: self.inner.losses.overruns(),
             queue_dropped: self.inner.losses.by_receiver(),
+            missed: self.inner.losses.missed_by_topic(),
         }
     }
 
@@ -690,6 +691,9 @@ pub struct MediumStats {
     /// Data messages dropped because a receiver's queue was full (the oldest first), by receiver:
     /// the name its interface was attached with (a module's name).
     pub queue_dropped: BTreeMap<String, u64>,
+    /// Messages a sender published that never arrived, by topic, as a wire that numbers each
+    /// sender's messages tells (Zenoh's).
+    pub missed: BTreeMap<String, u64>,
 }
 
 /// A count as a datamap value.
@@ -720,6 +724,7 @@ impl MediumStats {
             || self.dropped_bytes > 0
             || self.overruns > 0
             || self.queue_dropped_total() > 0
+            || self.missed.values().sum::<u64>() > 0
             || self.commands_refused > 0
     }
 
@@ -732,6 +737,7 @@ impl MediumStats {
             .and("dropped_bytes", count(self.dropped_bytes))
             .and("overruns", count(self.overruns))
             .and("queue_dropped", counts(&self.queue_dropped))
+            .and("missed", counts(&self.missed))
             .and("commands_refused", count(self.commands_refused))
             .and("published", count(self.published))
             .and("delivered", count(self.delivered))
@@ -772,6 +778,7 @@ impl MediumStats {
             dropped_bytes: n("dropped_bytes"),
             overruns: n("overruns"),
             queue_dropped: by("queue_dropped"),
+            missed: by("missed"),
         }
     }
 }
@@ -1014,6 +1021,14 @@ impl Ingress {
     pub fn overrun(&self, n: u64) {
         if let Some(inner) = self.inner.upgrade() {
             inner.losses.overrun(n);
+        }
+    }
+
+    /// Counts `n` messages of `topic` that were sent and never arrived (see
+    /// [`MediumStats::missed`]); a burst of them is logged once it ends.
+    pub fn missed(&self, topic: &str, n: u64) {
+        if let Some(inner) = self.inner.upgrade() {
+            inner.losses.missed(topic, n);
         }
     }
 

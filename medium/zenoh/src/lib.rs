@@ -51,10 +51,16 @@ use std::sync::{Arc, LazyLock, Mutex};
 use std::time::Duration;
 use tokio::sync::watch;
 use zenoh::bytes::{Encoding, ZBytes};
-use zenoh::pubsub::{Publisher, Subscriber};
+use zenoh::pubsub::Publisher;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::sample::{Locality, Sample};
+use zenoh::session::EntityGlobalId;
 use zenoh::{Config, Session};
+use zenoh_ext::{
+    AdvancedPublisher, AdvancedPublisherBuilderExt, AdvancedSubscriber,
+    AdvancedSubscriberBuilderExt, CacheConfig, HistoryConfig, Miss, MissDetectionConfig,
+    RecoveryConfig,
+};
 
 /// How a Zenoh medium connects: its mode and endpoints, prefix and payload form.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -261,6 +267,9 @@ pub struct Frame {
 
 /// Publishers kept per key and kind; beyond this many, messages are put without one.
 const MAX_PUBLISHERS: usize = 4096;
+/// How soon after a data sample its publisher says how many it sent, so that a subscriber
+/// knows what it missed (only while samples are sent: an idle publisher says nothing).
+const HEARTBEAT: Duration = Duration::from_millis(500);
 /// How long a send waits for the session to open.
 const OPEN_WAIT: Duration = Duration::from_secs(5);
 
@@ -273,8 +282,15 @@ pub struct ZenohTransport {
     sender: u64,
     caps: Capabilities,
     session: watch::Receiver<Option<Session>>,
-    publishers: tokio::sync::Mutex<HashMap<(String, bool), Publisher<'static>>>,
+    publishers: tokio::sync::Mutex<HashMap<(String, bool), Publishing>>,
     hearing: Hearing,
+}
+
+/// A publisher of one key: data keeps its latest sample for late joiners and numbers its samples so
+/// that a subscriber knows what it missed; a command does neither (a command is never replayed).
+enum Publishing {
+    Data(AdvancedPublisher<'static>),
+    Command(Publisher<'static>),
 }
 
 /// What the medium hears: the key expressions asked for, their subscribers once the session is
@@ -288,12 +304,17 @@ struct Hearing {
     subscriptions: Arc<Mutex<Subscriptions>>,
     /// the fleet's members, as their liveliness tokens come and go
     fleet: fleet::Fleet,
+    /// the topic of each publisher heard, for the samples it says were missed
+    sources: Arc<Mutex<HashMap<EntityGlobalId, String>>>,
 }
+
+/// Publishers whose topic is kept, at most; past this the map starts again.
+const MAX_SOURCES: usize = 4096;
 
 #[derive(Default)]
 struct Subscriptions {
     keys: HashSet<String>,
-    declared: Vec<Subscriber<()>>,
+    declared: Vec<AdvancedSubscriber<()>>,
 }
 
 impl Hearing {
@@ -301,20 +322,54 @@ impl Hearing {
         self.subscriptions.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Declares a subscriber on `key` that hands what it hears to the medium.
+    /// Declares a subscriber on `key` that hands what it hears to the medium: it asks the
+    /// publishers already there for their latest sample (a late joiner gets the current state at
+    /// once), and counts on the medium, by topic, the samples a publisher's numbering says it
+    /// missed (asking for them again while the publisher still has them).
     async fn declare(&self, session: &Session, key: String) {
         let me = self.clone();
         let declared = session
             .declare_subscriber(key.clone())
+            .history(
+                HistoryConfig::default()
+                    .detect_late_publishers()
+                    .max_samples(1),
+            )
+            .recovery(RecoveryConfig::default().heartbeat())
+            .subscriber_detection()
             .allowed_origin(Locality::Remote)
             .callback(move |sample| me.receive(&sample))
             .await;
-        match declared {
-            Ok(s) => self.subscriptions().declared.push(s),
-            Err(e) => self
-                .ingress
-                .set_link(LinkState::Down(format!("cannot subscribe to {key}: {e}"))),
+        let sub = match declared {
+            Ok(s) => s,
+            Err(e) => {
+                return self
+                    .ingress
+                    .set_link(LinkState::Down(format!("cannot subscribe to {key}: {e}")));
+            }
+        };
+        let me = self.clone();
+        let listened = sub
+            .sample_miss_listener()
+            .callback(move |miss| me.missed(&miss))
+            .background()
+            .await;
+        if let Err(e) = listened {
+            tracing::warn!(key, "missed samples of {key} will not be counted: {e}");
         }
+        self.subscriptions().declared.push(sub);
+    }
+
+    /// Samples a publisher sent and this medium never got: counted under the publisher's topic.
+    fn missed(&self, miss: &Miss) {
+        let topic = self
+            .sources
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&miss.source())
+            .cloned()
+            .unwrap_or_else(|| "(a publisher not heard yet)".to_string());
+        self.ingress.missed(&topic, u64::from(miss.nb()));
     }
 
     /// Declares the subscribers asked for before the session opened.
@@ -357,6 +412,7 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
             ingress: o.ingress.clone(),
             subscriptions: Arc::default(),
             fleet: fleet::Fleet::new(&cfg.fleet, o.ingress.clone()),
+            sources: Arc::default(),
         },
     });
     o.ingress
@@ -478,6 +534,15 @@ fn read_sample(sample: &Sample, hearing: &Hearing) -> Result<(), Dropped> {
     let (prefix, me, ingress) = (&*hearing.prefix, hearing.sender, &hearing.ingress);
     let topic = keys::key_topic(prefix, sample.key_expr().as_str())
         .map_err(|e| ("bad-key", e.to_string()))?;
+    if let Some(info) = sample.source_info() {
+        let mut sources = hearing.sources.lock().unwrap_or_else(|p| p.into_inner());
+        if !sources.contains_key(info.source_id()) {
+            if sources.len() >= MAX_SOURCES {
+                sources.clear();
+            }
+            sources.insert(*info.source_id(), topic.to_string());
+        }
+    }
     let bytes = Bytes::from(sample.payload().to_bytes().into_owned());
     let encoding = sample.encoding();
     if *encoding == *DATAGRAM {
@@ -574,34 +639,48 @@ impl Transport for ZenohTransport {
             let slot = (frame.key.clone(), frame.command);
             if !publishers.contains_key(&slot) && publishers.len() < MAX_PUBLISHERS {
                 let builder = session.declare_publisher(frame.key.clone());
-                let builder = if frame.command {
-                    builder
+                let p = if frame.command {
+                    let p = builder
                         .congestion_control(CongestionControl::Block)
                         .priority(Priority::InteractiveHigh)
                         .express(true)
+                        .await;
+                    Publishing::Command(p.map_err(|e| self.send_error(e))?)
                 } else {
-                    builder
+                    let p = builder
                         .congestion_control(CongestionControl::Drop)
                         .priority(Priority::Data)
+                        .cache(CacheConfig::default().max_samples(1))
+                        .sample_miss_detection(
+                            MissDetectionConfig::default().sporadic_heartbeat(HEARTBEAT),
+                        )
+                        .publisher_detection()
+                        .await;
+                    Publishing::Data(p.map_err(|e| self.send_error(e))?)
                 };
-                let p = builder.await.map_err(|e| self.send_error(e))?;
                 publishers.insert(slot.clone(), p);
             }
             let payload = ZBytes::from(frame.payload);
+            let attachment = frame.attachment.map(ZBytes::from);
             let put = match publishers.get(&slot) {
-                Some(p) => {
-                    let put = p.put(payload).encoding(encoding);
-                    match frame.attachment {
-                        Some(a) => put.attachment(ZBytes::from(a)).await,
-                        None => put.await,
-                    }
+                Some(Publishing::Data(p)) => {
+                    p.put(payload)
+                        .encoding(encoding)
+                        .attachment(attachment)
+                        .await
+                }
+                Some(Publishing::Command(p)) => {
+                    p.put(payload)
+                        .encoding(encoding)
+                        .attachment(attachment)
+                        .await
                 }
                 None => {
-                    let put = session.put(frame.key.clone(), payload).encoding(encoding);
-                    match frame.attachment {
-                        Some(a) => put.attachment(ZBytes::from(a)).await,
-                        None => put.await,
-                    }
+                    session
+                        .put(frame.key.clone(), payload)
+                        .encoding(encoding)
+                        .attachment(attachment)
+                        .await
                 }
             };
             put.map_err(|e| self.send_error(format!("publishing on {}: {e}", frame.key)))

@@ -396,3 +396,66 @@ async fn a_vehicle_started_before_its_router_connects_when_the_router_comes() {
     vehicle.close();
     again.close();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
+    let port = free_port();
+    let vehicle = open(
+        "fleet",
+        "auv1",
+        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false"),
+    );
+    let nav = vehicle.attach("nav");
+    // published while nobody listens: an old position, then the current one, and a depth
+    let old = DataMap::new().and("lat", 43.0).and("lon", 16.0);
+    let now = DataMap::new().and("lat", 43.5081).and("lon", 16.4402);
+    nav.send("nav.position", Payload::from(old)).await.unwrap();
+    nav.send("nav.position", Payload::from(now.clone()))
+        .await
+        .unwrap();
+    nav.send(
+        "nav.depth",
+        Payload::from(DataMap::new().and("depth", 12.5)),
+    )
+    .await
+    .unwrap();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let shore = open(
+        "fleet",
+        "shore",
+        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    let mut heard = shore.attach("console").subscribed("auv1.nav.**").unwrap();
+    let joined = tokio::time::Instant::now();
+    let mut latest = std::collections::BTreeMap::new();
+    while latest.len() < 2 {
+        let m = timeout(Duration::from_secs(1), heard.recv())
+            .await
+            .expect("the current state within 1 s of joining")
+            .unwrap();
+        latest.insert(m.topic.to_string(), (*m.payload.to_map().unwrap()).clone());
+    }
+    assert!(
+        joined.elapsed() < Duration::from_secs(1),
+        "{:?}",
+        joined.elapsed()
+    );
+    assert_eq!(
+        latest["auv1.nav.position"], now,
+        "the latest value, not the old one"
+    );
+    assert_eq!(latest["auv1.nav.depth"].get_f64("depth"), Some(12.5));
+    assert!(
+        timeout(Duration::from_millis(300), heard.recv())
+            .await
+            .is_err(),
+        "nothing older after it"
+    );
+    assert!(
+        shore.stats().missed.is_empty(),
+        "{:?}",
+        shore.stats().missed
+    );
+    vehicle.close();
+    shore.close();
+}
