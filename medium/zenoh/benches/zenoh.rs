@@ -26,7 +26,14 @@
 //!    same datamaps as JSON text, the shore's callback parsing each into a `serde_json::Value`.
 //!    Payload bytes are what the samples carried: the JSON text for bare; for seabus the datagram
 //!    (or the JSON text and the attached datagram), its length found again on the shore from the
-//!    message received. The medium's own `seabus.fleet` announcements are not counted.
+//!    message received. The medium's own `seabus.fleet` announcements are not counted. Lowest
+//!    shore CPU of [`FLEET_ROUNDS`] rounds taken in turn.
+//!
+//! Each part also has a "bare advanced" side: Zenoh-ext's advanced publisher and subscriber
+//! configured as the medium configures them for data (the latest sample cached for late joiners,
+//! samples numbered with heartbeats so that misses are detected and recovered, history asked of
+//! publishers found late), so that what those features cost is told apart from what seabus's own
+//! handling costs.
 //!
 //! Every session has multicast scouting off and listens on loopback only.
 //!
@@ -53,6 +60,10 @@ use zenoh::handlers::FifoChannel;
 use zenoh::pubsub::Publisher;
 use zenoh::qos::{CongestionControl, Priority};
 use zenoh::{Config, Session};
+use zenoh_ext::{
+    AdvancedPublisher, AdvancedPublisherBuilderExt, AdvancedSubscriberBuilderExt, CacheConfig,
+    HistoryConfig, MissDetectionConfig, RecoveryConfig,
+};
 
 /// Rounds of each throughput run, taken in turn.
 const ROUNDS: usize = 3;
@@ -69,7 +80,7 @@ const KEY: &str = "bench/bench/data";
 const VEHICLES: usize = 20;
 const NAV_HZ: f64 = 10.0;
 const FLEET_SECONDS: f64 = 4.0;
-const FLEET_ROUNDS: usize = 3;
+const FLEET_ROUNDS: usize = 2;
 
 static T0: LazyLock<Instant> = LazyLock::new(Instant::now);
 
@@ -147,6 +158,9 @@ enum Side {
     SeabusWild,
     /// bare, the callback's subscriber on `bench/**`
     BareWild,
+    /// bare Zenoh-ext advanced publisher and subscriber, configured as the medium configures
+    /// them for data (latest sample cached, sample numbering and heartbeats, history, recovery)
+    BareAdvanced,
 }
 
 impl Side {
@@ -157,6 +171,7 @@ impl Side {
             Side::BareChannel => "bare (channel)",
             Side::SeabusWild => "seabus, on **",
             Side::BareWild => "bare, on bench/**",
+            Side::BareAdvanced => "bare advanced",
         }
     }
 }
@@ -169,10 +184,56 @@ enum Pair {
         media: [Medium; 2],
     },
     Bare {
-        publisher: Publisher<'static>,
+        publisher: BarePublisher,
         sessions: [Session; 2],
         _subscriber: Box<dyn Send>,
     },
+}
+
+/// A bare publisher: plain, or Zenoh-ext's advanced one.
+enum BarePublisher {
+    Plain(Publisher<'static>),
+    Advanced(AdvancedPublisher<'static>),
+}
+
+/// How soon after a sample an advanced publisher says how many it sent (the medium's value).
+const HEARTBEAT: Duration = Duration::from_millis(500);
+
+impl BarePublisher {
+    /// Declares a publisher on `key` with the medium's quality of service for data.
+    async fn declare(session: &Session, key: String, advanced: bool, json: bool) -> BarePublisher {
+        let encoding = if json {
+            Encoding::APPLICATION_JSON
+        } else {
+            Encoding::default()
+        };
+        let builder = session
+            .declare_publisher(key)
+            .congestion_control(CongestionControl::Drop)
+            .priority(Priority::Data)
+            .encoding(encoding);
+        if advanced {
+            BarePublisher::Advanced(
+                builder
+                    .cache(CacheConfig::default().max_samples(1))
+                    .sample_miss_detection(
+                        MissDetectionConfig::default().sporadic_heartbeat(HEARTBEAT),
+                    )
+                    .publisher_detection()
+                    .await
+                    .expect("publisher"),
+            )
+        } else {
+            BarePublisher::Plain(builder.await.expect("publisher"))
+        }
+    }
+
+    async fn put(&self, payload: impl Into<ZBytes>) {
+        let _ = match self {
+            BarePublisher::Plain(p) => p.put(payload).await,
+            BarePublisher::Advanced(p) => p.put(payload).await,
+        };
+    }
 }
 
 impl Pair {
@@ -210,14 +271,29 @@ impl Pair {
                     media: [rx, tx],
                 }
             }
-            Side::Bare | Side::BareChannel | Side::BareWild => {
+            Side::Bare | Side::BareChannel | Side::BareWild | Side::BareAdvanced => {
                 let rx = zenoh::open(zconfig("peer", std::slice::from_ref(&listen), &[]))
                     .await
                     .expect("session");
                 let tx = zenoh::open(zconfig("peer", &["tcp/127.0.0.1:0".to_string()], &[listen]))
                     .await
                     .expect("session");
-                let subscriber: Box<dyn Send> = if side != Side::BareChannel {
+                let subscriber: Box<dyn Send> = if side == Side::BareAdvanced {
+                    let seen = seen.clone();
+                    Box::new(
+                        rx.declare_subscriber(KEY)
+                            .history(
+                                HistoryConfig::default()
+                                    .detect_late_publishers()
+                                    .max_samples(1),
+                            )
+                            .recovery(RecoveryConfig::default().heartbeat())
+                            .subscriber_detection()
+                            .callback(move |s| seen.hit(&s.payload().to_bytes()))
+                            .await
+                            .expect("subscriber"),
+                    )
+                } else if side != Side::BareChannel {
                     let seen = seen.clone();
                     let key = if side == Side::Bare { KEY } else { "bench/**" };
                     Box::new(
@@ -240,12 +316,9 @@ impl Pair {
                     });
                     Box::new(sub)
                 };
-                let publisher = tx
-                    .declare_publisher(KEY)
-                    .congestion_control(CongestionControl::Drop)
-                    .priority(Priority::Data)
-                    .await
-                    .expect("publisher");
+                let publisher =
+                    BarePublisher::declare(&tx, KEY.to_string(), side == Side::BareAdvanced, false)
+                        .await;
                 Pair::Bare {
                     publisher,
                     sessions: [rx, tx],
@@ -260,9 +333,7 @@ impl Pair {
             Pair::Seabus { tx, topic, .. } => {
                 let _ = tx.send(topic, Payload::from(data.clone())).await;
             }
-            Pair::Bare { publisher, .. } => {
-                let _ = publisher.put(ZBytes::from(data.clone())).await;
-            }
+            Pair::Bare { publisher, .. } => publisher.put(data.clone()).await,
         }
     }
 
@@ -379,11 +450,17 @@ async fn one_way(side: Side) -> (f64, f64) {
     (common::quantile_us(&l, 0.5), common::quantile_us(&l, 0.99))
 }
 
-const PAIR_SIDES: [Side; 3] = [Side::Bare, Side::BareChannel, Side::Seabus];
-const FLOOD_SIDES: [Side; 5] = [
+const PAIR_SIDES: [Side; 4] = [
     Side::Bare,
     Side::BareChannel,
     Side::Seabus,
+    Side::BareAdvanced,
+];
+const FLOOD_SIDES: [Side; 6] = [
+    Side::Bare,
+    Side::BareChannel,
+    Side::Seabus,
+    Side::BareAdvanced,
     Side::BareWild,
     Side::SeabusWild,
 ];
@@ -418,8 +495,9 @@ async fn throughput() {
             best[2].delivered / best[1].delivered
         );
         println!(
-            "  {size:>4} B ratio seabus on ** / bare on bench/** {:.2}",
-            best[4].delivered / best[3].delivered
+            "  {size:>4} B ratio seabus / bare advanced {:.2}; seabus on ** / bare on bench/** {:.2}",
+            best[2].delivered / best[3].delivered,
+            best[5].delivered / best[4].delivered
         );
     }
 }
@@ -428,7 +506,7 @@ async fn latency() {
     println!(
         "One-way latency, peer to peer on loopback, {LAT_N} messages of {LAT_SIZE} B at {LAT_RATE} per second, best of {LAT_ROUNDS} rounds taken in turn:"
     );
-    let mut best = [(f64::MAX, f64::MAX); 3];
+    let mut best = [(f64::MAX, f64::MAX); PAIR_SIDES.len()];
     for _ in 0..LAT_ROUNDS {
         for (i, side) in PAIR_SIDES.iter().enumerate() {
             let (p50, p99) = one_way(*side).await;
@@ -444,6 +522,11 @@ async fn latency() {
         best[2].1 / best[0].1,
         best[2].0 / best[1].0,
         best[2].1 / best[1].1
+    );
+    println!(
+        "  ratio seabus / bare advanced p50 {:.2} p99 {:.2}",
+        best[2].0 / best[3].0,
+        best[2].1 / best[3].1
     );
 }
 
@@ -483,6 +566,7 @@ enum Fleet {
     Seabus,
     SeabusJson,
     Bare,
+    BareAdvanced,
 }
 
 impl Fleet {
@@ -491,6 +575,7 @@ impl Fleet {
             Fleet::Seabus => "seabus",
             Fleet::SeabusJson => "seabus-json",
             Fleet::Bare => "bare",
+            Fleet::BareAdvanced => "bare-advanced",
         }
     }
 
@@ -499,6 +584,7 @@ impl Fleet {
             Fleet::Seabus => "seabus (datagrams)",
             Fleet::SeabusJson => "seabus (json=true)",
             Fleet::Bare => "bare (JSON)",
+            Fleet::BareAdvanced => "bare advanced (JSON)",
         }
     }
 }
@@ -521,7 +607,7 @@ impl Vehicles {
         for i in 0..VEHICLES {
             // the vehicles' ticks spread over the period
             let phase = period.mul_f64(i as f64 / VEHICLES as f64);
-            if kind == Fleet::Bare {
+            if matches!(kind, Fleet::Bare | Fleet::BareAdvanced) {
                 let s = zenoh::open(zconfig("client", &[], &[router.to_string()]))
                     .await
                     .expect("vehicle session");
@@ -529,12 +615,7 @@ impl Vehicles {
                 for (topic, _) in navigation(i, 0) {
                     let key = format!("fleet/auv{i}/{}", topic.replace('.', "/"));
                     pubs.push(
-                        s.declare_publisher(key)
-                            .congestion_control(CongestionControl::Drop)
-                            .priority(Priority::Data)
-                            .encoding(Encoding::APPLICATION_JSON)
-                            .await
-                            .expect("publisher"),
+                        BarePublisher::declare(&s, key, kind == Fleet::BareAdvanced, true).await,
                     );
                 }
                 v.sessions.push(s);
@@ -545,7 +626,7 @@ impl Vehicles {
                         tick.tick().await;
                         for (p, (_, map)) in pubs.iter().zip(navigation(i, n)) {
                             let text = seabus_medium::json::to_json(&map).expect("json");
-                            let _ = p.put(text).await;
+                            p.put(text).await;
                         }
                     }
                 }));
@@ -657,7 +738,12 @@ async fn fleet() {
     println!(
         "Fleet: {VEHICLES} vehicles × 3 navigation topics at {NAV_HZ} Hz through one router into one shore station (its own process), {FLEET_SECONDS} s per run, lowest shore CPU of {FLEET_ROUNDS} rounds taken in turn:"
     );
-    let kinds = [Fleet::Bare, Fleet::Seabus, Fleet::SeabusJson];
+    let kinds = [
+        Fleet::Bare,
+        Fleet::Seabus,
+        Fleet::SeabusJson,
+        Fleet::BareAdvanced,
+    ];
     let mut best: Vec<Option<ShoreFigures>> = kinds.iter().map(|_| None).collect();
     for _ in 0..FLEET_ROUNDS {
         for (i, kind) in kinds.iter().enumerate() {
@@ -671,7 +757,7 @@ async fn fleet() {
     let best: Vec<ShoreFigures> = best.into_iter().map(|b| b.expect("a round")).collect();
     for (kind, f) in kinds.iter().zip(&best) {
         println!(
-            "  {:<19} shore CPU {:.2} % of a core; per vehicle: payload {:.0} B/s, TCP {:.0} B/s; {} messages (about {expected} sent) from {} vehicles",
+            "  {:<21} shore CPU {:.2} % of a core; per vehicle: payload {:.0} B/s, TCP {:.0} B/s; {} messages (about {expected} sent) from {} vehicles",
             kind.label(),
             f.cpu_share,
             f.per_vehicle(f.payload_bytes),
@@ -680,14 +766,20 @@ async fn fleet() {
             f.vehicles
         );
     }
-    for (i, kind) in kinds.iter().enumerate().skip(1) {
+    let ratio = |i: usize, reference: usize| {
         println!(
-            "  ratio {} / bare: shore CPU {:.2}, payload bytes {:.2}, TCP bytes {:.2}",
-            kind.label(),
-            best[i].cpu_share / best[0].cpu_share,
-            best[i].per_vehicle(best[i].payload_bytes) / best[0].per_vehicle(best[0].payload_bytes),
-            best[i].per_vehicle(best[i].tcp_bytes) / best[0].per_vehicle(best[0].tcp_bytes),
+            "  ratio {} / {}: shore CPU {:.2}, payload bytes {:.2}, TCP bytes {:.2}",
+            kinds[i].label(),
+            kinds[reference].label(),
+            best[i].cpu_share / best[reference].cpu_share,
+            best[i].per_vehicle(best[i].payload_bytes)
+                / best[reference].per_vehicle(best[reference].payload_bytes),
+            best[i].per_vehicle(best[i].tcp_bytes)
+                / best[reference].per_vehicle(best[reference].tcp_bytes),
         );
+    };
+    for (i, reference) in [(1, 0), (2, 0), (3, 0), (1, 3), (2, 3)] {
+        ratio(i, reference);
     }
     let _ = router.close().await;
 }
@@ -765,24 +857,41 @@ fn shore(kind: &str, router: &str) {
         .expect("runtime");
     let seen = Arc::new(ShoreSeen::default());
     let keep: Box<dyn std::any::Any> = rt.block_on(async {
-        if kind == "bare" {
+        if kind.starts_with("bare") {
             let s = zenoh::open(zconfig("client", &[], &[router.to_string()]))
                 .await
                 .expect("shore session");
             let seen = seen.clone();
-            let sub = s
-                .declare_subscriber("fleet/**")
-                .callback(move |sample| {
-                    let payload = sample.payload().to_bytes();
-                    let value: serde_json::Value =
-                        serde_json::from_slice(&payload).unwrap_or_default();
-                    std::hint::black_box(value);
-                    let vehicle = sample.key_expr().as_str().split('/').nth(1).unwrap_or("");
-                    let att = sample.attachment().map_or(0, |a| a.len());
-                    seen.hit(vehicle, payload.len() + att);
-                })
-                .await
-                .expect("subscriber");
+            let take = move |sample: zenoh::sample::Sample| {
+                let payload = sample.payload().to_bytes();
+                let value: serde_json::Value = serde_json::from_slice(&payload).unwrap_or_default();
+                std::hint::black_box(value);
+                let vehicle = sample.key_expr().as_str().split('/').nth(1).unwrap_or("");
+                let att = sample.attachment().map_or(0, |a| a.len());
+                seen.hit(vehicle, payload.len() + att);
+            };
+            let sub: Box<dyn std::any::Any> = if kind == "bare" {
+                Box::new(
+                    s.declare_subscriber("fleet/**")
+                        .callback(take)
+                        .await
+                        .expect("subscriber"),
+                )
+            } else {
+                Box::new(
+                    s.declare_subscriber("fleet/**")
+                        .history(
+                            HistoryConfig::default()
+                                .detect_late_publishers()
+                                .max_samples(1),
+                        )
+                        .recovery(RecoveryConfig::default().heartbeat())
+                        .subscriber_detection()
+                        .callback(take)
+                        .await
+                        .expect("subscriber"),
+                )
+            };
             Box::new((s, sub)) as Box<dyn std::any::Any>
         } else {
             let url = format!("zenoh://?mode=client&connect={router}&prefix=fleet&scout=false");

@@ -13,7 +13,11 @@
 //! configuration file, JSON5, relative to the working directory; the other options are applied
 //! over it), `scout` (multicast scouting for peers on the LAN, default on unless `connect` is
 //! given), `json` (datamaps are published as JSON so that any Zenoh program reads them; default
-//! off).
+//! off), `fleet` and `lease` (see [`fleet`]); TLS with `ca`, `cert`, `key` (PEM files: the
+//! fleet's certificate authority, this node's certificate and key) and `mtls` (a listener refuses
+//! peers without a certificate the authority signed; on when the node has one); user and password
+//! authentication with `user` and `password_file`, and for a listener `users` (a file of
+//! `user:password` lines).
 //!
 //! **Wire.** A message is published on its topic's key as a seabus datagram
 //! ([`seabus_medium::datagram`]: provenance, kind, stamp, payload) with the encoding
@@ -83,6 +87,36 @@ pub struct ZenohConfig {
     pub fleet: String,
     /// How soon a silent connection counts as lost, when no configuration file sets it.
     pub lease: Duration,
+    /// TLS: the certificate authority's certificate, and this node's certificate and key (PEM
+    /// files), and whether a listener requires its peers' certificates.
+    pub tls: Option<Tls>,
+    /// User and password authentication: this node's user and the file holding its password,
+    /// and for a listener the file of `user:password` lines it accepts.
+    pub auth: Auth,
+}
+
+/// TLS settings (see [`ZenohConfig::tls`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Tls {
+    /// The certificate authority's certificate.
+    pub ca: String,
+    /// This node's certificate.
+    pub cert: Option<String>,
+    /// This node's private key.
+    pub key: Option<String>,
+    /// A listener refuses peers without a certificate the authority signed.
+    pub mtls: bool,
+}
+
+/// User and password settings (see [`ZenohConfig::auth`]).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Auth {
+    /// This node's user name.
+    pub user: Option<String>,
+    /// The file holding its password.
+    pub password_file: Option<String>,
+    /// For a listener: the file of `user:password` lines it accepts.
+    pub users: Option<String>,
 }
 
 const OPTIONS: &[&str] = &[
@@ -146,6 +180,15 @@ impl ZenohConfig {
                 })?,
             None => Duration::from_secs(3),
         };
+        let tls = tls_options(url)?;
+        let auth = Auth {
+            user: url.take("user"),
+            password_file: url.take("password_file"),
+            users: url.take("users"),
+        };
+        if auth.user.is_some() != auth.password_file.is_some() {
+            return Err(url.error("`user` and `password_file` go together"));
+        }
         if mode == "client" && connect.is_empty() && config.is_none() && !scout {
             return Err(url.error("a client needs a router to connect to: ?connect=tcp/HOST:PORT"));
         }
@@ -160,6 +203,8 @@ impl ZenohConfig {
             json,
             fleet,
             lease,
+            tls,
+            auth,
         })
     }
 
@@ -200,6 +245,32 @@ impl ZenohConfig {
         if self.config.is_none() || !self.scout {
             set("scouting/multicast/enabled", self.scout.to_string())?;
         }
+        let quoted = |v: &str| serde_json::to_string(v).unwrap_or_default();
+        if let Some(tls) = &self.tls {
+            set("transport/link/tls/root_ca_certificate", quoted(&tls.ca))?;
+            if let (Some(cert), Some(key)) = (&tls.cert, &tls.key) {
+                for side in ["listen", "connect"] {
+                    set(
+                        &format!("transport/link/tls/{side}_certificate"),
+                        quoted(cert),
+                    )?;
+                    set(
+                        &format!("transport/link/tls/{side}_private_key"),
+                        quoted(key),
+                    )?;
+                }
+            }
+            set("transport/link/tls/enable_mtls", tls.mtls.to_string())?;
+        }
+        if let (Some(user), Some(file)) = (&self.auth.user, &self.auth.password_file) {
+            let password = std::fs::read_to_string(file)
+                .map_err(|e| format!("option `password_file`: cannot read {file}: {e}"))?;
+            set("transport/auth/usrpwd/user", quoted(user))?;
+            set("transport/auth/usrpwd/password", quoted(password.trim()))?;
+        }
+        if let Some(users) = &self.auth.users {
+            set("transport/auth/usrpwd/dictionary_file", quoted(users))?;
+        }
         if self.config.is_none() {
             set(
                 "transport/link/tx/lease",
@@ -232,6 +303,29 @@ pub fn config_error(path: &str, message: &str) -> String {
         Some((line, col)) => format!("{path}:{line}:{col}: {what}"),
         None => format!("{path}: {what}"),
     }
+}
+
+/// The TLS options: `ca` (required for TLS), `cert` and `key` together, `mtls` (default on when this
+/// node has a certificate).
+fn tls_options(url: &mut MediumUrl) -> Result<Option<Tls>, UrlError> {
+    let (ca, cert, key) = (url.take("ca"), url.take("cert"), url.take("key"));
+    let mtls = url.take_flag("mtls")?;
+    if cert.is_some() != key.is_some() {
+        return Err(url.error("`cert` and `key` go together: this node's certificate and its key"));
+    }
+    let Some(ca) = ca else {
+        if cert.is_some() || mtls.is_some() {
+            return Err(url.error("TLS needs `ca`, the certificate authority's certificate"));
+        }
+        return Ok(None);
+    };
+    let mtls = mtls.unwrap_or(cert.is_some());
+    Ok(Some(Tls {
+        ca,
+        cert,
+        key,
+        mtls,
+    }))
 }
 
 /// Adds `zenoh://`.

@@ -270,6 +270,9 @@ fn urls_say_what_is_wrong() {
     assert!(err("zenoh://host:7447").contains("names no host"));
     assert!(err("zenoh://?mode=client&scout=false").contains("a client needs a router"));
     assert!(err("zenoh://?colour=red").contains("unknown option"));
+    assert!(err("zenoh://?ca=ca.pem&cert=a.pem").contains("`cert` and `key` go together"));
+    assert!(err("zenoh://?cert=a.pem&key=a.key").contains("TLS needs `ca`"));
+    assert!(err("zenoh://?user=auv1").contains("`user` and `password_file` go together"));
 }
 
 #[test]
@@ -458,4 +461,242 @@ async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
     );
     vehicle.close();
     shore.close();
+}
+
+/// Runs openssl in `dir`, failing the test with its output when it fails.
+fn openssl(dir: &std::path::Path, args: &[&str]) {
+    let out = std::process::Command::new("openssl")
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("openssl runs");
+    assert!(
+        out.status.success(),
+        "openssl {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// A certificate authority, certificates it signs for `shore` and `auv1` (valid for 127.0.0.1),
+/// and one for `rogue` that signs itself.
+fn certificates(dir: &std::path::Path) {
+    openssl(
+        dir,
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=fleet-ca",
+            "-keyout",
+            "ca.key",
+            "-out",
+            "ca.pem",
+        ],
+    );
+    std::fs::write(
+        dir.join("san.cnf"),
+        "subjectAltName=IP:127.0.0.1,DNS:localhost\n",
+    )
+    .unwrap();
+    for name in ["shore", "auv1"] {
+        let (key, csr, pem) = (
+            format!("{name}.key"),
+            format!("{name}.csr"),
+            format!("{name}.pem"),
+        );
+        openssl(
+            dir,
+            &[
+                "req",
+                "-newkey",
+                "rsa:2048",
+                "-nodes",
+                "-subj",
+                &format!("/CN={name}"),
+                "-keyout",
+                &key,
+                "-out",
+                &csr,
+            ],
+        );
+        openssl(
+            dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                &csr,
+                "-CA",
+                "ca.pem",
+                "-CAkey",
+                "ca.key",
+                "-CAcreateserial",
+                "-days",
+                "2",
+                "-extfile",
+                "san.cnf",
+                "-out",
+                &pem,
+            ],
+        );
+    }
+    openssl(
+        dir,
+        &[
+            "req",
+            "-x509",
+            "-newkey",
+            "rsa:2048",
+            "-nodes",
+            "-days",
+            "2",
+            "-subj",
+            "/CN=rogue",
+            "-addext",
+            "subjectAltName=IP:127.0.0.1",
+            "-keyout",
+            "rogue.key",
+            "-out",
+            "rogue.pem",
+        ],
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tls_lets_in_the_fleet_and_refuses_a_peer_without_its_certificate() {
+    let dir = tempfile::tempdir().unwrap();
+    certificates(dir.path());
+    let f = |name: &str| dir.path().join(name).display().to_string();
+    let port = free_port();
+    let shore = open(
+        "fleet",
+        "shore",
+        &format!(
+            "zenoh://?mode=router&listen=tls/127.0.0.1:{port}&prefix=fleet&scout=false&ca={}&cert={}&key={}",
+            f("ca.pem"),
+            f("shore.pem"),
+            f("shore.key")
+        ),
+    );
+    let mut heard = shore.attach("watch").subscribed("*.nav.**").unwrap();
+    let member = open(
+        "fleet",
+        "auv1",
+        &format!(
+            "zenoh://?mode=client&connect=tls/127.0.0.1:{port}&prefix=fleet/auv1&ca={}&cert={}&key={}",
+            f("ca.pem"),
+            f("auv1.pem"),
+            f("auv1.key")
+        ),
+    );
+    let rogue = open(
+        "fleet",
+        "rogue",
+        &format!(
+            "zenoh://?mode=client&connect=tls/127.0.0.1:{port}&prefix=fleet/rogue&ca={}&cert={}&key={}",
+            f("ca.pem"),
+            f("rogue.pem"),
+            f("rogue.key")
+        ),
+    );
+    let bare = open(
+        "fleet",
+        "bare",
+        &format!(
+            "zenoh://?mode=client&connect=tls/127.0.0.1:{port}&prefix=fleet/bare&ca={}",
+            f("ca.pem")
+        ),
+    );
+    wait_link(&member, true).await;
+    let depth = DataMap::new().and("depth", 3.5);
+    let m = send_until_heard(
+        &member.attach("nav"),
+        &mut heard,
+        Kind::Data,
+        "nav.depth",
+        &depth,
+    )
+    .await;
+    assert_eq!(m.topic.as_str(), "auv1.nav.depth");
+    // the peers the fleet's authority did not sign never get in
+    for outsider in [&rogue, &bare] {
+        outsider
+            .attach("nav")
+            .send(
+                "nav.depth",
+                Payload::from(DataMap::new().and("depth", 99.0)),
+            )
+            .await
+            .ok();
+    }
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    for outsider in [&rogue, &bare] {
+        assert!(
+            matches!(outsider.link_state(), LinkState::Down(_)),
+            "{}: {:?}",
+            outsider.node().name,
+            outsider.link_state()
+        );
+    }
+    while let Ok(Some(m)) = timeout(Duration::from_millis(200), heard.recv()).await {
+        assert!(
+            m.topic.as_str().starts_with("auv1."),
+            "only the member is heard: {}",
+            m.topic
+        );
+    }
+    for m in [member, rogue, bare, shore] {
+        m.close();
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn users_and_passwords_let_in_who_knows_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = |name: &str| dir.path().join(name).display().to_string();
+    std::fs::write(dir.path().join("users.txt"), "auv1:seaweed\nshore:kelp\n").unwrap();
+    std::fs::write(dir.path().join("auv1.pw"), "seaweed\n").unwrap();
+    std::fs::write(dir.path().join("wrong.pw"), "plankton\n").unwrap();
+    std::fs::write(dir.path().join("shore.pw"), "kelp\n").unwrap();
+    let port = free_port();
+    let shore = open(
+        "fleet",
+        "shore",
+        &format!(
+            "zenoh://?mode=router&listen=tcp/127.0.0.1:{port}&prefix=fleet&scout=false&users={}&user=shore&password_file={}",
+            f("users.txt"),
+            f("shore.pw")
+        ),
+    );
+    let member = open(
+        "fleet",
+        "auv1",
+        &format!(
+            "zenoh://?mode=client&connect=tcp/127.0.0.1:{port}&prefix=fleet/auv1&user=auv1&password_file={}",
+            f("auv1.pw")
+        ),
+    );
+    let intruder = open(
+        "fleet",
+        "auv9",
+        &format!(
+            "zenoh://?mode=client&connect=tcp/127.0.0.1:{port}&prefix=fleet/auv9&user=auv1&password_file={}",
+            f("wrong.pw")
+        ),
+    );
+    wait_link(&member, true).await;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert!(
+        matches!(intruder.link_state(), LinkState::Down(_)),
+        "{:?}",
+        intruder.link_state()
+    );
+    for m in [member, intruder, shore] {
+        m.close();
+    }
 }
