@@ -18,6 +18,16 @@ lock = threading.Lock()
 latest = {}
 
 
+def say(record):
+    # one whole line at a time: the subscriber's thread and the main loop both print
+    with say_lock:
+        sys.stdout.write(json.dumps(record) + "\n")
+        sys.stdout.flush()
+
+
+say_lock = threading.Lock()
+
+
 def heard(sample):
     key = str(sample.key_expr)
     try:
@@ -28,7 +38,7 @@ def heard(sample):
         first = key not in latest
         latest[key] = value
     if first or key.endswith("/cmd/status"):
-        print(json.dumps({"key": key, "encoding": str(sample.encoding), "value": value}), flush=True)
+        say({"key": key, "encoding": str(sample.encoding), "value": value})
 
 
 with zenoh.open(conf) as session:
@@ -48,7 +58,7 @@ with zenoh.open(conf) as session:
             session.put(prefix + "/cmd/course", json.dumps(course),
                         encoding=zenoh.Encoding.APPLICATION_JSON.with_schema("command"))
             sent += 1
-            print(json.dumps({"sent": course, "count": sent}), flush=True)
+            say({"sent": course, "count": sent})
             time.sleep(1.0)
         else:
             time.sleep(0.1)
