@@ -38,6 +38,11 @@ async fn a_vehicle_that_leaves_the_fleet_is_offline() {
         .unwrap();
     let bus = rt.medium("bus").unwrap();
     let mut health = bus.attach("watch").subscribed("fleet.health").unwrap();
+    // the monitor is running (and listening to the fleet) before anything is announced
+    timeout_at(Instant::now() + Duration::from_secs(10), health.recv())
+        .await
+        .expect("a first snapshot")
+        .unwrap();
     let fleet = bus.attach("fleet");
     let topic = Topic::new(seabus_medium::topic::FLEET).unwrap();
     let state_of = |map: &DataMap, node: &str| {

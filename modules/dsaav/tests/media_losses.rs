@@ -31,6 +31,11 @@ async fn the_health_snapshot_lists_the_media_that_lost_anything() {
         .unwrap();
     let (bus, line) = (rt.medium("bus").unwrap(), rt.medium("line").unwrap());
     let mut health = bus.attach("watch").subscribed("vehicle.health").unwrap();
+    // the monitor is running (and listening to the media's counters) before anything is lost
+    timeout_at(Instant::now() + Duration::from_secs(10), health.recv())
+        .await
+        .expect("a first snapshot")
+        .unwrap();
     // the line reads 20 messages, of which a receiver with room for 5 misses 15, rejects a run of
     // garbage and drops its 6 bytes
     let mut slow = line.attach_with("slow", 5, 5);
