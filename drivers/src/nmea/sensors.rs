@@ -43,7 +43,7 @@ use super::sentence::{Parsed, talker};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, Message, Topic};
+use seabus_medium::{DataMap, Format, Ingress, Kind, Message, Topic};
 use seabus_modules::Catalogue;
 use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TopicDecl};
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
@@ -291,8 +291,9 @@ pub struct Sensor {
     pub(super) table: Table,
     /// Pitch and roll kept for an attitude.
     pub(super) combined: Combined,
-    /// The parse shared with the other drivers on the line, once the first sentence came.
-    reader: Option<Arc<Reader>>,
+    /// The parse shared with the other drivers on the line, and the line's ingress (where what
+    /// cannot be read is counted), from the driver's start.
+    line: Option<(Arc<Reader>, Ingress)>,
     tally: Tally,
 }
 
@@ -418,7 +419,7 @@ impl Sensor {
                 Duration::ZERO
             }),
             table,
-            reader: None,
+            line: None,
             tally: Tally::new(),
         };
         Ok((sensor, decl))
@@ -533,16 +534,20 @@ pub(super) fn checked(
 }
 
 impl Sensor {
-    /// The parse shared by the drivers on `medium`, told what this one reads the first time.
-    fn reader(&mut self, medium: &seabus_medium::Medium) -> Arc<Reader> {
-        let outputs = &self.outputs;
-        self.reader
-            .get_or_insert_with(|| {
-                let r = medium.shared::<Reader>();
-                r.want(outputs.iter().flat_map(|o| o.feeds.iter().map(|f| &**f)));
-                r
-            })
-            .clone()
+    /// The parse shared by the drivers on the line (port 0) and the line's ingress, the parse told
+    /// what this driver reads the first time.
+    fn line(&mut self, ctx: &Context) -> Option<(Arc<Reader>, Ingress)> {
+        if self.line.is_none() {
+            let medium = ctx.port(0)?.medium();
+            let reader = medium.shared::<Reader>();
+            reader.want(
+                self.outputs
+                    .iter()
+                    .flat_map(|o| o.feeds.iter().map(|f| &**f)),
+            );
+            self.line = Some((reader, medium.ingress()));
+        }
+        self.line.clone()
     }
 }
 
@@ -550,9 +555,7 @@ impl Sensor {
 impl Module for Sensor {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
         // what this driver reads is known before its first sentence comes
-        if let Some(medium) = ctx.port(0).map(|p| p.medium().clone()) {
-            self.reader(&medium);
-        }
+        self.line(ctx);
         Ok(())
     }
 
@@ -578,11 +581,10 @@ impl Module for Sensor {
                 return Ok(());
             }
         }
-        let Some(medium) = ctx.port(0).map(|p| p.medium().clone()) else {
+        let Some((reader, ingress)) = self.line(ctx) else {
             return Ok(());
         };
-        let reader = self.reader(&medium);
-        let Some(read) = reader.read(&msg, line, &medium.ingress()) else {
+        let Some(read) = reader.read(&msg, line, &ingress) else {
             return Ok(());
         };
         let Ok(parsed) = &*read else {
@@ -590,9 +592,7 @@ impl Module for Sensor {
         };
         let readings = self.read(parsed, Instant::now());
         if let Some(why) = readings.dropped() {
-            medium
-                .ingress()
-                .reject("out-of-range", format_args!("{}: {why}", line.trim_end()));
+            ingress.reject("out-of-range", format_args!("{}: {why}", line.trim_end()));
         }
         for (i, map) in readings {
             let o = &self.outputs[i];

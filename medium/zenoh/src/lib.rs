@@ -400,6 +400,8 @@ struct Hearing {
     fleet: fleet::Fleet,
     /// the topic of each publisher heard, for the samples it says were missed
     sources: Arc<Mutex<HashMap<EntityGlobalId, String>>>,
+    /// the origins of the datagrams heard, shared rather than made again for each one
+    origins: Arc<Mutex<datagram::Origins>>,
 }
 
 /// Publishers whose topic is kept, at most; past this the map starts again.
@@ -412,6 +414,10 @@ struct Subscriptions {
 }
 
 impl Hearing {
+    fn origins(&self) -> std::sync::MutexGuard<'_, datagram::Origins> {
+        self.origins.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
     fn subscriptions(&self) -> std::sync::MutexGuard<'_, Subscriptions> {
         self.subscriptions.lock().unwrap_or_else(|p| p.into_inner())
     }
@@ -507,6 +513,7 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
             subscriptions: Arc::default(),
             fleet: fleet::Fleet::new(&cfg.fleet, o.ingress.clone()),
             sources: Arc::default(),
+            origins: Arc::default(),
         },
     });
     o.ingress
@@ -600,6 +607,10 @@ async fn watch_link(session: &Session, ingress: &Ingress, router: bool, members:
 impl ZenohTransport {
     /// The open session, waiting for it to open at most [`OPEN_WAIT`].
     async fn session(&self) -> Result<Session, SendError> {
+        // (once open, no timer: the session is taken as it is)
+        if let Some(s) = self.session.borrow().as_ref() {
+            return Ok(s.clone());
+        }
         let mut rx = self.session.clone();
         let got = tokio::time::timeout(OPEN_WAIT, rx.wait_for(Option::is_some)).await;
         match got {
@@ -640,7 +651,7 @@ fn read_sample(sample: &Sample, hearing: &Hearing) -> Result<(), Dropped> {
     let bytes = Bytes::from(sample.payload().to_bytes().into_owned());
     let encoding = sample.encoding();
     if *encoding == *DATAGRAM {
-        let (sender, mut msg) = datagram::decode(&bytes, &mut datagram::Origins::default())
+        let (sender, mut msg) = datagram::decode(&bytes, &mut hearing.origins())
             .map_err(|e| (e.kind(), e.to_string()))?;
         if sender != me {
             hearing.fleet.heard(&msg);
@@ -654,7 +665,7 @@ fn read_sample(sample: &Sample, hearing: &Hearing) -> Result<(), Dropped> {
     // a datamap sent as JSON by seabus: its provenance in the attachment
     if let Some(att) = sample.attachment() {
         let att = Bytes::from(att.to_bytes().into_owned());
-        if let Ok((sender, mut msg)) = datagram::decode(&att, &mut datagram::Origins::default()) {
+        if let Ok((sender, mut msg)) = datagram::decode(&att, &mut hearing.origins()) {
             if sender == me {
                 return Ok(());
             }
