@@ -110,10 +110,25 @@ fn start_with(modules: &str, layouts: &[PathBuf]) -> System {
     let path = d.join("system.xml");
     std::fs::write(&path, text).expect("system written");
     let (spy_run, spy) = spy_json(&net, 120);
+    let (run, url) = run_console(&path);
+    System {
+        _dir: dir,
+        dir: d,
+        _run: run,
+        url,
+        net,
+        spy,
+        _spy: spy_run,
+    }
+}
+
+/// Starts `seabus run` of the system file `path`, whose console says where it listens: the
+/// running system and the console's address.
+fn run_console(path: &Path) -> (Running, String) {
     let mut run = Running(
         seabus()
             .arg("run")
-            .arg(&path)
+            .arg(path)
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .spawn()
@@ -131,15 +146,7 @@ fn start_with(modules: &str, layouts: &[PathBuf]) -> System {
     let url = rx
         .recv_timeout(Duration::from_secs(30))
         .expect("the console starts and says where");
-    System {
-        _dir: dir,
-        dir: d,
-        _run: run,
-        url,
-        net,
-        spy,
-        _spy: spy_run,
-    }
+    (run, url)
 }
 
 /// chromedriver, stopped when dropped.
@@ -1762,4 +1769,242 @@ fn the_demo_runs_twenty_seconds_without_a_warning() {
     );
     // and the vehicle did run: the frontseat took the helm's commands
     assert!(err.contains("frontseat accepting -> in-control"), "{err}");
+}
+
+/// The vehicles of the fleet test, with where each simulated frontseat starts.
+const FLEET: [(&str, f64, f64); 3] = [
+    ("auv1", 43.5081, 16.4402),
+    ("auv2", 43.5101, 16.4432),
+    ("auv3", 43.5121, 16.4462),
+];
+
+/// A vehicle of the fleet: a simulated Iver2 frontseat and its driver, its bus reaching the shore's
+/// Zenoh router at `port` under `fleet/NAME`.
+fn fleet_vehicle(d: &Path, (name, lat, lon): (&str, f64, f64), port: u16) -> String {
+    let line = d.join(format!("{name}-frontseat")).display().to_string();
+    format!(
+        r#"<seabus node="{name}">
+  <medium name="bus" url="inproc://"/>
+  <medium name="frontseat" url="pty://{line}?framing=lines"/>
+  <medium name="serial" url="serial://{line}?baud=19200&amp;framing=nmea"/>
+  <medium name="fleet" url="zenoh://?mode=client&amp;connect=tcp/127.0.0.1:{port}&amp;prefix=fleet/{name}&amp;scout=false"/>
+  <module name="frontseat-sim" type="iver2-sim" media="frontseat" lat="{lat}" lon="{lon}" heading="0" autostart="true"/>
+  <module name="iver" type="iver2" media="serial bus" version="5" request_every="250ms"/>
+  <bridge name="shore" media="bus fleet" report="0">
+    <route from="bus" to="fleet" topics="**"/>
+    <route from="fleet" to="bus" topics="cmd.**" kind="command"/>
+  </bridge>
+</seabus>"#
+    )
+}
+
+/// The shore station: a Zenoh router at `port`, the fleet bridged to its bus `bus` (a loopback
+/// group the test watches) and the shipped fleet console on it.
+fn fleet_shore(port: u16, bus: &str) -> String {
+    let layouts = repo("configs/fleet/console").display().to_string();
+    format!(
+        r#"<seabus node="shore">
+  <medium name="bus" url="{bus}"/>
+  <medium name="fleet" url="zenoh://?mode=router&amp;listen=tcp/127.0.0.1:{port}&amp;prefix=fleet&amp;scout=false"/>
+  <bridge name="fleet" media="fleet bus" report="0">
+    <route from="fleet" to="bus" topics="*.nav.**"/>
+    <route from="fleet" to="bus" topics="*.vehicle.state"/>
+    <route from="fleet" to="bus" topics="*.power.battery"/>
+    <route from="fleet" to="bus" topics="*.cmd.status"/>
+    <route from="fleet" to="bus" topics="seabus.fleet"/>
+    <route from="bus" to="fleet" topics="*.cmd.**" kind="command"/>
+  </bridge>
+  <console medium="bus" listen="127.0.0.1:0" users="users.xml" layouts="{layouts}"
+           log="commands.csv"/>
+</seabus>"#
+    )
+}
+
+/// The rows of the fleet table: vehicle → its cells by column.
+const FLEET_ROWS: &str =
+    "return Object.fromEntries([...document.querySelectorAll('[data-testid=fleet-table] tbody tr')]
+     .map(r => [r.dataset.vehicle, Object.fromEntries([...r.querySelectorAll('td[data-col]')]
+       .map(td => [td.dataset.col, td.innerText]))]));";
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_fleet_console_shows_three_vehicles_and_a_pilot_commands_the_one_chosen() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let d = dir.path();
+    add_user(&d.join("users.xml"), "pilot", "pilot", "pilot-password");
+    let port = common::free_port();
+    let bus = format!("udp://{}:{}?ttl=0", group(), common::free_port());
+    let shore_file = d.join("shore.xml");
+    std::fs::write(&shore_file, fleet_shore(port, &bus)).expect("shore written");
+    let (_spy_run, spy) = spy_json(&bus, 150);
+    let (_shore, url) = run_console(&shore_file);
+    let _vehicles: Vec<Running> = FLEET
+        .iter()
+        .map(|v| {
+            let file = d.join(format!("{}.xml", v.0));
+            std::fs::write(&file, fleet_vehicle(d, *v, port)).expect("vehicle written");
+            Running(
+                seabus()
+                    .arg("run")
+                    .arg(&file)
+                    .stdout(Stdio::null())
+                    .stderr(Stdio::null())
+                    .spawn()
+                    .expect("seabus run starts"),
+            )
+        })
+        .collect();
+    let driver = chromedriver();
+    let c = browser(&driver).await;
+    log_in(&c, &url, "pilot", "pilot-password").await;
+
+    // the fleet table: the three vehicles (not the shore itself), online, in their modes
+    let rows = until(
+        &c,
+        Duration::from_secs(40),
+        "three vehicles online in the fleet table",
+        &format!(
+            "const rows = (() => {{ {FLEET_ROWS} }})();
+             const names = Object.keys(rows);
+             return names.length === 3 && names.every(n => rows[n].online === 'online'
+               && rows[n].mode !== '—' && rows[n].position !== '—') && rows;"
+        ),
+    )
+    .await;
+    let names: Vec<&String> = rows.as_object().unwrap().keys().collect();
+    assert_eq!(names, ["auv1", "auv2", "auv3"], "{rows}");
+    for (name, row) in rows.as_object().unwrap() {
+        assert_eq!(row["control"], "free", "{name}: {row}");
+    }
+    // every vehicle's track on the one map
+    let trails = until(
+        &c,
+        Duration::from_secs(20),
+        "three trails",
+        "const t = window.seabusConsole.plot('All tracks');
+         return t && ['auv1', 'auv2', 'auv3'].every(v => t[v] >= 2) && t;",
+    )
+    .await;
+    assert_eq!(
+        trails.as_object().unwrap().keys().collect::<Vec<_>>(),
+        ["auv1", "auv2", "auv3"],
+        "{trails}"
+    );
+    screenshot(&c, "fleet.png").await;
+    // the table commands nothing: control is taken on a vehicle's own page
+    assert_eq!(
+        js(&c, "return document.querySelector('[data-testid=take-control]').hidden;").await,
+        json!(true)
+    );
+
+    // auv2's own layout, from its row
+    c.find(Locator::Css(
+        "tr[data-vehicle=auv2] [data-testid=fleet-open]",
+    ))
+    .await
+    .expect("auv2's open button")
+    .click()
+    .await
+    .expect("clicked");
+    until_eq(
+        &c,
+        Duration::from_secs(10),
+        "auv2's layout",
+        "const s = window.seabusConsole.state(); return [s.layout, s.vehicle, document.querySelector('[data-testid=control-label]').textContent];",
+        json!(["vehicle", "auv2", "Control of auv2"]),
+    )
+    .await;
+    take_control(&c, "pilot").await;
+    assert_eq!(
+        js(&c, "return window.seabusConsole.state().leases;").await,
+        json!({"auv2": "pilot"})
+    );
+    until(
+        &c,
+        Duration::from_secs(30),
+        "auv2's frontseat taking commands",
+        "const l = document.querySelector('[data-kind=log]'); return l && /control=(accepting|in-control)/.test(l.innerText);",
+    )
+    .await;
+    slide(&c, "heading", 200.0).await;
+
+    // the course goes to auv2, whose driver acknowledges it; auv1 and auv3 get nothing
+    let mut seen = Vec::new();
+    let course = wait_for_line(
+        &spy,
+        &mut seen,
+        Duration::from_secs(10),
+        "auv2.cmd.course",
+        |v| v["topic"] == "auv2.cmd.course",
+    );
+    assert_eq!(
+        course["payload"]["heading"].as_f64(),
+        Some(200.0),
+        "{course}"
+    );
+    let origin = course["origin"].as_str().expect("an origin").to_string();
+    let acknowledged = wait_for_line(
+        &spy,
+        &mut seen,
+        Duration::from_secs(15),
+        "auv2's acknowledgement",
+        |v| {
+            v["topic"] == "auv2.cmd.status"
+                && v["payload"]["origin"] == origin.as_str()
+                && v["payload"]["state"] == "acknowledged"
+        },
+    );
+    assert_eq!(acknowledged["payload"]["command"], "OMS", "{acknowledged}");
+    let history = until_text(
+        &c,
+        Duration::from_secs(15),
+        "the acknowledgement in the history",
+        "const h = document.querySelector('[data-kind=history]'); return h && /acknowledged/.test(h.innerText) && h.innerText;",
+    )
+    .await;
+    assert!(
+        history.contains("heading=200") && history.contains("acknowledged"),
+        "{history}"
+    );
+    // 3 s more of the shore's bus: the console said who controls auv2 and kept auv2's course,
+    // and nothing of the console's reached auv1 or auv3
+    let deadline = Instant::now() + Duration::from_secs(3);
+    while Instant::now() < deadline {
+        if let Ok(v) = spy.recv_timeout(Duration::from_millis(50)) {
+            seen.push(v);
+        }
+    }
+    let mine =
+        |v: &&Json| v["origin"] == origin.as_str() || v["payload"]["origin"] == origin.as_str();
+    let topics: std::collections::BTreeSet<&str> = seen
+        .iter()
+        .filter(mine)
+        .filter_map(|v| v["topic"].as_str())
+        // (the shore's own modules publish on its bus as the same origin)
+        .filter(|t| t.starts_with("auv"))
+        .collect();
+    assert_eq!(
+        topics,
+        ["auv2.cmd.course", "auv2.cmd.status", "auv2.console.control"].into(),
+        "what the console's control and commands caused on the shore's bus"
+    );
+    // back in the fleet table, auv2 is the pilot's and the others are free
+    c.find(Locator::Css("[data-testid=layout-select]"))
+        .await
+        .expect("the layout list")
+        .select_by_value("fleet")
+        .await
+        .expect("fleet chosen");
+    let rows = until(
+        &c,
+        Duration::from_secs(10),
+        "the fleet table again",
+        &format!("const rows = (() => {{ {FLEET_ROWS} }})(); return Object.keys(rows).length === 3 && rows;"),
+    )
+    .await;
+    let control: Vec<&str> = ["auv1", "auv2", "auv3"]
+        .iter()
+        .map(|v| rows[v]["control"].as_str().unwrap_or("?"))
+        .collect();
+    assert_eq!(control, ["free", "you (pilot)", "free"], "{rows}");
+    c.close().await.expect("closed");
 }

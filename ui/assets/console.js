@@ -40,6 +40,7 @@ function consolePage() {
     root: $('layout-root'), banner: $('banner'), notice: $('notice'),
     select: $('layout-select'), title: $('layout-title'),
     holder: $('lease-holder'), take: $('take-control'), release: $('release-control'),
+    controlLabel: $('control-label'),
     conn: $('connection'), userName: $('user-name'), userRoles: $('user-roles'),
     edit: $('edit-toggle'), designer: $('designer'), toasts: $('toasts'),
     dialog: $('confirm-dialog'), dialogTitle: $('confirm-title'), dialogText: $('confirm-text'), dialogFields: $('confirm-fields'),
@@ -50,7 +51,11 @@ function consolePage() {
     conn: 'connecting',
     user: null, roles: [], layouts: [],
     leaseRole: 'pilot', designerRole: 'designer',
+    // the control of the layout's vehicle (or the console's one control), and every vehicle's
+    // by name ('' for the console's one)
     lease: { holder: null, since: null },
+    leases: {},
+    node: null,
     layoutName: null, layout: null, layoutError: null,
     producers: {}, topics: {}, now: undefined, nowAt: 0,
     // fields: the values the pilot changed and has not sent yet, by command; pending: sent, not
@@ -87,6 +92,20 @@ function consolePage() {
       return S.now + (performance.now() - S.nowAt) / 1000;
     },
     history: () => S.history,
+    /** Who controls `vehicle` ('' for the console's one control): {holder, since}. */
+    leaseOf: (vehicle) => S.leases[vehicle || ''] || { holder: null, since: null },
+    /** The node the console runs on (a fleet table leaves it out). */
+    node: () => S.node,
+    /** Opens layout `name` for `vars` (a fleet table's vehicle): the page's address says which. */
+    openFor(name, vars) {
+      const params = new URLSearchParams();
+      params.set('layout', name);
+      for (const [k, v] of Object.entries(vars || {})) params.set(k, v);
+      history.replaceState(null, '', `${location.pathname}?${params}`);
+      designer.stop();
+      S.layoutName = name;
+      sendMsg({ type: 'open', layout: name, vars: queryVars() });
+    },
     command: (n) => (S.layout && S.layout.commands && Object.prototype.hasOwnProperty.call(S.layout.commands, n) ? S.layout.commands[n] : null),
     commandRole(n) {
       const c = ctx.command(n);
@@ -250,6 +269,7 @@ function consolePage() {
       case 'layout': return onLayout(m);
       case 'data': return onData(m);
       case 'lease': return onLease(m);
+      case 'leases': return onLeases(m);
       case 'command': return onCommand(m);
       case 'history': return onHistory(m);
       case 'backlog': return onBacklog(m);
@@ -269,7 +289,11 @@ function consolePage() {
     if (m.lease_role) S.leaseRole = String(m.lease_role);
     if (m.designer_role) S.designerRole = String(m.designer_role);
     S.layouts = (Array.isArray(m.layouts) ? m.layouts : []).map((l) => (typeof l === 'string' ? { name: l, title: l } : { name: l.name, title: l.title || l.name }));
-    setLease(m.lease);
+    S.node = m.node || null;
+    S.leases = {};
+    for (const l of Array.isArray(m.leases) ? m.leases : []) rememberLease(l);
+    rememberLease(m.lease);
+    setLease(ctx.leaseOf(layoutVehicle()));
     ui.userName.textContent = S.user || '';
     ui.userRoles.textContent = S.roles.length ? S.roles.join(' · ') : 'observer';
     ui.select.replaceChildren(...S.layouts.map((l) => el('option', { value: l.name, text: l.title && l.title !== l.name ? `${l.title}` : l.name })));
@@ -344,6 +368,7 @@ function consolePage() {
     }
     ui.select.value = S.layoutName;
     ui.title.textContent = L.title || L.name || '';
+    setLease(ctx.leaseOf(layoutVehicle()));
     document.title = `${L.title || L.name} · seabus`;
     designer.loaded(L);
     renderLayout();
@@ -382,6 +407,17 @@ function consolePage() {
     for (const w of widgets) w.tick();
   }
 
+  /** The vehicle the open layout commands ('' for the console's one control). */
+  function layoutVehicle() {
+    return (S.layout && S.layout.vehicle) || '';
+  }
+
+  /** Keeps a `lease` message's holder under its vehicle. */
+  function rememberLease(l) {
+    if (!l || typeof l !== 'object') return;
+    S.leases[l.vehicle || ''] = { holder: l.holder ?? null, since: l.since ?? null };
+  }
+
   function setLease(l) {
     if (l && typeof l === 'object') S.lease = { holder: l.holder ?? null, since: l.since ?? null };
     else S.lease = { holder: l || null, since: null };
@@ -391,15 +427,31 @@ function consolePage() {
     ui.holder.title = h && S.lease.since ? `since ${new Date(Number(S.lease.since) * 1000).toLocaleTimeString()}` : '';
     ui.holder.dataset.holder = h || '';
     const mayTake = S.roles.includes(S.leaseRole);
-    ui.take.hidden = !mayTake || h === S.user;
+    // a layout that commands nothing under control (a fleet table) offers none to take
+    const controlled = Object.values((S.layout && S.layout.commands) || {}).some((c) => c.lease !== false);
+    ui.take.hidden = !mayTake || h === S.user || (S.layout && !controlled);
     ui.take.disabled = !!h || S.conn !== 'connected';
-    ui.take.title = h ? `${h} holds control` : 'take control of the vehicle';
+    const vehicle = layoutVehicle();
+    ui.take.title = h ? `${h} holds control` : `take control of ${vehicle || 'the vehicle'}`;
+    ui.controlLabel.textContent = vehicle ? `Control of ${vehicle}` : 'Control';
     ui.release.hidden = h !== S.user || !S.user;
     if (h !== S.user) inputs.stopAll(false);
     updatePermissions();
   }
 
-  function onLease(m) { setLease({ holder: m.holder, since: m.since }); }
+  function onLease(m) {
+    rememberLease(m);
+    if ((m.vehicle || '') === layoutVehicle()) setLease({ holder: m.holder, since: m.since });
+    for (const w of widgets) if (w.onLease) w.onLease();
+  }
+
+  /** Who controls what, whole: any holder not in it has released. */
+  function onLeases(m) {
+    S.leases = {};
+    for (const l of Array.isArray(m.held) ? m.held : []) rememberLease(l);
+    setLease(ctx.leaseOf(layoutVehicle()));
+    for (const w of widgets) if (w.onLease) w.onLease();
+  }
 
   function upsertCommand(c) {
     if (!c) return;
@@ -565,10 +617,15 @@ function consolePage() {
   // ------------------------------------------------------------ header
 
   ui.select.addEventListener('change', () => openLayout(ui.select.value, true));
-  ui.take.addEventListener('click', () => sendMsg({ type: 'lease', action: 'take' }));
+  // the control of the open layout's vehicle, or the console's one control
+  const leaseMsg = (action) => {
+    const vehicle = layoutVehicle();
+    return vehicle ? { type: 'lease', action, vehicle } : { type: 'lease', action };
+  };
+  ui.take.addEventListener('click', () => sendMsg(leaseMsg('take')));
   ui.release.addEventListener('click', () => {
     inputs.stopAll(true);
-    sendMsg({ type: 'lease', action: 'release' });
+    sendMsg(leaseMsg('release'));
   });
 
   // ------------------------------------------------------------ rendering
@@ -814,6 +871,9 @@ function consolePage() {
       return {
         layout: S.layout ? S.layout.name : S.layoutName,
         lease: S.lease.holder,
+        vehicle: layoutVehicle(),
+        // the vehicles someone controls ('' for the console's one control), with who
+        leases: Object.fromEntries(Object.entries(S.leases).filter(([, v]) => v.holder).map(([k, v]) => [k, v.holder])),
         connection: S.conn,
         drives: S.driveCount,
         releases: S.releaseCount,
@@ -829,7 +889,8 @@ function consolePage() {
     sent: () => S.sent.slice(),
     topic: (n) => S.topics[n] || null,
     policyViolations: () => policyViolations.slice(),
-    // what the plot labelled `label` last drew: its area, axes and lines in canvas pixels
+    // what the plot labelled `label` last drew: its area, axes and lines in canvas pixels (a
+    // track: the points of each vehicle's trail; a fleet table: its rows)
     plot(label) {
       const w = widgets.find((x) => x.drawn && x.node.label === label);
       return w ? w.drawn() : null;

@@ -252,7 +252,7 @@ function listAttr(x) {
 // ---------------------------------------------------------------- the tree
 
 const CONTAINERS = new Set(['row', 'column', 'grid', 'tabs', 'tab']);
-export const OUTPUT_KINDS = ['readout', 'gauge', 'plot', 'track', 'health', 'log', 'history'];
+export const OUTPUT_KINDS = ['readout', 'gauge', 'plot', 'track', 'fleet', 'health', 'log', 'history'];
 export const INPUT_KINDS = ['button', 'slider', 'number', 'text', 'toggle'];
 export const CONTAINER_KINDS = ['row', 'column', 'grid', 'tabs', 'tab'];
 
@@ -289,6 +289,7 @@ export function renderNode(ctx, node) {
     case 'gauge': e = gauge(ctx, node); break;
     case 'plot': e = plot(ctx, node); break;
     case 'track': e = track(ctx, node); break;
+    case 'fleet': e = fleet(ctx, node); break;
     case 'health': e = health(ctx, node); break;
     case 'log': e = logWidget(ctx, node); break;
     case 'history': e = history(ctx, node); break;
@@ -399,15 +400,20 @@ export function applyStatus(ctx, e, topicsList, freshMs) {
   if (!status) return;
   let best = null;
   let missing = [];
-  for (const names of topicsList) {
+  for (const entry of topicsList) {
+    // the names a topic goes by, or (`{matching, pattern}`) every topic a pattern matches
+    const names = Array.isArray(entry) ? entry : Object.keys(ctx.allTopics()).filter(entry.matching);
     let found = null;
     for (const n of names) {
       const t = ctx.topic(n);
-      if (t) { found = t; break; }
+      if (t && (!found || num(t.stamp, 0) > num(found.stamp, 0))) found = t;
+      if (found && Array.isArray(entry)) break;
     }
     if (found) {
       const age = ctx.serverNow() - num(found.stamp, 0);
       if (best === null || age < best) best = age;
+    } else if (!Array.isArray(entry) && ctx.producer(entry.pattern) === false) {
+      missing.push(entry.pattern);
     } else if (names.length && names.every((n) => ctx.producer(n) === false)) {
       missing.push(names[0]);
     }
@@ -457,6 +463,7 @@ function outputWidget(ctx, node, kind, body, topicsList, handlers) {
     },
     redraw: handlers.redraw,
     onHistory: handlers.onHistory,
+    onLease: handlers.onLease,
     onBacklog: handlers.onBacklog,
     drawn: handlers.drawn,
   };
@@ -848,31 +855,64 @@ export function parseWaypoints(x) {
   }).filter((p) => Number.isFinite(p.lat) && Number.isFinite(p.lon));
 }
 
+/**
+ * A seabus topic pattern (`*` one segment, `**` any) as a RegExp whose groups are what each
+ * wildcard captured; null for a plain topic.
+ */
+export function patternRegExp(p) {
+  if (!/\*/.test(p)) return null;
+  const parts = String(p).split('.').map((seg) => {
+    if (seg === '**') return '(.*)';
+    if (seg === '*') return '([^.]+)';
+    return seg.replace(/[.+^${}()|[\]\\?]/g, '\\$&');
+  });
+  // `a.**` also matches `a`
+  return new RegExp(`^${parts.join('\\.').replace(/\\\.\(\.\*\)$/, '(?:\\.(.*))?')}$`);
+}
+
+/** `pattern` with its wildcards replaced, in order, by `captured`. */
+function fillPattern(pattern, captured) {
+  let i = 0;
+  return String(pattern).split('.').map((seg) => (seg === '*' || seg === '**' ? captured[i++] ?? '' : seg)).filter((s) => s !== '').join('.');
+}
+
 function track(ctx, node) {
   const posNames = topicNames(node.position);
+  // a pattern (`*.nav.position`) draws one trail per vehicle, named by what the wildcards match
+  const posPattern = posNames.length ? patternRegExp(posNames[0]) : null;
   const headB = parseBind(node.heading);
   const trailN = Math.max(2, Math.round(num(node.trail, 600)));
   const waypoints = parseWaypoints(node.waypoints);
   const gridAttr = node.grid;
-  // positions oldest first, {lat, lon, t}: one per stamp, none the same as the one before
-  let trail = [];
+  // per vehicle ('' for a single topic): positions oldest first, {lat, lon, t}, one per stamp,
+  // none the same as the one before; and its heading
+  const vehicles = new Map();
   let origin = waypoints.length ? { ...waypoints[0] } : null;
-  let heading;
   const wrap = el('div', { class: 'track-wrap' });
   const s = svg('svg', { role: 'img', 'aria-label': node.label || 'vehicle track' });
   wrap.append(s);
   const info = el('div', { class: 'track-info', 'data-testid': 'track-info' });
   const body = el('div', { class: 'w-stack' }, wrap, info);
   let dirty = true;
-  if (!node.label) node = { ...node, label: 'Track' };
+  if (!node.label) node = { ...node, label: posPattern ? 'Tracks' : 'Track' };
 
-  /** Takes in positions (oldest first): merged by stamp, the trail kept to `trail` points. */
-  function addPositions(more) {
-    const before = trail.length;
-    const merged = mergeByStamp(trail, more, (p) => p.t);
-    if (merged === trail && merged.length === before) return;
-    trail = merged.filter((p, i) => i === 0 || p.lat !== merged[i - 1].lat || p.lon !== merged[i - 1].lon);
-    if (trail.length > trailN) trail.splice(0, trail.length - trailN);
+  function vehicle(key) {
+    let v = vehicles.get(key);
+    if (!v) {
+      v = { trail: [], heading: undefined, colour: PALETTE[vehicles.size % PALETTE.length] };
+      vehicles.set(key, v);
+    }
+    return v;
+  }
+
+  /** Takes in positions of vehicle `key` (oldest first): merged by stamp, kept to `trail` points. */
+  function addPositions(key, more) {
+    const v = vehicle(key);
+    const before = v.trail.length;
+    const merged = mergeByStamp(v.trail, more, (p) => p.t);
+    if (merged === v.trail && merged.length === before) return;
+    v.trail = merged.filter((p, i) => i === 0 || p.lat !== merged[i - 1].lat || p.lon !== merged[i - 1].lon);
+    if (v.trail.length > trailN) v.trail.splice(0, v.trail.length - trailN);
     dirty = true;
   }
 
@@ -881,6 +921,29 @@ function track(ctx, node) {
     if (!m || !m.fields) return null;
     const p = { lat: num(m.fields.lat, NaN), lon: num(m.fields.lon, NaN), t: num(m.stamp, NaN) };
     return Number.isFinite(p.lat) && Number.isFinite(p.lon) && Number.isFinite(p.t) ? p : null;
+  }
+
+  /** The position topics among `names`, each with its vehicle's key and what its wildcards caught. */
+  function positionTopics(names) {
+    const out = [];
+    if (!posPattern) {
+      const n = posNames.find((x) => names.includes(x));
+      if (n) out.push({ name: n, key: '', captured: [] });
+      return out;
+    }
+    for (const n of names) {
+      const m = posPattern.exec(n);
+      if (m) out.push({ name: n, key: m.slice(1).filter((x) => x !== undefined).join('.'), captured: m.slice(1) });
+    }
+    return out.sort((a, b) => (a.key < b.key ? -1 : a.key > b.key ? 1 : 0));
+  }
+
+  /** The heading of the vehicle whose position wildcards caught `captured`. */
+  function headingOf(captured) {
+    if (!headB) return undefined;
+    const topic = posPattern ? fillPattern(headB.topic, captured) : headB.topic;
+    const h = valueOf(ctx, { topic, field: headB.field });
+    return typeof h === 'number' && Number.isFinite(h) ? h : undefined;
   }
 
   const project = (p) => {
@@ -901,9 +964,9 @@ function track(ctx, node) {
       s.append(svg('text', { x: W / 2, y: H / 2, 'text-anchor': 'middle', fill: '#7f9bb3', 'font-size': 13, text: 'waiting for a position' }));
       return;
     }
-    const pts = trail.map(project);
+    const drawn = [...vehicles.entries()].map(([key, v]) => ({ key, v, pts: v.trail.map(project) }));
     const wps = waypoints.map(project);
-    const all = pts.concat(wps);
+    const all = drawn.flatMap((d) => d.pts).concat(wps);
     let x0 = Infinity, x1 = -Infinity, y0 = Infinity, y1 = -Infinity;
     for (const [x, y] of all) { x0 = Math.min(x0, x); x1 = Math.max(x1, x); y0 = Math.min(y0, y); y1 = Math.max(y1, y); }
     if (!all.length) { x0 = x1 = y0 = y1 = 0; }
@@ -941,25 +1004,27 @@ function track(ctx, node) {
         s.append(svg('text', { x: SX(x) + 9, y: SY(y) - 7, fill: '#f2b33d', 'font-size': 11, text: `WP${i + 1}` }));
       });
     }
-    if (pts.length > 1) {
-      s.append(svg('polyline', {
-        points: pts.map(([x, y]) => `${SX(x).toFixed(1)},${SY(y).toFixed(1)}`).join(' '),
-        fill: 'none', stroke: '#3fc1e0', 'stroke-width': 2, 'stroke-linejoin': 'round', opacity: 0.9,
-        'data-testid': 'trail',
-      }));
-    }
-    if (pts.length) {
+    for (const { key, v, pts } of drawn) {
+      if (pts.length > 1) {
+        s.append(svg('polyline', {
+          points: pts.map(([x, y]) => `${SX(x).toFixed(1)},${SY(y).toFixed(1)}`).join(' '),
+          fill: 'none', stroke: v.colour, 'stroke-width': 2, 'stroke-linejoin': 'round', opacity: 0.9,
+          'data-testid': 'trail', 'data-vehicle': key,
+        }));
+      }
+      if (!pts.length) continue;
       const [x, y] = pts[pts.length - 1];
       const X = SX(x), Y = SY(y);
-      if (typeof heading === 'number' && Number.isFinite(heading)) {
+      if (typeof v.heading === 'number') {
         s.append(svg('path', {
           d: 'M0,-16 L9,10 L0,4 L-9,10 Z',
-          transform: `translate(${X.toFixed(1)},${Y.toFixed(1)}) rotate(${heading.toFixed(1)})`,
-          fill: '#ffffff', stroke: '#3fc1e0', 'stroke-width': 1.5, 'data-testid': 'heading-arrow',
+          transform: `translate(${X.toFixed(1)},${Y.toFixed(1)}) rotate(${v.heading.toFixed(1)})`,
+          fill: '#ffffff', stroke: v.colour, 'stroke-width': 1.5, 'data-testid': 'heading-arrow', 'data-vehicle': key,
         }));
       } else {
-        s.append(svg('circle', { cx: X, cy: Y, r: 6, fill: '#ffffff', stroke: '#3fc1e0', 'stroke-width': 2 }));
+        s.append(svg('circle', { cx: X, cy: Y, r: 6, fill: '#ffffff', stroke: v.colour, 'stroke-width': 2, 'data-vehicle': key }));
       }
+      if (key) s.append(svg('text', { x: X + 12, y: Y + 4, fill: v.colour, 'font-size': 12, 'data-testid': 'vehicle-label', text: key }));
     }
     // scale bar
     const barM = niceStep((W / 4) / scale, 1);
@@ -976,41 +1041,171 @@ function track(ctx, node) {
     s.append(svg('text', { x: 6, y: 14, fill: '#56778f', 'font-size': 10, text: `grid ${fmtValue(step)} m` }));
   }
 
-  function positionTopic() {
-    for (const n of posNames) if (ctx.topic(n)) return ctx.topic(n);
-    return undefined;
+  /** The line under the map: one vehicle's place and heading, or how many vehicles are drawn. */
+  function infoText() {
+    if (posPattern) {
+      const keys = [...vehicles.keys()].filter((k) => vehicles.get(k).trail.length);
+      return keys.length ? `${keys.length} vehicle${keys.length === 1 ? '' : 's'}: ${keys.join(', ')}` : '';
+    }
+    const v = vehicles.get('');
+    const cur = v && v.trail[v.trail.length - 1];
+    const parts = [];
+    if (cur) parts.push(`${cur.lat.toFixed(6)}, ${cur.lon.toFixed(6)}`);
+    if (v && typeof v.heading === 'number') parts.push(`hdg ${fmtAngle(v.heading, 0)}°`);
+    if (cur && origin) {
+      const [x, y] = project(cur);
+      parts.push(`${x >= 0 ? 'E' : 'W'} ${Math.abs(x).toFixed(0)} m  ${y >= 0 ? 'N' : 'S'} ${Math.abs(y).toFixed(0)} m from ${waypoints.length ? 'WP1' : 'start'}`);
+    }
+    return parts.join('   ');
   }
 
-  const topicsList = [posNames];
+  // a single topic goes by its names; a pattern by every topic it matches
+  const topicsList = [posPattern ? { matching: (n) => posPattern.test(n), pattern: posNames[0] } : posNames];
   return outputWidget(ctx, node, 'track', body, topicsList, {
     update() {
-      const p = positionOf(positionTopic());
-      if (p) {
-        if (!origin) origin = { lat: p.lat, lon: p.lon };
-        addPositions([p]);
+      for (const { name, key, captured } of positionTopics(Object.keys(ctx.allTopics()))) {
+        const p = positionOf(ctx.topic(name));
+        if (p) {
+          if (!origin) origin = { lat: p.lat, lon: p.lon };
+          addPositions(key, [p]);
+        }
+        const h = headingOf(captured);
+        const v = vehicle(key);
+        if (h !== v.heading) { v.heading = h; dirty = true; }
       }
-      const h = valueOf(ctx, headB);
-      if (h !== heading) { heading = typeof h === 'number' ? h : undefined; dirty = true; }
-      const cur = trail[trail.length - 1];
-      const parts = [];
-      if (cur) parts.push(`${cur.lat.toFixed(6)}, ${cur.lon.toFixed(6)}`);
-      if (typeof heading === 'number') parts.push(`hdg ${fmtAngle(heading, 0)}°`);
-      if (cur && origin) {
-        const [x, y] = project(cur);
-        parts.push(`${x >= 0 ? 'E' : 'W'} ${Math.abs(x).toFixed(0)} m  ${y >= 0 ? 'N' : 'S'} ${Math.abs(y).toFixed(0)} m from ${waypoints.length ? 'WP1' : 'start'}`);
-      }
-      const txt = parts.join('   ');
+      const txt = infoText();
       if (info.textContent !== txt) info.textContent = txt;
     },
     onBacklog(backlog) {
-      const list = posNames.map((n) => backlog[n]).find(Array.isArray) || [];
-      addPositions(list.map(positionOf).filter(Boolean).sort((a, b) => a.t - b.t));
-      // without waypoints the trail's start is where distances are measured from
-      if (!waypoints.length && trail.length) origin = { lat: trail[0].lat, lon: trail[0].lon };
+      for (const { name, key } of positionTopics(Object.keys(backlog))) {
+        const list = Array.isArray(backlog[name]) ? backlog[name] : [];
+        addPositions(key, list.map(positionOf).filter(Boolean).sort((a, b) => a.t - b.t));
+      }
+      // without waypoints the first trail's start is where distances are measured from
+      const first = [...vehicles.values()].find((v) => v.trail.length);
+      if (!waypoints.length && first) origin = { lat: first.trail[0].lat, lon: first.trail[0].lon };
       draw();
     },
     tick: () => draw(),
     redraw() { dirty = true; draw(); },
+    drawn: () => Object.fromEntries([...vehicles.entries()].map(([k, v]) => [k, v.trail.length])),
+  });
+}
+
+// ---------------------------------------------------------------- fleet
+
+/** Where a fleet table finds each vehicle's values, under the vehicle's name, unless it says. */
+const FLEET_COLUMNS = {
+  mode: 'vehicle.state.mode',
+  battery: 'power.battery.percent',
+  severity: 'vehicle.health.severity',
+  position: 'nav.position',
+};
+
+/**
+ * Every vehicle of the fleet in one table: online (from the fleet's own topic), mode, battery,
+ * severity, the age of its last position, who controls it, and a button that opens the layout
+ * `open` for it (its name in variable `var`, default `vehicle`).
+ */
+function fleet(ctx, node) {
+  const fleetTopic = node.bind || 'seabus.fleet';
+  const at = (name) => parseBind(node[name] || FLEET_COLUMNS[name]);
+  const cols = { mode: at('mode'), battery: at('battery'), severity: at('severity') };
+  const position = String(node.position || FLEET_COLUMNS.position);
+  const varName = node.var || 'vehicle';
+  const tbody = el('tbody');
+  const table = el('table', { class: 'tbl fleet-table', 'data-testid': 'fleet-table' },
+    el('thead', {}, el('tr', {}, ['vehicle', 'online', 'mode', 'battery', 'severity', 'position', 'control', node.open ? '' : null]
+      .filter((h) => h !== null).map((h) => el('th', { scope: 'col', text: h })))),
+    tbody);
+  const body = el('div', { class: 'scroll' }, table);
+  if (!node.label) node = { ...node, label: 'Fleet' };
+  let rows = [];
+
+  /** The vehicles: those the fleet announces (the console's own node left out) and those heard. */
+  function vehicles() {
+    const t = ctx.topic(fleetTopic);
+    const announced = t && t.fields && typeof t.fields === 'object' ? t.fields : {};
+    const names = new Set(Object.keys(announced));
+    const suffix = `.${position}`;
+    for (const n of Object.keys(ctx.allTopics())) {
+      if (n.endsWith(suffix) && !n.slice(0, -suffix.length).includes('.')) names.add(n.slice(0, -suffix.length));
+    }
+    names.delete(ctx.node() || '');
+    return [...names].sort().map((name) => {
+      const a = announced[name] && typeof announced[name] === 'object' ? announced[name] : null;
+      const value = (b) => valueOf(ctx, b && { topic: `${name}.${b.topic}`, field: b.field });
+      const pos = ctx.topic(`${name}.${position}`);
+      return {
+        name,
+        online: a ? a.online === true : null,
+        since: a ? num(a.since, NaN) : NaN,
+        latency: a ? num(a.latency, NaN) : NaN,
+        mode: value(cols.mode),
+        battery: value(cols.battery),
+        severity: value(cols.severity),
+        positionAge: pos ? ctx.serverNow() - num(pos.stamp, NaN) : NaN,
+        holder: ctx.leaseOf(name).holder,
+      };
+    });
+  }
+
+  /** A row's cells, made once per vehicle and updated in place (a button stays under the pointer). */
+  const made = new Map();
+  function rowOf(name) {
+    let r = made.get(name);
+    if (r) return r;
+    const cell = (col) => el('td', { 'data-col': col });
+    r = { tr: el('tr', { 'data-vehicle': name }), cells: {} };
+    for (const col of ['vehicle', 'online', 'mode', 'battery', 'severity', 'position', 'control']) {
+      r.cells[col] = cell(col);
+      r.tr.append(r.cells[col]);
+    }
+    r.cells.vehicle.textContent = name;
+    if (node.open) {
+      const b = el('button', { type: 'button', class: 'btn', 'data-testid': 'fleet-open', text: 'Open' });
+      b.addEventListener('click', () => ctx.openFor(node.open, { [varName]: name }));
+      r.tr.append(el('td', { 'data-col': 'open' }, b));
+    }
+    made.set(name, r);
+    return r;
+  }
+
+  /** Sets a cell's text, class and title when they changed. */
+  function put(td, text, cls, title) {
+    if (td.textContent !== text) td.textContent = text;
+    if (td.className !== (cls || '')) td.className = cls || '';
+    if ((td.title || '') !== (title || '')) td.title = title || '';
+  }
+
+  function render() {
+    rows = vehicles();
+    const names = new Set(rows.map((v) => v.name));
+    for (const [name, r] of made) {
+      if (!names.has(name)) { r.tr.remove(); made.delete(name); }
+    }
+    rows.forEach((v, i) => {
+      const r = rowOf(v.name);
+      const since = Number.isFinite(v.since) ? `since ${fmtTime(v.since)}` : '';
+      const latency = Number.isFinite(v.latency) ? `, latency ${(v.latency * 1000).toFixed(0)} ms` : '';
+      if (v.online === null) put(r.cells.online, '—', 'muted');
+      else put(r.cells.online, v.online ? 'online' : 'OFFLINE', v.online ? 'yes' : 'no', since + latency);
+      put(r.cells.mode, v.mode === undefined ? '—' : fmtValue(v.mode));
+      put(r.cells.battery, typeof v.battery === 'number' ? `${v.battery.toFixed(0)} %` : '—');
+      put(r.cells.severity, v.severity === undefined ? '—' : String(v.severity), v.severity ? `st-${v.severity}` : '');
+      put(r.cells.position, Number.isFinite(v.positionAge) ? fmtAge(Math.max(0, v.positionAge)) : '—', v.positionAge > 5 ? 'st-UNAVAILABLE' : '');
+      put(r.cells.control, v.holder ? (v.holder === ctx.S.user ? `you (${v.holder})` : v.holder) : 'free');
+      r.tr.classList.toggle('is-offline', v.online === false);
+      if (tbody.children[i] !== r.tr) tbody.insertBefore(r.tr, tbody.children[i] || null);
+    });
+  }
+
+  const topicsList = [[fleetTopic]];
+  return outputWidget(ctx, node, 'fleet', body, topicsList, {
+    update: render,
+    tick: render,
+    onLease: render,
+    drawn: () => rows.map((r) => ({ ...r })),
   });
 }
 

@@ -143,6 +143,7 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<ConsoleSpec>, FileError> {
                     .map(|l| seabus_modules::system::beside(&el.pos, l)),
                 layouts,
                 history: history(el)?,
+                node: spec.node.clone(),
             },
             element: el.clone(),
         });

@@ -262,7 +262,7 @@ async fn logout(State(hub): State<Arc<Hub>>, headers: HeaderMap) -> Response {
         hub.sessions.end(&key);
         tracing::info!(component = "console", user = %session.user, "logged out");
         // control goes with its holder's log-out (for anyone else there is nothing to release)
-        let _ = hub.lease(&session, false).await;
+        hub.release_everything(&session).await;
         // the log-out is in the session file before it is answered
         hub.sessions.save().await;
     }
@@ -342,6 +342,7 @@ async fn connection(hub: Arc<Hub>, key: Key, session: Session, socket: WebSocket
                 }
                 Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {
                     out.push(hub.lease_json());
+                    out.push(hub.leases_json());
                     out.push(hub.history());
                     out.extend(hub.commands_again(&client));
                 }
@@ -403,11 +404,7 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
                             };
                             // a value names a vehicle or such: nothing that could change the
                             // meaning of the attribute it lands in
-                            let plain = !v.is_empty()
-                                && v.len() <= 64
-                                && v.chars()
-                                    .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
-                            plain.then(|| (k.clone(), v))
+                            crate::layout::is_name(&v).then(|| (k.clone(), v))
                         })
                         .collect()
                 })
@@ -423,9 +420,14 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
                 "release" => false,
                 other => return vec![error(format!("lease action `{other}`: take or release"))],
             };
-            match hub.lease(&client.session, take).await {
+            // a vehicle's own control, or (none named) the console's one control
+            let vehicle = s("vehicle");
+            if !vehicle.is_empty() && !crate::layout::is_name(&vehicle) {
+                return vec![error(format!("`{vehicle}` is not a vehicle name"))];
+            }
+            match hub.lease(&client.session, &vehicle, take).await {
                 Ok(()) => Vec::new(),
-                Err(e) => vec![error(e), hub.lease_json()],
+                Err(e) => vec![error(e), hub.vehicle_lease_json(&vehicle)],
             }
         }
         "arm" => match hub.arm(client, &s("layout"), &s("command")) {

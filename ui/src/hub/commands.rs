@@ -165,6 +165,8 @@ pub(super) type DriveKey = (u64, String, String);
 #[derive(Debug, Clone)]
 pub(super) struct Drive {
     pub(super) user: String,
+    /// The vehicle whose control it is sent under (`""`: the console's one control).
+    vehicle: String,
     name: String,
     topic: Topic,
     neutral: DataMap,
@@ -179,6 +181,13 @@ pub(super) struct Drive {
 #[derive(Debug, Default)]
 pub(super) struct Drives {
     running: HashMap<DriveKey, Drive>,
+}
+
+impl Drive {
+    /// The vehicle whose control it is sent under (`""`: the console's one control).
+    pub(super) fn vehicle(&self) -> &str {
+        &self.vehicle
+    }
 }
 
 impl Drives {
@@ -270,7 +279,7 @@ impl Hub {
             return Err(CommandError::RoleNeeded(role.to_string()));
         }
         if decl.lease {
-            match self.state().lease.holder() {
+            match self.state().lease.holder(decl.vehicle()) {
                 Some(u) if u == session.user => {}
                 Some(u) => return Err(CommandError::ControlHeldBy(u.to_string())),
                 None => return Err(CommandError::NoControl),
@@ -414,6 +423,7 @@ impl Hub {
         let now = Instant::now();
         let drive = Drive {
             user: client.session.user.clone(),
+            vehicle: decl.vehicle().to_string(),
             name: command.to_string(),
             topic,
             neutral,
@@ -762,7 +772,7 @@ mod tests {
         let both = DataMap::new().with("heading", 90).with("speed", 2);
         send(&f, &mut ana, "course", both, None).await.unwrap();
         // another page of another pilot starts from what was commanded, not from its layout
-        f.hub.lease(&f.session("ana"), false).await.unwrap();
+        f.hub.lease(&f.session("ana"), "", false).await.unwrap();
         let mut bo = f.pilot("bo").await;
         send(&f, &mut bo, "course", set("heading", 45), None)
             .await
@@ -819,10 +829,10 @@ mod tests {
         f.hub.release(&ana, "pilot", "course").await;
         assert_eq!(neutrals(&waiting(&mut driver)), 1);
         drive(&f, &mut ana, "course", ahead()).await.unwrap();
-        f.hub.lease(&ana.session, false).await.unwrap();
+        f.hub.lease(&ana.session, "", false).await.unwrap();
         f.hub.release(&ana, "pilot", "course").await;
         assert_eq!(neutrals(&waiting(&mut driver)), 1);
-        f.hub.lease(&ana.session, true).await.unwrap();
+        f.hub.lease(&ana.session, "", true).await.unwrap();
         drive(&f, &mut ana, "course", ahead()).await.unwrap();
         f.hub.disconnect(&ana).await;
         f.hub.release(&ana, "pilot", "course").await;

@@ -114,12 +114,30 @@ pub(super) struct Ack {
     pub(super) state: String,
     /// The driver's reason (`reason`, or else `error`).
     pub(super) reason: String,
+    /// The vehicle it came from: what its topic has before `cmd.status` (`auv1.` of
+    /// `auv1.cmd.status`; empty on a vehicle's own bus).
+    pub(super) vehicle: String,
+}
+
+/// The status topic that answers a command on `topic`: the vehicle's `cmd.status`, its vehicle
+/// being what the command's topic has before its first `cmd` segment (`auv1.cmd.course` is
+/// answered on `auv1.cmd.status`; `cmd.course`, and a topic without a `cmd` segment, on
+/// `cmd.status`).
+fn vehicle_of_command(topic: &str) -> &str {
+    if topic.starts_with("cmd.") {
+        return "";
+    }
+    match topic.find(".cmd.") {
+        Some(i) => &topic[..=i],
+        None => "",
+    }
 }
 
 impl Ack {
     /// The answer in a message on `topic`, when it is a `cmd.status` about a command of `origin`.
     pub(super) fn from_status(topic: &Topic, map: &DataMap, origin: &str) -> Option<Ack> {
-        if topic.as_str() != "cmd.status"
+        let vehicle = topic.as_str().strip_suffix("cmd.status")?;
+        if !(vehicle.is_empty() || vehicle.ends_with('.'))
             || map.get("origin").and_then(Value::as_str) != Some(origin)
         {
             return None;
@@ -135,6 +153,7 @@ impl Ack {
             seq,
             state: state.to_string(),
             reason: reason.to_string(),
+            vehicle: vehicle.to_string(),
         })
     }
 
@@ -208,6 +227,17 @@ impl History {
             }
             return None;
         };
+        if vehicle_of_command(&e.topic) != ack.vehicle {
+            // another vehicle's driver answering the same number: not this command's answer
+            tracing::warn!(
+                component = "console",
+                "{}cmd.status answers command {} on {}: not its vehicle, ignored",
+                ack.vehicle,
+                e.id,
+                e.topic
+            );
+            return None;
+        }
         if !ack.settles() && ack.state == e.state {
             return None;
         }
@@ -399,7 +429,8 @@ mod tests {
             Some(Ack {
                 seq: 2,
                 state: "acknowledged".into(),
-                reason: String::new()
+                reason: String::new(),
+                vehicle: String::new(),
             })
         );
         assert_eq!(Ack::from_status(&cmd_status(), &mine, "o2"), None);
@@ -411,6 +442,43 @@ mod tests {
             .with("reason", "")
             .with("error", "depth limit");
         assert_eq!(ack(&refused).reason, "depth limit");
+    }
+
+    #[test]
+    fn a_vehicles_command_is_answered_only_by_that_vehicle() {
+        let mut h = History::default();
+        let course =
+            |topic: &str| Entry::new("ana", "course", topic, &DataMap::new().with("heading", 90));
+        let to_auv2 = h.push(course("auv2.cmd.course").pending(7));
+        let on = |topic: &str, state: &str| {
+            Ack::from_status(&Topic::new(topic).unwrap(), &status("o1", 7, state), "o1").unwrap()
+        };
+        // auv1's driver numbering a command of its own 7 is not auv2's answer
+        assert_eq!(on("auv1.cmd.status", "refused").vehicle, "auv1.");
+        assert!(h.acknowledge(&on("auv1.cmd.status", "refused")).is_none());
+        assert!(h.acknowledge(&on("cmd.status", "refused")).is_none());
+        assert_eq!(states(&h), [(to_auv2.id, "pending")]);
+        let answered = h
+            .acknowledge(&on("auv2.cmd.status", "acknowledged"))
+            .unwrap();
+        assert_eq!(
+            (answered.id, answered.state.as_str()),
+            (to_auv2.id, "acknowledged")
+        );
+        // a topic that only ends like a status topic is none
+        let like = Topic::new("auv2.xcmd.status").unwrap();
+        assert_eq!(
+            Ack::from_status(&like, &status("o1", 8, "refused"), "o1"),
+            None
+        );
+        // a console's own vehicle answers on cmd.status
+        let local = h.push(course("cmd.course").pending(9));
+        let ack = Ack::from_status(&cmd_status(), &status("o1", 9, "acknowledged"), "o1");
+        let settled = h.acknowledge(&ack.unwrap()).unwrap();
+        assert_eq!(
+            (settled.id, settled.state.as_str()),
+            (local.id, "acknowledged")
+        );
     }
 
     #[test]

@@ -87,6 +87,8 @@ impl Commanded {
 #[derive(Debug, Clone)]
 pub(super) struct Kept {
     pub(super) user: String,
+    /// The vehicle whose control it is kept under (`""`: the console's one control).
+    vehicle: String,
     name: String,
     pub(super) topic: Topic,
     fields: DataMap,
@@ -103,6 +105,11 @@ pub(super) struct Kept {
 }
 
 impl Kept {
+    /// The vehicle whose control it is kept under (`""`: the console's one control).
+    pub(super) fn vehicle(&self) -> &str {
+        &self.vehicle
+    }
+
     /// What pages are shown of it: while kept its values, once ended when and why.
     fn json(&self, ended: Option<&str>) -> Json {
         let mut m = json!({
@@ -309,6 +316,7 @@ impl Hub {
             st.keeps.generations += 1;
             let mut k = Kept {
                 user: user.to_string(),
+                vehicle: decl.vehicle().to_string(),
                 name: decl.name.clone(),
                 topic: decl.topic.clone(),
                 fields: fields.clone(),
@@ -363,9 +371,19 @@ impl Hub {
     /// watchdog).
     pub async fn keep(&self, now: Instant) {
         self.sort_heard().await;
-        let holder = self.state().lease.holder().map(str::to_string);
+        let held: Vec<(String, String)> = {
+            let st = self.state();
+            st.keeps
+                .kept
+                .values()
+                .filter_map(|k| {
+                    let holder = st.lease.holder(&k.vehicle)?;
+                    Some((k.vehicle.clone(), holder.to_string()))
+                })
+                .collect()
+        };
         self.end_kept(
-            |k| holder.as_deref() != Some(k.user.as_str()),
+            |k| !held.iter().any(|(v, u)| *v == k.vehicle && *u == k.user),
             "control ended",
         )
         .await;
@@ -382,11 +400,13 @@ impl Hub {
             // still the same keeping, its sender still in control: it may have ended meanwhile
             let fields = {
                 let st = self.state();
-                let holder = st.lease.holder();
                 st.keeps
                     .kept
                     .get(&topic)
-                    .filter(|k| k.generation == generation && holder == Some(k.user.as_str()))
+                    .filter(|k| {
+                        k.generation == generation
+                            && st.lease.holder(&k.vehicle) == Some(k.user.as_str())
+                    })
                     .map(|k| k.fields.clone())
             };
             let Some(fields) = fields else {
@@ -482,7 +502,7 @@ mod tests {
                 .all(|m| field(m, "speed") == Some(Value::Float(1.5))
                     && field(m, "heading") == Some(Value::Int(90)))
         );
-        f.hub.lease(&ana.session, false).await.unwrap();
+        f.hub.lease(&ana.session, "", false).await.unwrap();
         let released = waiting(&mut driver);
         let released = helms(&released);
         assert_eq!(released.len(), 1);

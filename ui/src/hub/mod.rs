@@ -34,8 +34,9 @@ use commands::{Arms, Drives};
 use history::{Ack, History};
 use keep::{Commanded, Keeps};
 use lease::Lease;
+use seabus_medium::topic::FLEET;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Interface, Kind, Pattern, Stamp, Topic};
+use seabus_medium::{DataMap, Interface, Kind, Pattern, Stamp, Topic, Value};
 use serde_json::{Value as Json, json};
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -65,6 +66,8 @@ pub struct Settings {
     pub layouts: Vec<PathBuf>,
     /// How far back the plotted and tracked variables are kept for pages that open a layout.
     pub history: Duration,
+    /// The node the console runs on (the system's `node`): a fleet table leaves it out.
+    pub node: Option<String>,
 }
 
 /// The latest message of a topic.
@@ -208,20 +211,27 @@ impl Hub {
             let mut st = self.state();
             let stale = st.drives.stale(now);
             let timed_out = st.history.time_out(now, self.settings.ack_timeout);
-            let released = st.lease.expire(now).map(|user| {
-                // its kept commands end in `keep`, which sees no holder
-                let released = st.drives.take(|_, d| d.user == user);
-                tracing::info!(component = "console", user = %user, "control released: disconnected");
-                released
-            });
+            let released: Vec<(String, Vec<_>)> = st
+                .lease
+                .expire(now)
+                .into_iter()
+                .map(|(vehicle, user)| {
+                    // its kept commands end in `keep`, which sees no holder
+                    let drives = st
+                        .drives
+                        .take(|_, d| d.user == user && d.vehicle() == vehicle);
+                    tracing::info!(component = "console", user = %user, vehicle, "control released: disconnected");
+                    (vehicle, drives)
+                })
+                .collect();
             (stale, timed_out, released)
         };
         self.neutral(stale, "re-sends stopped").await;
         for e in &timed_out {
             self.changed(e);
         }
-        if let Some(released) = lease_gone {
-            self.lease_changed().await;
+        for (vehicle, released) in lease_gone {
+            self.lease_changed(&vehicle).await;
             self.neutral(released, "control released").await;
         }
     }
@@ -238,11 +248,16 @@ impl Hub {
             st.version += 1;
             let version = st.version;
             st.backlog.record(topic, stamp.as_secs_f64(), map);
+            let map = if topic.as_str() == FLEET {
+                fleet_table(st.latest.get(topic).map(|l| &l.map), map)
+            } else {
+                map.clone()
+            };
             st.latest.insert(
                 topic.clone(),
                 Latest {
                     stamp: stamp.as_secs_f64(),
-                    map: map.clone(),
+                    map,
                     version,
                 },
             );
@@ -264,6 +279,22 @@ impl Hub {
             }
         }
     }
+}
+
+/// Nodes a fleet table keeps, at most (those heard first).
+pub const FLEET_NODES: usize = 256;
+
+/// The fleet's table after `said` (one node's `seabus.fleet` message): each node's latest message
+/// under its name, so a page shows every vehicle however many spoke since it was last sent data.
+fn fleet_table(table: Option<&DataMap>, said: &DataMap) -> DataMap {
+    let mut table = table.cloned().unwrap_or_default();
+    let Some(node) = said.get("node").and_then(Value::as_str) else {
+        return table;
+    };
+    if table.get(node).is_some() || table.len() < FLEET_NODES {
+        table.insert(node.to_string(), said.clone());
+    }
+    table
 }
 
 /// Removes and returns the values of `map` that `pick` picks.

@@ -69,7 +69,9 @@ impl Hub {
             "roles": client.session.roles,
             "layouts": self.layouts_for(&client.session),
             "lease": self.lease_json(),
+            "leases": self.leases_json()["held"],
             "lease_role": self.settings.lease_role,
+            "node": self.settings.node,
             "designer_role": self.settings.designer_role,
         })
     }
@@ -342,6 +344,57 @@ mod tests {
         assert_eq!(
             (&again[1]["type"], &again[1]["command"], &again[1]["user"]),
             (&json!("kept"), &json!("helm"), &json!("ana"))
+        );
+    }
+
+    #[test]
+    fn a_fleet_table_gets_every_node_announced_and_each_vehicles_bound_fields() {
+        let table = r#"<layout name="fleet" roles="observer"><fleet open="vehicle"/></layout>"#;
+        let f = Fixture::with_layouts(&[("fleet.xml", table)]);
+        let mut ivo = f.hub.connect(f.session("ivo"));
+        let opened = f.hub.open(&mut ivo, "fleet", &BTreeMap::new());
+        assert_eq!(opened["type"], "layout", "{opened}");
+        let fleet = Topic::new("seabus.fleet").unwrap();
+        let said = |node: &str, online: bool| {
+            DataMap::new()
+                .with("node", node)
+                .with("online", online)
+                .with("since", 1.0)
+        };
+        // three nodes speak between two frames of the page: all three are in the table
+        f.hub
+            .observe(&fleet, Stamp(1_000_000_000), &said("auv1", true));
+        f.hub
+            .observe(&fleet, Stamp(1_000_000_000), &said("auv2", true));
+        f.hub
+            .observe(&fleet, Stamp(1_000_000_000), &said("shore", true));
+        let state = Topic::new("auv1.vehicle.state").unwrap();
+        let mode = DataMap::new().with("mode", "mission").with("error", "none");
+        f.hub.observe(&state, Stamp(2_000_000_000), &mode);
+        let battery = Topic::new("auv2.power.battery").unwrap();
+        let charge = DataMap::new().with("percent", 81.0).with("voltage", 15.1);
+        f.hub.observe(&battery, Stamp(2_000_000_000), &charge);
+        let data = f.hub.data_for(&mut ivo).unwrap();
+        let nodes = &data["topics"]["seabus.fleet"]["fields"];
+        let names: Vec<&String> = nodes.as_object().unwrap().keys().collect();
+        assert_eq!(names, ["auv1", "auv2", "shore"], "{data}");
+        assert_eq!(nodes["auv2"]["online"], true);
+        assert_eq!(
+            data["topics"]["auv1.vehicle.state"]["fields"],
+            json!({"mode": "mission"})
+        );
+        assert_eq!(
+            data["topics"]["auv2.power.battery"]["fields"],
+            json!({"percent": 81.0})
+        );
+        // auv1 goes: its row stays, offline
+        f.hub
+            .observe(&fleet, Stamp(3_000_000_000), &said("auv1", false));
+        let data = f.hub.data_for(&mut ivo).unwrap();
+        let nodes = &data["topics"]["seabus.fleet"]["fields"];
+        assert_eq!(
+            (&nodes["auv1"]["online"], &nodes["auv2"]["online"]),
+            (&json!(false), &json!(true))
         );
     }
 }

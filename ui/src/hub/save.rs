@@ -75,8 +75,9 @@ impl Hub {
         let file = path.display().to_string();
         let layout = Layout::parse(&file, xml, &BTreeMap::new()).map_err(SaveError::Layout)?;
         // what may be sent and by whom is for those who may take control, not for designers alone
-        let rules_changed =
-            old.to_json()["commands"] != layout.to_json()["commands"] || old.roles != layout.roles;
+        let rules_changed = old.to_json()["commands"] != layout.to_json()["commands"]
+            || old.roles != layout.roles
+            || old.vehicle != layout.vehicle;
         if rules_changed && !session.has(&self.settings.lease_role) {
             return Err(SaveError::RulesNeedRole(self.settings.lease_role.clone()));
         }
@@ -121,7 +122,7 @@ mod tests {
         let bad = "<layout name=\"pilot\">\n  <dial/>\n</layout>";
         let refused = f.hub.save(&f.session("ana"), "pilot", bad).unwrap_err();
         let file = f.dir.join("pilot.xml").display().to_string();
-        let message = "unexpected element <dial> inside <layout>; expected <var>, <command>, <template>, <use>, <keys>, <gamepad>, <row>, <column>, <tabs>, <grid>, <readout>, <gauge>, <plot>, <track>, <health>, <log>, <history>, <button>, <slider>, <number>, <text>, <toggle>";
+        let message = "unexpected element <dial> inside <layout>; expected <var>, <command>, <template>, <use>, <keys>, <gamepad>, <row>, <column>, <tabs>, <grid>, <readout>, <gauge>, <plot>, <track>, <fleet>, <health>, <log>, <history>, <button>, <slider>, <number>, <text>, <toggle>";
         let text = format!("{file}:2:3: {message}");
         assert_eq!(refused.to_string(), text);
         assert_eq!(

@@ -73,6 +73,7 @@ impl Fixture {
             log: Some(d.join("commands.csv")),
             layouts,
             history: Duration::from_secs(600),
+            node: None,
         };
         let hub = Hub::new(
             settings,
@@ -115,7 +116,7 @@ impl Fixture {
     /// A connection of `name` with [`PILOT`] open and control taken.
     pub async fn pilot(&self, name: &str) -> Client {
         let client = self.client(name);
-        self.hub.lease(&client.session, true).await.unwrap();
+        self.hub.lease(&client.session, "", true).await.unwrap();
         client
     }
 

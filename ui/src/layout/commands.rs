@@ -21,6 +21,11 @@ const KNOWN: [&str; 12] = [
 const KEEP_RANGE: (Duration, Duration) = (Duration::from_millis(100), Duration::from_secs(60));
 
 impl CommandDecl {
+    /// The vehicle whose control it needs (`""`: the console's one control).
+    pub fn vehicle(&self) -> &str {
+        self.vehicle.as_deref().unwrap_or("")
+    }
+
     /// Checks a proposed set of field values (types as the declared values', ranges) and returns
     /// the full datamap to send, or the reason it cannot be sent. A field in `chosen` (one the
     /// layout's controls let the pilot choose) is the value in `set`, else its current value in
@@ -168,6 +173,7 @@ pub(super) fn read_command(el: &Element) -> Result<CommandDecl, FileError> {
         rate_hz,
         neutral: DataMap::new(),
         lease: el.flag("lease")?.unwrap_or(true),
+        vehicle: None,
         min: BTreeMap::new(),
         max: BTreeMap::new(),
         from: BTreeMap::new(),

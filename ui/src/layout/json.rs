@@ -31,6 +31,7 @@ impl Layout {
             "name": self.name,
             "title": self.title,
             "roles": self.roles,
+            "vehicle": self.vehicle,
             "vars": self.vars,
             "commands": commands,
             "root": node_json(&self.root),

@@ -30,7 +30,8 @@ mod widgets;
 pub use expand::{MAX_ELEMENTS, MAX_TEMPLATE_DEPTH, MAX_TEXT};
 pub use model::{
     AxisBinding, Binding, CommandDecl, Confirm, DEFAULT_FRESH, DEFAULT_HEALTH, DEFAULT_HOLD,
-    DEFAULT_LOG_TOPICS, Horizon, KeyBinding, Layout, Node, Offers, Offset, PadButton, Plotted,
+    DEFAULT_LOG_TOPICS, FLEET_COLUMNS, Horizon, KeyBinding, Layout, Node, Offers, Offset,
+    PadButton, Plotted,
 };
 pub use system::{Producer, producers};
-pub use values::COLOURS;
+pub use values::{COLOURS, is_name};

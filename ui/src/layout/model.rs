@@ -27,13 +27,24 @@ pub(super) const TOP: [&str; 6] = ["var", "command", "template", "use", "keys", 
 pub(super) const CONTAINERS: [&str; 4] = ["row", "column", "tabs", "grid"];
 
 /// Every widget kind an element may name, containers first.
-pub(super) const WIDGETS: [&str; 16] = [
-    "row", "column", "tabs", "grid", "readout", "gauge", "plot", "track", "health", "log",
+pub(super) const WIDGETS: [&str; 17] = [
+    "row", "column", "tabs", "grid", "readout", "gauge", "plot", "track", "fleet", "health", "log",
     "history", "button", "slider", "number", "text", "toggle",
 ];
 
 /// Widgets that display variables and take `fresh`.
-pub(super) const OUTPUTS: [&str; 6] = ["readout", "gauge", "plot", "track", "health", "log"];
+pub(super) const OUTPUTS: [&str; 7] = [
+    "readout", "gauge", "plot", "track", "fleet", "health", "log",
+];
+
+/// What a `<fleet>` table shows of each vehicle when it does not say: its own attribute, and
+/// where under the vehicle's name (`auv1.vehicle.state`) the value is.
+pub const FLEET_COLUMNS: [(&str, &str); 4] = [
+    ("mode", "vehicle.state.mode"),
+    ("battery", "power.battery.percent"),
+    ("severity", "vehicle.health.severity"),
+    ("position", "nav.position"),
+];
 
 /// Every widget kind.
 pub(super) fn widget_kinds() -> Vec<&'static str> {
@@ -70,6 +81,9 @@ pub struct CommandDecl {
     pub neutral: DataMap,
     /// Whether control is needed to send it.
     pub lease: bool,
+    /// The vehicle whose control it needs (its layout's `vehicle`; `None`: the console's one
+    /// control).
+    pub vehicle: Option<String>,
     /// Lowest values of fields.
     pub min: BTreeMap<String, f64>,
     /// Highest values of fields.
@@ -227,6 +241,9 @@ pub struct Layout {
     pub title: String,
     /// The roles it is shown to (empty: everyone).
     pub roles: Vec<String>,
+    /// The vehicle it commands (`vehicle`, usually `${vehicle}`): its commands need control of
+    /// that vehicle, each vehicle's control taken on its own. `None`: the console's one control.
+    pub vehicle: Option<String>,
     /// Its variables with the values used.
     pub vars: BTreeMap<String, String>,
     /// Its commands by name.
@@ -491,6 +508,22 @@ fn node_bindings(node: &Node, out: &mut Vec<Binding>) {
         "health" => {
             let topic = node.attrs.get("bind").map_or(DEFAULT_HEALTH, |b| b.trim());
             add(topic, None, node);
+        }
+        "fleet" => {
+            let fleet = node
+                .attrs
+                .get("bind")
+                .map_or(seabus_medium::topic::FLEET, |b| b.trim());
+            add(fleet, None, node);
+            for (attr, default) in FLEET_COLUMNS {
+                let at = node.attrs.get(attr).map_or(default, |v| v.trim());
+                // every vehicle's: `*.vehicle.state` with field `mode`; a position's any field
+                let (topic, field) = match at.rsplit_once('.') {
+                    Some((t, f)) if attr != "position" => (t, Some(f)),
+                    _ => (at, None),
+                };
+                add(&format!("*.{topic}"), field, node);
+            }
         }
         "log" => {
             let topics = node

@@ -45,6 +45,7 @@ struct Header {
     name: String,
     title: String,
     roles: Vec<String>,
+    vehicle: Option<String>,
 }
 
 /// What the elements inside `<layout>` give besides commands.
@@ -73,7 +74,7 @@ impl Reader {
                 root.name
             )));
         }
-        root.only_attrs(&["name", "title", "roles"])?;
+        root.only_attrs(&["name", "title", "roles", "vehicle"])?;
         let (vars, templates) = declarations(root, given)?;
         root.only_children(&top_elements())?;
         let mut ex = Expander::new(&vars, templates);
@@ -89,6 +90,9 @@ impl Reader {
             ids: BTreeMap::new(),
         };
         reader.commands(&children)?;
+        for c in reader.commands.values_mut() {
+            c.vehicle.clone_from(&header.vehicle);
+        }
         let body = reader.body(&children)?;
         let mut root_node = root_node(body.widgets, &root.pos);
         reader.assign_ids(&mut root_node);
@@ -96,6 +100,7 @@ impl Reader {
             name: header.name,
             title: header.title,
             roles: header.roles,
+            vehicle: header.vehicle,
             vars,
             commands: reader.commands,
             root: root_node,
@@ -223,7 +228,8 @@ fn variable(el: &Element, given: &BTreeMap<String, String>) -> Result<(String, S
     Ok((name, value))
 }
 
-/// The name, title and roles of `<layout>` (`attrs`: its attributes, variables substituted).
+/// The name, title, roles and vehicle of `<layout>` (`attrs`: its attributes, variables
+/// substituted).
 fn header(root: &Element, attrs: &[Attr]) -> Result<Header, FileError> {
     let get = |n: &str| attrs.iter().find(|a| a.name == n);
     let name = match get("name") {
@@ -235,7 +241,15 @@ fn header(root: &Element, attrs: &[Attr]) -> Result<Header, FileError> {
         Some(a) => roles(a)?,
         None => Vec::new(),
     };
-    Ok(Header { name, title, roles })
+    let vehicle = get("vehicle")
+        .map(|a| name_attr(a, "a vehicle"))
+        .transpose()?;
+    Ok(Header {
+        name,
+        title,
+        roles,
+        vehicle,
+    })
 }
 
 /// The root of the widget tree: the only top-level widget, or a `column` around them.
@@ -333,6 +347,10 @@ mod tests {
                 "1:1: root element is <page>, expected <layout>",
             ),
             ("<layout/>", "1:1: <layout> is missing attribute `name`"),
+            (
+                "<layout name=\"t\" vehicle=\"auv 1\"/>",
+                "1:18: attribute `vehicle`: `auv 1` is not a vehicle name: use letters, digits, `_` and `-` (at most 64)",
+            ),
             (
                 "<layout name=\"t\" roles=\"pilot s!\"/>",
                 "1:18: attribute `roles`: `s!` is not a role name: use letters, digits, `_` and `-`",

@@ -94,7 +94,7 @@ impl Layout {
         let mut ranges = Vec::new();
         for c in self.commands.values() {
             let acceptors = acceptors(c, &accepted, spec, medium);
-            if acceptors.is_empty() {
+            if acceptors.is_empty() && sent_beyond(c, spec, medium).is_none() {
                 warnings.push(c.pos.error(format!(
                     "warning: no module of {} accepts command `{}` on `{}`",
                     spec.file,
@@ -219,6 +219,22 @@ fn acceptors<'a>(
         }
     }
     out
+}
+
+/// The medium beyond this system a command is carried to, if a bridge route takes it from the
+/// console's medium onto a medium that reaches other systems (anything but in-process): a fleet
+/// console's `auv2.cmd.course` goes out to the vehicle, whose own system accepts it.
+fn sent_beyond<'a>(c: &CommandDecl, spec: &'a SystemSpec, console: &str) -> Option<&'a str> {
+    let topic = c.topic.as_str();
+    route_legs(spec)
+        .filter(|(from, _, r)| {
+            *from == console && r.kind != Some(Kind::Data) && r.topics.matches(topic)
+        })
+        .map(|(_, to, _)| to)
+        .find(|to| {
+            spec.medium(to)
+                .is_some_and(|m| !m.url.trim_start().starts_with("inproc:"))
+        })
 }
 
 /// A widget or input that sends a command: what it is called in a warning, and where it is.
@@ -591,6 +607,41 @@ mod tests {
                 "l.xml:2:1: warning: no module of sys.xml accepts command `course` on `cmd.course`",
                 "l.xml:3:1: warning: no module of sys.xml accepts command `stop` on `cmd.mission`",
             ]
+        );
+    }
+
+    #[test]
+    fn a_command_a_route_carries_out_to_other_systems_is_not_warned_of() {
+        let spec = SystemSpec::parse(
+            "sys.xml",
+            r#"<seabus node="shore">
+  <medium name="bus" url="inproc://"/>
+  <medium name="fleet" url="udp://239.255.1.1:47000?ttl=0"/>
+  <medium name="local" url="inproc://"/>
+  <bridge name="b" media="bus fleet"><route from="bus" to="fleet" topics="*.cmd.**" kind="command"/></bridge>
+  <bridge name="c" media="bus local"><route from="bus" to="local" topics="lab.**"/></bridge>
+</seabus>"#,
+        )
+        .unwrap();
+        let registry = seabus_support::registry();
+        let catalogue = Catalogue::built_in();
+        let l = parse(
+            r#"<layout name="t" vehicle="auv2">
+<command name="course" topic="auv2.cmd.course" fields="heading=0.0"/>
+<command name="lab" topic="lab.light" fields="on=true"/>
+</layout>"#,
+        )
+        .unwrap();
+        let got: Vec<String> = l
+            .check_on(&spec, &registry, &catalogue, "bus")
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        // auv2's commands go out to auv2's own system; `lab.light` stays in this process,
+        // where nothing takes it
+        assert_eq!(
+            got,
+            ["l.xml:3:1: warning: no module of sys.xml accepts command `lab` on `lab.light`"]
         );
     }
 }

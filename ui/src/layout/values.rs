@@ -4,7 +4,7 @@
 
 use seabus_medium::parse::parse_duration;
 use seabus_medium::xml::{Attr, Element, FileError};
-use seabus_medium::{DataMap, Topic, Value};
+use seabus_medium::{DataMap, Pattern, Topic, Value};
 use std::time::Duration;
 
 /// Colour names a layout may use besides `#rgb` and `#rrggbb`.
@@ -108,7 +108,7 @@ fn listed_value(value: &str) -> Result<Value, String> {
 }
 
 /// Letters, digits, `_` and `-`, not empty.
-pub(super) fn is_name(s: &str) -> bool {
+pub fn is_name(s: &str) -> bool {
     !s.is_empty()
         && s.len() <= 64
         && s.chars()
@@ -185,8 +185,14 @@ pub(super) fn topic(a: &Attr, text: &str) -> Result<Topic, FileError> {
     Topic::new(text.trim()).map_err(|e| a.error(format!("`{}` is not a topic: {e}", text.trim())))
 }
 
-/// `topic.field`, split at the last dot.
-pub(super) fn bind(a: &Attr) -> Result<(Topic, String), FileError> {
+/// `text` (part of `a`'s value) as a topic pattern.
+pub(super) fn pattern(a: &Attr, text: &str) -> Result<Pattern, FileError> {
+    Pattern::new(text.trim())
+        .map_err(|e| a.error(format!("`{}` is not a topic pattern: {e}", text.trim())))
+}
+
+/// `topic.field`, split at the last dot: the topic part and the field.
+fn split_bind(a: &Attr) -> Result<(&str, String), FileError> {
     let text = a.value.trim();
     let Some((t, field)) = text.rsplit_once('.') else {
         return Err(a.error(format!(
@@ -196,7 +202,19 @@ pub(super) fn bind(a: &Attr) -> Result<(Topic, String), FileError> {
     if !is_name(field) {
         return Err(a.error(format!("`{field}` is not a field name in `{text}`")));
     }
-    Ok((topic(a, t)?, field.to_string()))
+    Ok((t, field.to_string()))
+}
+
+/// `topic.field`, split at the last dot.
+pub(super) fn bind(a: &Attr) -> Result<(Topic, String), FileError> {
+    let (t, field) = split_bind(a)?;
+    Ok((topic(a, t)?, field))
+}
+
+/// `pattern.field` (`*.nav.attitude.yaw`), split at the last dot.
+pub(super) fn bind_pattern(a: &Attr) -> Result<(Pattern, String), FileError> {
+    let (t, field) = split_bind(a)?;
+    Ok((pattern(a, t)?, field))
 }
 
 /// `text` (part of `a`'s value) as a colour: `#rgb`, `#rrggbb` or one of [`COLOURS`].

@@ -6,8 +6,8 @@ use super::commands::article;
 use super::model::{Node, widget_kinds};
 use super::read::Reader;
 use super::values::{
-    bind, colour, count, duration, field_list, field_value, finite, list, list_items, name_attr,
-    no_children, topic,
+    bind, bind_pattern, colour, count, duration, field_list, field_value, finite, list, list_items,
+    name_attr, no_children, pattern, topic,
 };
 use seabus_medium::xml::{Attr, Element, FileError};
 use seabus_medium::{Pattern, Value};
@@ -33,6 +33,9 @@ fn kind_attrs(kind: &str) -> Option<&'static [&'static str]> {
         "plot" => &["window", "min", "max", "fresh"],
         "series" => &["bind", "colour", "unit", "angle"],
         "track" => &["position", "heading", "trail", "waypoints", "grid", "fresh"],
+        "fleet" => &[
+            "bind", "open", "var", "mode", "battery", "severity", "position", "fresh",
+        ],
         "health" => &["bind", "fresh"],
         "log" => &["topics", "lines", "fresh"],
         "history" => &["lines"],
@@ -207,6 +210,7 @@ impl Reader {
             "readout" | "gauge" => readout(el)?,
             "series" => series(el)?,
             "track" => track(el)?,
+            "fleet" => fleet(el)?,
             "health" => health(el)?,
             "log" | "history" => log(el)?,
             "button" => self.button(el)?,
@@ -352,13 +356,14 @@ fn series(el: &Element) -> Result<(), FileError> {
     Ok(())
 }
 
-/// `<track>`: a position topic, a heading binding, the trail, waypoints and grid.
+/// `<track>`: a position topic (or a pattern: one trail per vehicle, `*.nav.position`), a
+/// heading binding, the trail, waypoints and grid.
 fn track(el: &Element) -> Result<(), FileError> {
     no_children(el)?;
     let a = el.required("position")?;
-    topic(a, &a.value)?;
+    pattern(a, &a.value)?;
     if let Some(a) = el.attr("heading") {
-        bind(a)?;
+        bind_pattern(a)?;
     }
     if let Some(a) = el.attr("trail") {
         count(a, 1, 1_000_000)?;
@@ -368,6 +373,30 @@ fn track(el: &Element) -> Result<(), FileError> {
     }
     if let Some(a) = el.attr("grid") {
         grid(a)?;
+    }
+    Ok(())
+}
+
+/// `<fleet>`: the fleet's topic, the layout each vehicle opens with and its variable, and where
+/// each vehicle's mode, battery, severity and position are (topics under the vehicle's name).
+fn fleet(el: &Element) -> Result<(), FileError> {
+    no_children(el)?;
+    if let Some(a) = el.attr("bind") {
+        topic(a, &a.value)?;
+    }
+    if let Some(a) = el.attr("open") {
+        name_attr(a, "a layout")?;
+    }
+    if let Some(a) = el.attr("var") {
+        name_attr(a, "a variable")?;
+    }
+    for name in ["mode", "battery", "severity"] {
+        if let Some(a) = el.attr(name) {
+            bind(a)?;
+        }
+    }
+    if let Some(a) = el.attr("position") {
+        topic(a, &a.value)?;
     }
     Ok(())
 }
@@ -408,7 +437,19 @@ mod tests {
             ),
             (
                 "<layout name=\"t\">\n  <column><dial/></column>\n</layout>",
-                "2:11: unexpected element <dial> inside <column>; expected <row>, <column>, <tabs>, <grid>, <readout>, <gauge>, <plot>, <track>, <health>, <log>, <history>, <button>, <slider>, <number>, <text>, <toggle>",
+                "2:11: unexpected element <dial> inside <column>; expected <row>, <column>, <tabs>, <grid>, <readout>, <gauge>, <plot>, <track>, <fleet>, <health>, <log>, <history>, <button>, <slider>, <number>, <text>, <toggle>",
+            ),
+            (
+                "<layout name=\"t\">\n  <fleet mode=\"vehicle-state\"/>\n</layout>",
+                "2:10: attribute `mode`: `vehicle-state` is not topic.field (the field is after the last dot: nav.depth.depth)",
+            ),
+            (
+                "<layout name=\"t\">\n  <fleet open=\"a b\"/>\n</layout>",
+                "2:10: attribute `open`: `a b` is not a layout name: use letters, digits, `_` and `-` (at most 64)",
+            ),
+            (
+                "<layout name=\"t\">\n  <track position=\"*.nav..position\"/>\n</layout>",
+                "2:10: attribute `position`: `*.nav..position` is not a topic pattern: empty segment in \"*.nav..position\" (two dots in a row, or a dot at an end)",
             ),
             (
                 "<layout name=\"t\">\n  <tabs><column/></tabs>\n</layout>",
