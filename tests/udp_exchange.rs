@@ -14,7 +14,8 @@ fn vehicle_side(net: &str) -> String {
   <bridge name="link" media="bus net">
     <route from="bus" topics="nav.**"/>
     <route from="bus" topics="vehicle.**"/>
-    <route from="net" topics="cmd.**"/>
+    <route from="bus" topics="cmd.status"/>
+    <route from="net" topics="cmd.**" kind="command"/>
   </bridge>
 </seabus>"#
     )
@@ -94,6 +95,44 @@ fn two_processes_exchange_over_udp_and_a_third_sees_it() {
             .iter()
             .any(|s| s["payload"]["commanded_heading"] == 90.0),
         "alpha never reported following bravo's command: {states:?}"
+    );
+    // and answered each one it took on cmd.status, naming the command's origin and number
+    let answers = from("cmd.status", "alpha/bus");
+    let answered: Vec<(&str, i64)> = answers
+        .iter()
+        .map(|a| {
+            assert_eq!(
+                (&a["payload"]["command"], &a["payload"]["state"]),
+                (
+                    &serde_json::json!("course"),
+                    &serde_json::json!("acknowledged")
+                ),
+                "{a}"
+            );
+            (
+                a["payload"]["origin"].as_str().unwrap_or("?"),
+                a["payload"]["request_seq"].as_i64().unwrap_or(-1),
+            )
+        })
+        .collect();
+    let sent: Vec<(&str, i64)> = commands
+        .iter()
+        .map(|c| ("bravo/bus", c["seq"].as_i64().unwrap()))
+        .collect();
+    // (commands sent before the spy listened are answered too, with lower numbers)
+    let first = sent.iter().map(|(_, q)| *q).min().unwrap_or(i64::MAX);
+    let unknown: Vec<&(&str, i64)> = answered
+        .iter()
+        .filter(|a| a.0 != "bravo/bus" || (a.1 >= first && !sent.contains(a)))
+        .collect();
+    assert_eq!(
+        unknown,
+        Vec::<&(&str, i64)>::new(),
+        "answers to no command sent: {sent:?}"
+    );
+    assert!(
+        answered.iter().filter(|a| sent.contains(a)).count() >= 2,
+        "answers {answered:?} to the commands {sent:?}"
     );
     // bravo received alpha's depth and converted it
     let feet = from("bravo.depth_ft", "bravo/bus");

@@ -3,7 +3,9 @@
 //!
 //! It accepts `cmd.course` (heading, depth, speed; valid for the command's `timeout`, or the
 //! `timeout` parameter) and `cmd.mission` (`stop` ends the current course). Without a valid course
-//! it stops and surfaces, as a frontseat does when its backseat falls silent. It publishes
+//! it stops and surfaces, as a frontseat does when its backseat falls silent. Each command is
+//! answered on `cmd.status` (`acknowledged`, or `refused` with the reason), with its origin and
+//! sequence number, as a driver answers a console. It publishes
 //! `nav.attitude`, `nav.position`, `nav.depth`, `nav.altitude` and `nav.velocity` every tick, and
 //! `power.battery` and `vehicle.state` once a second.
 //!
@@ -15,7 +17,7 @@ use super::kinematics::{Limits, Setpoint, Vehicle};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Message, Topic, Value};
+use seabus_medium::{DataMap, Kind, Message, Topic, Value};
 use seabus_modules::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
@@ -45,6 +47,7 @@ struct Topics {
     state: Topic,
     course: Topic,
     mission: Topic,
+    status: Topic,
 }
 
 struct Sim {
@@ -83,6 +86,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         state: topic("vehicle-state", "vehicle.state")?,
         course: topic("course-command", "cmd.course")?,
         mission: topic("mission-command", "cmd.mission")?,
+        status: topic("command-status", "cmd.status")?,
     };
     let decl = Declaration::new(ModuleKind::Driver)
         .produces(TopicDecl::dataset(&topics.attitude, "attitude"))
@@ -92,6 +96,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         .produces(TopicDecl::dataset(&topics.velocity, "velocity"))
         .produces(TopicDecl::dataset(&topics.battery, "battery"))
         .produces(TopicDecl::dataset(&topics.state, "vehicle-state"))
+        .produces(TopicDecl::dataset(&topics.status, "command-status"))
         .accepts(TopicDecl::dataset(&topics.course, "course-command"))
         .accepts(TopicDecl::dataset(&topics.mission, "mission-command"))
         .default_tick(Duration::from_millis(100));
@@ -116,6 +121,26 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
 }
 
 impl Sim {
+    /// Answers command `msg` on `cmd.status`: acknowledged, or refused with the reason.
+    async fn answer(&self, ctx: &Context, msg: &Message, command: &str, done: Result<(), &str>) {
+        let (state, error) = match done {
+            Ok(()) => ("acknowledged", ""),
+            Err(why) => ("refused", why),
+        };
+        let status = DataMap::new()
+            .with("command", command)
+            .with("state", state)
+            .with("error", error)
+            .with("origin", msg.provenance.origin.to_string())
+            .with("request_seq", msg.provenance.seq as i64);
+        if let Err(e) = ctx
+            .dataset_on(0, Kind::Data, "command-status", &self.topics.status, status)
+            .await
+        {
+            self.tally.record(ctx.name(), "status", &e);
+        }
+    }
+
     fn active(&self, now: Instant) -> Option<Setpoint> {
         self.course
             .filter(|(_, until)| now < *until)
@@ -238,6 +263,7 @@ impl Module for Sim {
                     "refused",
                     format_args!("course command from {} refused: {e}", msg.provenance.origin),
                 );
+                self.answer(ctx, &msg, "course", Err(&e.to_string())).await;
                 return Ok(());
             }
             let sp = Setpoint {
@@ -252,8 +278,18 @@ impl Module for Sim {
                     seabus_medium::parse::secs(t.min(3600.0)).unwrap_or(self.default_timeout)
                 });
             self.course = Some((sp, Instant::now() + timeout));
-        } else if *msg.topic == *self.topics.mission && map.get_str("action") == Some("stop") {
-            self.course = None;
+            self.answer(ctx, &msg, "course", Ok(())).await;
+        } else if *msg.topic == *self.topics.mission {
+            match map.get_str("action") {
+                Some("stop") => {
+                    self.course = None;
+                    self.answer(ctx, &msg, "mission", Ok(())).await;
+                }
+                other => {
+                    let why = format!("mission action {other:?}: only stop is simulated");
+                    self.answer(ctx, &msg, "mission", Err(&why)).await;
+                }
+            }
         }
         Ok(())
     }
