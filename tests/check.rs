@@ -229,3 +229,38 @@ fn every_shipped_config_is_valid() {
     }
     assert!(layouts >= 2);
 }
+
+#[test]
+fn a_routes_quality_of_service_needs_a_medium_that_carries_priorities() {
+    expect_error(
+        "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <medium name=\"radio\" url=\"udp://239.255.42.1:47800?ttl=0\"/>\n  \
+         <bridge name=\"up\" media=\"bus radio\">\n    <route from=\"bus\" to=\"radio\" topics=\"nav.**\" priority=\"data-high\"/>\n  \
+         </bridge>\n</seabus>\n",
+        "5:50: attribute `priority`: the route delivers to medium `radio`, which carries no priority, \
+         congestion control or express (a Zenoh medium does)",
+    );
+    let fleet = "zenoh://?listen=tcp/127.0.0.1:7447&amp;prefix=fleet/auv1&amp;scout=false";
+    expect_error(
+        &format!(
+            "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <medium name=\"fleet\" url=\"{fleet}\"/>\n  \
+             <bridge name=\"up\" media=\"bus fleet\">\n    <route from=\"bus\" topics=\"nav.**\" congestion=\"wait\"/>\n  \
+             </bridge>\n</seabus>\n"
+        ),
+        "5:39: attribute `congestion`: `wait` is not a congestion control; expected block or drop",
+    );
+    let (_dir, path) = system_file(
+        "fleet.xml",
+        &format!(
+            "<seabus>\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <medium name=\"fleet\" url=\"{fleet}\"/>\n  \
+             <bridge name=\"up\" media=\"bus fleet\">\n    <route from=\"bus\" topics=\"nav.**\" priority=\"data-high\" \
+             congestion=\"block\" express=\"true\"/>\n  </bridge>\n</seabus>\n"
+        ),
+    );
+    let out = check(&path);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

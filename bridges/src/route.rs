@@ -18,6 +18,11 @@
 //!    drops the same message coming back from it within [`ECHO_WINDOW`] — once per message sent,
 //!    so a device sending the same frame loses at most that one.
 //!
+//! A route's `priority`, `congestion` and `express` are declared, when the bridge starts, on the
+//! medium the route delivers to, for its topics as they leave it (after `rename`) and its kind
+//! ([`Medium::set_qos`]); a route that says them to a medium that carries no priorities
+//! ([`Capabilities::qos`]) is refused when the bridge is built, by `seabus check` as at start.
+//!
 //! Every second (the `report` parameter) it publishes its counters and latency on
 //! `seabus.bridge.<name>` on each of its media that carries datamaps as they are (not a serial
 //! line, a CAN bus, LCM or DSAAV, which carry only their own kind of messages).
@@ -28,14 +33,15 @@ use seabus_medium::dedup::{Dedup, Seen};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{
-    Capabilities, DataMap, Format, Kind, Medium, Message, Pattern, Payload, Stamp, Topic, Value,
+    Capabilities, DataMap, Format, Kind, Medium, Message, Pattern, Payload, Qos, Stamp, Topic,
+    Value,
 };
 use seabus_modules::Catalogue;
 use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
 };
 use seabus_modules::registry::{BridgeType, Built};
-use seabus_modules::system::BridgeSpec;
+use seabus_modules::system::{BridgeSpec, RouteSpec};
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::sync::Arc;
@@ -157,6 +163,9 @@ struct Leg {
     fields: Vec<(String, String)>,
     keep: bool,
     lcm: Option<crate::lcm::Mapping>,
+    /// The quality of service of what it delivers, declared on the far medium when the bridge
+    /// starts.
+    qos: Option<Qos>,
 }
 
 #[derive(Default, Clone, Copy)]
@@ -266,6 +275,7 @@ impl RouteBridge {
                         Some(t) => crate::lcm::Mapping::new(spec, caps, r, t, from, to)?,
                         None => None,
                     },
+                    qos: route_qos(spec, caps, r, to)?,
                 });
             }
         }
@@ -289,6 +299,35 @@ impl RouteBridge {
         };
         Ok((bridge, decl))
     }
+}
+
+/// The quality of service of what route `r` delivers to medium `to` (0 or 1), refused when that
+/// medium carries no priorities.
+fn route_qos(
+    spec: &BridgeSpec,
+    caps: &[Capabilities; 2],
+    r: &RouteSpec,
+    to: usize,
+) -> Result<Option<Qos>, FileError> {
+    let Some(rq) = &r.qos else {
+        return Ok(None);
+    };
+    if caps[to].qos {
+        return Ok(Some(rq.qos));
+    }
+    // a route both ways delivers to both media: it may say which one it means
+    let hint = match (&r.from, &r.to) {
+        (None, None) if caps[1 - to].qos => format!(
+            "; give the route to=\"{}\" for what goes there only",
+            spec.media[1 - to]
+        ),
+        _ => String::new(),
+    };
+    Err(rq.attr.error(format!(
+        "the route delivers to medium `{}`, which carries no priority, congestion control or \
+         express (a Zenoh medium does){hint}",
+        spec.media[to]
+    )))
 }
 
 /// What became of one message.
@@ -528,6 +567,20 @@ impl Module for RouteBridge {
         for (i, memory) in self.echo.iter_mut().enumerate() {
             if let (Some(memory), Some(port)) = (memory, ctx.port(i)) {
                 *memory = EchoMemory::of(port.medium());
+            }
+        }
+        // what the routes deliver goes with their quality of service, in the order of the routes
+        for leg in &self.legs {
+            let (Some(qos), Some(port)) = (leg.qos, ctx.port(leg.to)) else {
+                continue;
+            };
+            let topics = leg.rename.as_ref().unwrap_or(&leg.topics);
+            if !port.medium().set_qos(topics, leg.kind, qos) {
+                tracing::warn!(
+                    bridge = ctx.name(),
+                    to = %self.media[leg.to],
+                    "`{qos}` for {topics} not honoured: the medium carries no priorities"
+                );
             }
         }
         match self.report {
@@ -800,6 +853,62 @@ mod tests {
             );
             assert_eq!(map.get_path("pose.hdg"), Some(&Value::Float(2.5)));
         }
+    }
+
+    /// A bridge between `a` (in-process) and `z`, a medium that carries priorities, with `routes`.
+    fn qos_bridge(routes: &str) -> Result<RouteBridge, String> {
+        let text = format!(
+            "<seabus><medium name=\"a\" url=\"inproc://\"/><medium name=\"z\" url=\"inproc://\"/>\n\
+             <bridge name=\"x\" media=\"a z\">\n{routes}\n</bridge></seabus>"
+        );
+        let spec = SystemSpec::parse("t.xml", &text).unwrap();
+        let z = Capabilities {
+            qos: true,
+            ..Capabilities::IN_PROCESS
+        };
+        RouteBridge::new(&spec.bridges[0], &[Capabilities::IN_PROCESS, z])
+            .map(|(b, _)| b)
+            .map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn quality_of_service_goes_only_to_a_medium_that_carries_priorities() {
+        use seabus_medium::qos::{Congestion, Priority};
+        let b = qos_bridge(
+            r#"<route from="a" topics="nav.*" rename="auv1.nav.*" priority="data-high" congestion="block"/>
+               <route from="z" to="a" topics="cmd.**"/>"#,
+        )
+        .unwrap();
+        let qos: Vec<_> = b.legs.iter().map(|l| (l.to, l.qos)).collect();
+        assert_eq!(
+            qos,
+            [
+                (
+                    1,
+                    Some(Qos {
+                        priority: Some(Priority::DataHigh),
+                        congestion: Some(Congestion::Block),
+                        express: None,
+                    })
+                ),
+                (0, None)
+            ]
+        );
+        assert_eq!(
+            qos_bridge(r#"<route from="z" topics="cmd.**" express="true"/>"#)
+                .err()
+                .unwrap(),
+            "t.xml:3:33: attribute `express`: the route delivers to medium `a`, which carries no \
+             priority, congestion control or express (a Zenoh medium does)"
+        );
+        assert_eq!(
+            qos_bridge(r#"<route topics="**" priority="realtime"/>"#)
+                .err()
+                .unwrap(),
+            "t.xml:3:20: attribute `priority`: the route delivers to medium `a`, which carries no \
+             priority, congestion control or express (a Zenoh medium does); give the route \
+             to=\"z\" for what goes there only"
+        );
     }
 
     #[cfg(feature = "lcm")]

@@ -20,6 +20,7 @@ use crate::datasets::Catalogue;
 use crate::params::{Param, Params};
 use crate::registry::{ModuleConfig, Registry};
 use seabus_medium::parse::parse_rate;
+use seabus_medium::qos::{Congestion, Priority, Qos};
 use seabus_medium::xml::{self, Element, FileError, Pos};
 use seabus_medium::{Format, Kind, Pattern};
 use std::collections::BTreeMap;
@@ -62,8 +63,22 @@ pub struct RouteSpec {
     pub keep: bool,
     /// The LCM type (`package.name_t`) messages have on the route's LCM side.
     pub lcm: Option<String>,
+    /// The quality of service of what the route delivers, from its `priority`, `congestion` and
+    /// `express` attributes, when it has any.
+    pub qos: Option<RouteQos>,
     /// Where it is written.
     pub pos: Pos,
+}
+
+/// A route's `priority`, `congestion` and `express`: the quality of service of what it delivers,
+/// on a medium that carries priorities ([`seabus_medium::Capabilities::qos`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RouteQos {
+    /// The attributes' values.
+    pub qos: Qos,
+    /// The first of these attributes as written, which an error about the route's quality of
+    /// service names.
+    pub attr: xml::Attr,
 }
 
 impl RouteSpec {
@@ -411,7 +426,18 @@ fn bridge_spec(
 fn route_spec(r: &Element, media: &[String; 2]) -> Result<RouteSpec, FileError> {
     r.only_children(&["field"])?;
     r.only_attrs(&[
-        "from", "to", "topics", "rename", "rate", "format", "kind", "lcm", "keep",
+        "from",
+        "to",
+        "topics",
+        "rename",
+        "rate",
+        "format",
+        "kind",
+        "lcm",
+        "keep",
+        "priority",
+        "congestion",
+        "express",
     ])?;
     let medium_attr = |key: &str| -> Result<Option<String>, FileError> {
         match r.attr(key) {
@@ -485,8 +511,46 @@ fn route_spec(r: &Element, media: &[String; 2]) -> Result<RouteSpec, FileError> 
         fields,
         keep: r.flag("keep")?.unwrap_or(true),
         lcm: r.get("lcm").map(|t| t.trim().to_string()),
+        qos: route_qos(r)?,
         pos: r.pos.clone(),
     })
+}
+
+/// A route's `priority`, `congestion` and `express`, each checked; `None` without any.
+fn route_qos(r: &Element) -> Result<Option<RouteQos>, FileError> {
+    let priority = match r.attr("priority") {
+        None => None,
+        Some(a) => Some(Priority::parse(&a.value).ok_or_else(|| {
+            a.error(format!(
+                "`{}` is not a priority; expected {}",
+                a.value.trim(),
+                Priority::expected()
+            ))
+        })?),
+    };
+    let congestion = match r.attr("congestion") {
+        None => None,
+        Some(a) => Some(Congestion::parse(&a.value).ok_or_else(|| {
+            a.error(format!(
+                "`{}` is not a congestion control; expected {}",
+                a.value.trim(),
+                Congestion::expected()
+            ))
+        })?),
+    };
+    let qos = Qos {
+        priority,
+        congestion,
+        express: r.flag("express")?,
+    };
+    let first = r
+        .attrs
+        .iter()
+        .find(|a| ["priority", "congestion", "express"].contains(&a.name.as_str()));
+    Ok(first.map(|attr| RouteQos {
+        qos,
+        attr: attr.clone(),
+    }))
 }
 
 /// A route cycle: messages could go round these media through these bridges.
@@ -785,6 +849,62 @@ mod tests {
         assert!(e.message.contains("above 0"), "{e}");
         let e = parse(&base("<route topics=\"**\" format=\"json\"/>")).unwrap_err();
         assert!(e.message.contains("bytes, map or xml"), "{e}");
+    }
+
+    #[test]
+    fn a_route_reads_its_quality_of_service_attribute_by_attribute() {
+        let route = |attrs: &str| {
+            let text = format!(
+                "<seabus><medium name=\"a\" url=\"inproc://\"/><medium name=\"b\" url=\"inproc://\"/>\n\
+                 <bridge name=\"x\" media=\"a b\">\n<route to=\"b\" topics=\"**\" {attrs}/>\n</bridge></seabus>"
+            );
+            parse(&text).map(|s| s.bridges[0].routes[0].qos.clone())
+        };
+        assert_eq!(route("").unwrap(), None);
+        let all = route(r#"express="true" priority="data-high" congestion="block""#)
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            all.qos,
+            Qos {
+                priority: Some(Priority::DataHigh),
+                congestion: Some(Congestion::Block),
+                express: Some(true),
+            }
+        );
+        assert_eq!(
+            (all.attr.name.as_str(), all.attr.pos.line, all.attr.pos.col),
+            ("express", 3, 27),
+            "the first of them as written"
+        );
+        let one = route(r#"priority="background""#).unwrap().unwrap();
+        assert_eq!(
+            one.qos,
+            Qos {
+                priority: Some(Priority::Background),
+                ..Qos::default()
+            },
+            "what is not said stays the kind's"
+        );
+        let cases = [
+            (
+                r#"priority="urgent""#,
+                "sys.xml:3:27: attribute `priority`: `urgent` is not a priority; expected realtime, \
+                 interactive-high, interactive-low, data-high, data, data-low or background",
+            ),
+            (
+                r#"congestion="wait""#,
+                "sys.xml:3:27: attribute `congestion`: `wait` is not a congestion control; expected \
+                 block or drop",
+            ),
+            (
+                r#"express="often""#,
+                "sys.xml:3:27: attribute `express`: `often` is not true or false",
+            ),
+        ];
+        for (attrs, expected) in cases {
+            assert_eq!(route(attrs).unwrap_err().to_string(), expected, "{attrs}");
+        }
     }
 
     #[test]

@@ -68,6 +68,7 @@ pub fn capabilities(link_state: bool) -> Capabilities {
         carries: Carries::DataMap,
         link_state,
         native: Some("can"),
+        qos: false,
     }
 }
 

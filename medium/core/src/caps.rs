@@ -55,6 +55,10 @@ pub struct Capabilities {
     /// (`"lcm"`: typed LCM messages on channels; `"dsaav"`: DSAAV IComms messages and services),
     /// `None` when the wire takes seabus messages as they are.
     pub native: Option<&'static str>,
+    /// The wire gives each message a priority, a congestion control and an express flag, and
+    /// honours those declared for some topics ([`crate::Medium::set_qos`]): a bridge route's
+    /// `priority`, `congestion` and `express` apply to what it delivers here (Zenoh).
+    pub qos: bool,
 }
 
 impl Capabilities {
@@ -67,6 +71,7 @@ impl Capabilities {
         carries: Carries::Any,
         link_state: false,
         native: None,
+        qos: false,
     };
 
     /// Whether a datamap can be sent here (a report, a standard dataset) as it is.

@@ -18,6 +18,8 @@
 //!   in its [`MediumStats`] and warned of once per burst ([`loss`]).
 //! - [`caps`] — what a transport declares it can do ([`Capabilities`]); code asks these, never a
 //!   URL's scheme.
+//! - [`qos`] — quality of service ([`Qos`]: priority, congestion control, express) that a medium
+//!   carrying priorities gives the topics declared with it ([`Medium::set_qos`]).
 //! - [`schemes`] — the registry of URL schemes ([`Schemes`]): each medium crate adds its own with
 //!   `register(&mut Schemes)`; the in-process medium (`inproc://`) is built in.
 //! - Shared machinery of the medium crates: [`link`] (one reconnect loop with back-off and link
@@ -49,6 +51,7 @@ pub mod message;
 pub mod net;
 pub mod parse;
 pub mod payload;
+pub mod qos;
 pub mod queue;
 pub mod schemes;
 pub mod tally;
@@ -68,6 +71,7 @@ pub use medium::{
 };
 pub use message::{Kind, Message, Origin, Provenance, Stamp};
 pub use payload::{ConvertError, Format, Payload};
+pub use qos::Qos;
 pub use schemes::{Opened, Scheme, Schemes};
 pub use topic::{ChannelRegex, Pattern, Topic, TopicError};
 pub use wire::WireError;

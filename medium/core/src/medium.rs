@@ -14,6 +14,7 @@ use crate::fault::{FaultConfig, Faults};
 use crate::loss::Losses;
 use crate::message::{Kind, Message, Origin, Provenance, Stamp};
 use crate::payload::{ConvertError, Format, Payload};
+use crate::qos::Qos;
 use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queue};
 use crate::tally::Tally;
 use crate::topic::{Pattern, Topic, TopicError};
@@ -194,6 +195,13 @@ pub trait Transport: Send + Sync + 'static {
         let _ = (topic, payload);
         None
     }
+    /// Messages this medium sends on topics matching `pattern`, of `kind` (`None`: both kinds), go
+    /// with `qos` from now on: each attribute it sets replaces the one their kind would have, and of
+    /// several declarations matching a topic the first one declared counts. Only a transport whose
+    /// [`Capabilities::qos`] says so is asked ([`Medium::set_qos`]); by default nothing changes.
+    fn set_qos(&self, pattern: &Pattern, kind: Option<Kind>, qos: Qos) {
+        let _ = (pattern, kind, qos);
+    }
 }
 
 /// A frame encoded by a transport, in the transport's own type, on its way to the wire (through
@@ -251,6 +259,7 @@ pub(crate) trait Wire: Send + Sync {
     fn flush(&self) -> BoxFuture<'_, ()>;
     fn subscribed(&self, pattern: &Pattern);
     fn fingerprint(&self, topic: &Topic, payload: &Payload) -> Option<u64>;
+    fn set_qos(&self, pattern: &Pattern, kind: Option<Kind>, qos: Qos);
 }
 
 impl<T: Transport> Wire for T {
@@ -294,6 +303,10 @@ impl<T: Transport> Wire for T {
 
     fn fingerprint(&self, topic: &Topic, payload: &Payload) -> Option<u64> {
         Transport::fingerprint(self, topic, payload)
+    }
+
+    fn set_qos(&self, pattern: &Pattern, kind: Option<Kind>, qos: Qos) {
+        Transport::set_qos(self, pattern, kind, qos)
     }
 }
 
@@ -515,6 +528,23 @@ impl Medium {
             .get()
             .and_then(|t| t.fingerprint(topic, payload))
             .unwrap_or_else(|| fingerprint(topic, payload))
+    }
+
+    /// Declares that the messages this medium sends on topics matching `pattern`, of `kind`
+    /// (`None`: both kinds), go with `qos`: each attribute it sets replaces the one the medium
+    /// gives their kind, the others stay; of several declarations matching a topic, the first one
+    /// declared counts (declaring the same one again changes nothing). A bridge route's
+    /// `priority`, `congestion` and `express` are declared so when the bridge starts. Returns
+    /// false, changing nothing, when the medium's wire has no such thing
+    /// ([`Capabilities::qos`]).
+    pub fn set_qos(&self, pattern: &Pattern, kind: Option<Kind>, qos: Qos) -> bool {
+        match self.inner.transport.get() {
+            Some(t) if t.capabilities().qos => {
+                t.set_qos(pattern, kind, qos);
+                true
+            }
+            _ => false,
+        }
     }
 
     /// The origin of messages first published here.

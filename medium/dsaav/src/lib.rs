@@ -100,6 +100,7 @@ impl DsaavConfig {
             carries: Carries::DataMap,
             link_state: false,
             native: Some("dsaav"),
+            qos: false,
         }
     }
 

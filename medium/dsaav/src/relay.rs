@@ -88,6 +88,7 @@ impl RelayConfig {
             carries: Carries::DataMap,
             link_state: false,
             native: Some(NATIVE),
+            qos: false,
         }
     }
 }

@@ -180,6 +180,7 @@ impl LcmConfig {
             carries: Carries::Bytes,
             link_state: true,
             native: Some("lcm"),
+            qos: false,
         }
     }
 }

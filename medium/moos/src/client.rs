@@ -121,6 +121,7 @@ impl MoosConfig {
             carries: Carries::DataMap,
             link_state: true,
             native: None,
+            qos: false,
         }
     }
 }

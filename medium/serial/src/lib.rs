@@ -195,6 +195,7 @@ impl SerialConfig {
             carries: Carries::Bytes,
             link_state: true,
             native: None,
+            qos: false,
         }
     }
 

@@ -69,6 +69,7 @@ impl UdpConfig {
             carries: Carries::Any,
             link_state: false,
             native: None,
+            qos: false,
         }
     }
 }

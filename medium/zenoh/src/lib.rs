@@ -31,7 +31,10 @@
 //!
 //! **Quality of service** from the message kind: a command is sent reliably, blocking when the
 //! network is congested, at interactive-high priority and without batching (express); data is
-//! dropped under congestion, at data priority.
+//! dropped under congestion, at data priority, batched. Topics declared with a [`Qos`]
+//! ([`seabus_medium::Medium::set_qos`]: a bridge route's `priority`, `congestion` and `express`)
+//! take what it sets over their kind's, attribute by attribute; the first declaration matching a
+//! topic counts.
 //!
 //! **Link state**: up while the session is connected to a router or a peer (or is itself a
 //! router), down otherwise, checked every second.
@@ -45,13 +48,14 @@ pub mod keys;
 use bytes::Bytes;
 use seabus_medium::caps::{Capabilities, Carries, Framing};
 use seabus_medium::datagram;
+use seabus_medium::qos::{self, Congestion, Qos};
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{
     BoxFuture, Ingress, Kind, LinkState, Message, OpenError, Opened, Opening, Pattern, Payload,
-    Scheme, Schemes, SendError, Transport,
+    Scheme, Schemes, SendError, Topic, Transport,
 };
 use std::collections::{HashMap, HashSet};
-use std::sync::{Arc, LazyLock, Mutex};
+use std::sync::{Arc, LazyLock, Mutex, RwLock};
 use std::time::Duration;
 use tokio::sync::watch;
 use zenoh::bytes::{Encoding, ZBytes};
@@ -209,7 +213,8 @@ impl ZenohConfig {
     }
 
     /// What a Zenoh medium can do: whole seabus messages with provenance, any payload, a link
-    /// that goes down and up; its own messages never come back to it.
+    /// that goes down and up, a quality of service per topic; its own messages never come back to
+    /// it.
     pub fn capabilities(&self) -> Capabilities {
         Capabilities {
             provenance: true,
@@ -219,6 +224,7 @@ impl ZenohConfig {
             carries: Carries::Any,
             link_state: true,
             native: None,
+            qos: true,
         }
     }
 
@@ -357,7 +363,62 @@ pub struct Frame {
     command: bool,
     /// `Some(datagram without payload)` for a datamap sent as JSON
     attachment: Option<Bytes>,
+    /// how it is sent: its kind's quality of service, or what was declared for its topic
+    qos: SendQos,
 }
+
+/// A message's quality of service on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct SendQos {
+    priority: Priority,
+    congestion: CongestionControl,
+    express: bool,
+}
+
+/// What a message of a kind gets unless its topic was declared with something else: a command
+/// blocks under congestion, at interactive-high priority, express; data is dropped, at data
+/// priority, batched.
+fn kind_qos(command: bool) -> Qos {
+    if command {
+        Qos {
+            priority: Some(qos::Priority::InteractiveHigh),
+            congestion: Some(Congestion::Block),
+            express: Some(true),
+        }
+    } else {
+        Qos {
+            priority: Some(qos::Priority::Data),
+            congestion: Some(Congestion::Drop),
+            express: Some(false),
+        }
+    }
+}
+
+impl SendQos {
+    /// `qos` over the defaults of the kind (`command` or data).
+    fn of(qos: Qos, command: bool) -> SendQos {
+        let q = qos.over(kind_qos(command));
+        SendQos {
+            priority: match q.priority.unwrap_or(qos::Priority::Data) {
+                qos::Priority::Realtime => Priority::RealTime,
+                qos::Priority::InteractiveHigh => Priority::InteractiveHigh,
+                qos::Priority::InteractiveLow => Priority::InteractiveLow,
+                qos::Priority::DataHigh => Priority::DataHigh,
+                qos::Priority::Data => Priority::Data,
+                qos::Priority::DataLow => Priority::DataLow,
+                qos::Priority::Background => Priority::Background,
+            },
+            congestion: match q.congestion.unwrap_or(Congestion::Drop) {
+                Congestion::Block => CongestionControl::Block,
+                Congestion::Drop => CongestionControl::Drop,
+            },
+            express: q.express.unwrap_or(false),
+        }
+    }
+}
+
+/// The qualities of service declared for topics, in the order declared.
+type Overrides = Vec<(Pattern, Option<Kind>, Qos)>;
 
 /// Publishers kept per key and kind; beyond this many, messages are put without one.
 const MAX_PUBLISHERS: usize = 4096;
@@ -376,7 +437,10 @@ pub struct ZenohTransport {
     sender: u64,
     caps: Capabilities,
     session: watch::Receiver<Option<Session>>,
-    publishers: tokio::sync::Mutex<HashMap<(String, bool), Publishing>>,
+    /// each publisher with the quality of service it was declared with
+    publishers: tokio::sync::Mutex<HashMap<(String, bool), (SendQos, Publishing)>>,
+    /// the qualities of service declared for topics ([`Transport::set_qos`])
+    overrides: RwLock<Overrides>,
     hearing: Hearing,
 }
 
@@ -506,6 +570,7 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
         caps: cfg.capabilities(),
         session: rx,
         publishers: tokio::sync::Mutex::new(HashMap::new()),
+        overrides: RwLock::new(Vec::new()),
         hearing: Hearing {
             prefix,
             sender,
@@ -622,6 +687,18 @@ impl ZenohTransport {
         }
     }
 
+    /// How a message of `kind` on `topic` is sent: the first quality of service declared for it
+    /// over its kind's.
+    fn qos_of(&self, topic: &Topic, kind: Kind) -> SendQos {
+        let command = kind == Kind::Command;
+        let overrides = self.overrides.read().unwrap_or_else(|p| p.into_inner());
+        let declared = overrides
+            .iter()
+            .find(|(p, k, _)| k.is_none_or(|k| k == kind) && p.matches(topic))
+            .map_or_else(Qos::default, |(_, _, q)| *q);
+        SendQos::of(declared, command)
+    }
+
     fn send_error(&self, reason: impl std::fmt::Display) -> SendError {
         SendError::Io {
             medium: self.name.to_string(),
@@ -708,6 +785,7 @@ impl Transport for ZenohTransport {
     fn encode(&self, msg: &Message) -> Result<Frame, SendError> {
         let key = keys::topic_key(&self.prefix, &msg.topic).map_err(|e| self.send_error(e))?;
         let command = msg.kind == Kind::Command;
+        let qos = self.qos_of(&msg.topic, msg.kind);
         if self.json
             && let Payload::Map(map) = &msg.payload
         {
@@ -721,6 +799,7 @@ impl Transport for ZenohTransport {
                 payload: Bytes::from(text),
                 command,
                 attachment: Some(attachment),
+                qos,
             });
         }
         let payload = datagram::encode(msg, self.sender).map_err(|e| self.send_error(e))?;
@@ -729,6 +808,7 @@ impl Transport for ZenohTransport {
             payload,
             command,
             attachment: None,
+            qos,
         })
     }
 
@@ -742,19 +822,22 @@ impl Transport for ZenohTransport {
             };
             let mut publishers = self.publishers.lock().await;
             let slot = (frame.key.clone(), frame.command);
+            let qos = frame.qos;
+            // a topic declared with a quality of service after its publisher: declared again
+            if publishers.get(&slot).is_some_and(|(q, _)| *q != qos) {
+                publishers.remove(&slot);
+            }
             if !publishers.contains_key(&slot) && publishers.len() < MAX_PUBLISHERS {
-                let builder = session.declare_publisher(frame.key.clone());
+                let builder = session
+                    .declare_publisher(frame.key.clone())
+                    .congestion_control(qos.congestion)
+                    .priority(qos.priority)
+                    .express(qos.express);
                 let p = if frame.command {
-                    let p = builder
-                        .congestion_control(CongestionControl::Block)
-                        .priority(Priority::InteractiveHigh)
-                        .express(true)
-                        .await;
+                    let p = builder.await;
                     Publishing::Command(p.map_err(|e| self.send_error(e))?)
                 } else {
                     let p = builder
-                        .congestion_control(CongestionControl::Drop)
-                        .priority(Priority::Data)
                         .cache(CacheConfig::default().max_samples(1))
                         .sample_miss_detection(
                             MissDetectionConfig::default().sporadic_heartbeat(HEARTBEAT),
@@ -763,11 +846,11 @@ impl Transport for ZenohTransport {
                         .await;
                     Publishing::Data(p.map_err(|e| self.send_error(e))?)
                 };
-                publishers.insert(slot.clone(), p);
+                publishers.insert(slot.clone(), (qos, p));
             }
             let payload = ZBytes::from(frame.payload);
             let attachment = frame.attachment.map(ZBytes::from);
-            let put = match publishers.get(&slot) {
+            let put = match publishers.get(&slot).map(|(_, p)| p) {
                 Some(Publishing::Data(p)) => {
                     p.put(payload)
                         .encoding(encoding)
@@ -785,6 +868,9 @@ impl Transport for ZenohTransport {
                         .put(frame.key.clone(), payload)
                         .encoding(encoding)
                         .attachment(attachment)
+                        .congestion_control(qos.congestion)
+                        .priority(qos.priority)
+                        .express(qos.express)
                         .await
                 }
             };
@@ -806,6 +892,14 @@ impl Transport for ZenohTransport {
         if let (true, Some(session)) = (fresh, session) {
             let hearing = self.hearing.clone();
             tokio::spawn(async move { hearing.declare(&session, key).await });
+        }
+    }
+
+    fn set_qos(&self, pattern: &Pattern, kind: Option<Kind>, qos: Qos) {
+        let mut overrides = self.overrides.write().unwrap_or_else(|p| p.into_inner());
+        let declared = (pattern.clone(), kind, qos);
+        if !overrides.contains(&declared) {
+            overrides.push(declared);
         }
     }
 

@@ -2,6 +2,7 @@
 //! connecting), and against a bare Zenoh session standing for a program that is not seabus.
 
 use seabus_medium::{DataMap, Interface, Kind, LinkState, Medium, Node, Payload, Value};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::time::timeout;
 
@@ -699,4 +700,349 @@ async fn users_and_passwords_let_in_who_knows_one() {
     for m in [member, intruder, shore] {
         m.close();
     }
+}
+
+/// A vehicle's bus bridged to Zenoh by `routes`, running as `seabus run` runs it.
+async fn vehicle_system(port: u16, routes: &str) -> seabus_modules::Runtime {
+    let text = format!(
+        r#"<seabus node="auv1">
+  <medium name="bus" url="inproc://"/>
+  <medium name="fleet" url="zenoh://?listen=tcp/127.0.0.1:{port}&amp;prefix=fleet/auv1&amp;scout=false"/>
+  <bridge name="shore" media="bus fleet" report="0">
+{routes}
+  </bridge>
+</seabus>"#
+    );
+    let spec = seabus_modules::SystemSpec::parse("auv1.xml", &text).unwrap();
+    let mut registry = seabus_modules::Registry::new();
+    registry.set_schemes(seabus_medium_zenoh::schemes());
+    seabus_bridges::register(&mut registry);
+    seabus_modules::Runtime::start(&spec, &registry, seabus_modules::Catalogue::built_in())
+        .await
+        .unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// A bare Zenoh session connected to `port` on loopback.
+async fn bare_session(port: u16) -> zenoh::Session {
+    let mut cfg = zenoh::Config::default();
+    cfg.insert_json5("connect/endpoints", &format!("[\"tcp/127.0.0.1:{port}\"]"))
+        .unwrap();
+    cfg.insert_json5("listen/endpoints", "[\"tcp/127.0.0.1:0\"]")
+        .unwrap();
+    cfg.insert_json5("scouting/multicast/enabled", "false")
+        .unwrap();
+    zenoh::open(cfg).await.unwrap()
+}
+
+/// What a bridge route's `priority`, `congestion` and `express` become on the wire, read by a
+/// program that is not seabus from each sample: each attribute a route sets replaces its kind's,
+/// the others stay, and a route without any sends with its kind's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_routes_quality_of_service_reaches_the_wire_attribute_by_attribute() {
+    use zenoh::qos::{CongestionControl, Priority};
+    let port = free_port();
+    let rt = vehicle_system(
+        port,
+        r#"    <route from="bus" to="fleet" topics="nav.**" priority="data-high" congestion="block" express="true"/>
+    <route from="bus" to="fleet" topics="sensors.*" rename="sensors.raw.*" express="true"/>
+    <route from="bus" to="fleet" topics="cmd.**" kind="command" priority="realtime"/>
+    <route from="bus" to="fleet" topics="**"/>"#,
+    )
+    .await;
+    let bus = rt.medium("bus").unwrap().attach("vehicle");
+    let other = bare_session(port).await;
+    let heard = other.declare_subscriber("fleet/auv1/**").await.unwrap();
+    let expected = std::collections::BTreeMap::from([
+        (
+            "fleet/auv1/nav/depth",
+            (Priority::DataHigh, CongestionControl::Block, true),
+        ),
+        (
+            "fleet/auv1/sensors/raw/temp",
+            (Priority::Data, CongestionControl::Drop, true),
+        ),
+        (
+            "fleet/auv1/cmd/course",
+            (Priority::RealTime, CongestionControl::Block, true),
+        ),
+        (
+            "fleet/auv1/env/wind",
+            (Priority::Data, CongestionControl::Drop, false),
+        ),
+    ]);
+    let mut seen = std::collections::BTreeMap::new();
+    let map = DataMap::new().and("x", 1.0);
+    // until the bare session's subscription has reached the vehicle, send again
+    for _ in 0..100 {
+        if seen.len() == expected.len() {
+            break;
+        }
+        for topic in ["nav.depth", "sensors.temp", "env.wind"] {
+            bus.send(topic, Payload::from(map.clone())).await.unwrap();
+        }
+        bus.command("cmd.course", Payload::from(map.clone()))
+            .await
+            .unwrap();
+        // what came of it (and what the system publishes besides, every second at most)
+        for _ in 0..20 {
+            let Ok(Ok(s)) = timeout(Duration::from_millis(100), heard.recv_async()).await else {
+                break;
+            };
+            let key = s.key_expr().as_str().to_string();
+            if expected.contains_key(key.as_str()) {
+                seen.insert(key, (s.priority(), s.congestion_control(), s.express()));
+            }
+        }
+    }
+    let seen: std::collections::BTreeMap<&str, _> =
+        seen.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+    assert_eq!(seen, expected);
+    other.close().await.unwrap();
+    rt.shutdown().await;
+}
+
+/// A quality of service declared for topics already being published takes effect from the next
+/// message, and of two declarations matching a topic the first counts.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_quality_of_service_declared_later_applies_from_the_next_message() {
+    use seabus_medium::qos::{Priority, Qos};
+    let port = free_port();
+    let vehicle = open(
+        "fleet",
+        "auv1",
+        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false"),
+    );
+    let other = bare_session(port).await;
+    let heard = other.declare_subscriber("fleet/auv1/late/x").await.unwrap();
+    let nav = vehicle.attach("nav");
+    let text = |t: &str| Payload::from(t.as_bytes().to_vec());
+    let carries = |s: &zenoh::sample::Sample, t: &str| {
+        let bytes = s.payload().to_bytes();
+        bytes.windows(t.len()).any(|w| w == t.as_bytes())
+    };
+    // until the bare session's subscription has reached the vehicle, send again
+    let mut reached = false;
+    for _ in 0..100 {
+        nav.send("late.x", text("before")).await.unwrap();
+        if let Ok(Ok(s)) = timeout(Duration::from_millis(100), heard.recv_async()).await {
+            assert_eq!(s.priority(), zenoh::qos::Priority::Data, "data's own");
+            reached = true;
+            break;
+        }
+    }
+    assert!(reached, "the bare session hears the vehicle");
+    let at = |p| Qos {
+        priority: Some(p),
+        ..Qos::default()
+    };
+    let late = seabus_medium::Pattern::new("late.**").unwrap();
+    let x = seabus_medium::Pattern::new("late.x").unwrap();
+    assert!(vehicle.set_qos(&late, None, at(Priority::Background)));
+    assert!(vehicle.set_qos(&x, None, at(Priority::Realtime)));
+    nav.send("late.x", text("after")).await.unwrap();
+    let mut after = None;
+    for _ in 0..100 {
+        let s = timeout(WAIT, heard.recv_async())
+            .await
+            .expect("a sample")
+            .unwrap();
+        if carries(&s, "after") {
+            after = Some(s);
+            break;
+        }
+        assert_eq!(s.priority(), zenoh::qos::Priority::Data, "sent before");
+    }
+    let after = after.expect("the message sent after the declarations");
+    assert_eq!(after.priority(), zenoh::qos::Priority::Background);
+    // a medium without priorities says so
+    let bus = Medium::in_process("bus", &Node::new("auv1"));
+    assert!(!bus.set_qos(&late, None, at(Priority::Background)));
+    other.close().await.unwrap();
+    vehicle.close();
+}
+
+/// Every `<<miss:NNNN>>` marker in a datagram.
+fn markers(datagram: &[u8]) -> Vec<u32> {
+    const TAG: &[u8] = b"<<miss:";
+    let mut found = Vec::new();
+    let mut rest = datagram;
+    while let Some(at) = rest.windows(TAG.len()).position(|w| w == TAG) {
+        rest = &rest[at + TAG.len()..];
+        if let Some(n) = rest
+            .get(..4)
+            .and_then(|d| std::str::from_utf8(d).ok())
+            .and_then(|d| d.parse().ok())
+        {
+            found.push(n);
+        }
+    }
+    found
+}
+
+/// A UDP relay on loopback between a Zenoh peer that listens (on `listener`) and one that
+/// connects to the relay's port instead: datagrams go both ways as they are, except that from
+/// the listener to the other peer the first datagram carrying each marker of `chosen` is dropped.
+struct Relay {
+    port: u16,
+    /// the markers of the datagrams dropped
+    dropped: Arc<Mutex<std::collections::BTreeSet<u32>>>,
+    task: tokio::task::JoinHandle<()>,
+}
+
+impl Relay {
+    async fn start(listener: u16, chosen: std::collections::BTreeSet<u32>) -> Relay {
+        use tokio::net::UdpSocket;
+        let front = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        let back = UdpSocket::bind("127.0.0.1:0").await.unwrap();
+        back.connect(("127.0.0.1", listener)).await.unwrap();
+        let port = front.local_addr().unwrap().port();
+        let dropped = Arc::new(Mutex::new(std::collections::BTreeSet::new()));
+        let gone = dropped.clone();
+        let task = tokio::spawn(async move {
+            let (mut up, mut down) = (vec![0u8; 65_536], vec![0u8; 65_536]);
+            let mut peer = None;
+            loop {
+                tokio::select! {
+                    got = front.recv_from(&mut up) => {
+                        if let Ok((n, from)) = got {
+                            peer = Some(from);
+                            let _ = back.send(&up[..n]).await;
+                        }
+                    }
+                    got = back.recv(&mut down) => {
+                        let (Ok(n), Some(to)) = (got, peer) else { continue };
+                        let carried = markers(&down[..n]);
+                        {
+                            let mut gone = gone.lock().unwrap();
+                            if carried.iter().any(|m| chosen.contains(m) && !gone.contains(m)) {
+                                gone.extend(carried);
+                                continue;
+                            }
+                        }
+                        let _ = front.send_to(&down[..n], to).await;
+                    }
+                }
+            }
+        });
+        Relay {
+            port,
+            dropped,
+            task,
+        }
+    }
+}
+
+impl Drop for Relay {
+    fn drop(&mut self) {
+        self.task.abort();
+    }
+}
+
+/// Two seabus nodes joined by a Zenoh `udp/` link (unreliable) through a relay that drops every
+/// fourth message of a burst on its way to the shore: the shore counts each message that never
+/// came under its topic, and what arrived plus what is counted missed is what was sent. (The
+/// publisher keeps only its latest sample, so a dropped message comes back only if it was the
+/// latest when the shore asked for it.)
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn messages_lost_on_an_unreliable_link_are_counted_missed_by_topic() {
+    const BURST: u32 = 60;
+    const TOPIC: &str = "auv1.test.burst";
+    // every fourth message, none of the last few (so that the burst ends with one that arrives)
+    let chosen: std::collections::BTreeSet<u32> = (0..BURST - 4).filter(|i| i % 4 == 3).collect();
+    let listener = free_udp_port();
+    let vehicle = open(
+        "fleet",
+        "auv1",
+        &format!("zenoh://?listen=udp/127.0.0.1:{listener}&prefix=fleet/auv1&scout=false"),
+    );
+    let relay = Relay::start(listener, chosen.clone()).await;
+    let shore = open(
+        "fleet",
+        "shore",
+        &format!(
+            "zenoh://?connect=udp/127.0.0.1:{}&listen=tcp/127.0.0.1:0&prefix=fleet&scout=false",
+            relay.port
+        ),
+    );
+    wait_link(&vehicle, true).await;
+    wait_link(&shore, true).await;
+    let mut heard = shore.attach("watch").subscribed(TOPIC).unwrap();
+    let tx = vehicle.attach("gen");
+    // the shore's subscription reaches the vehicle, which then publishes to it
+    let mut warm = 0u32;
+    let mut reached = false;
+    for _ in 0..100 {
+        warm += 1;
+        let text = format!("<<warm:{warm:04}>>");
+        tx.send("test.burst", Payload::from(text.into_bytes()))
+            .await
+            .unwrap();
+        if let Ok(Some(_)) = timeout(Duration::from_millis(100), heard.recv()).await {
+            reached = true;
+            break;
+        }
+    }
+    assert!(reached, "the shore hears the vehicle");
+    assert_eq!(
+        shore.stats().missed,
+        Default::default(),
+        "nothing missed yet"
+    );
+    // the burst, paced as a sensor would send it
+    for i in 0..BURST {
+        let text = format!("<<miss:{i:04}>>");
+        tx.send("test.burst", Payload::from(text.into_bytes()))
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    // what arrives, until every message of the burst has arrived or been counted missed
+    let mut arrived = std::collections::BTreeSet::new();
+    let missed = |m: &Medium| m.stats().missed.get(TOPIC).copied().unwrap_or(0);
+    // (each round takes a message or 100 ms: at most 30 s of waiting)
+    for _ in 0..BURST + 300 {
+        if arrived.len() as u64 + missed(&shore) >= u64::from(BURST) {
+            break;
+        }
+        if let Ok(Some(m)) = timeout(Duration::from_millis(100), heard.recv()).await {
+            let bytes = m.payload.as_bytes().expect("bytes").clone();
+            arrived.extend(markers(&bytes));
+        }
+    }
+    let dropped = relay.dropped.lock().unwrap().clone();
+    let stats = shore.stats();
+    let counted = missed(&shore);
+    assert!(
+        dropped.is_superset(&chosen),
+        "the relay dropped each chosen message: {dropped:?}"
+    );
+    assert_eq!(
+        arrived.len() as u64 + counted,
+        u64::from(BURST),
+        "arrived {arrived:?}, missed {counted}"
+    );
+    // each message dropped on the way and never sent again is counted, and nothing else is
+    let lost = dropped.difference(&arrived).count() as u64;
+    assert_eq!(counted, lost, "dropped {dropped:?}, arrived {arrived:?}");
+    assert!(counted > 0, "the publisher keeps only its latest sample");
+    assert_eq!(
+        stats.missed.keys().collect::<Vec<_>>(),
+        [TOPIC],
+        "counted under the topic"
+    );
+    // as `seabus.media` and `seabus spy --stats` show it
+    let shown = stats.to_map();
+    let by_topic = shown.get("missed").and_then(Value::as_map).unwrap();
+    assert_eq!(by_topic.get_i64(TOPIC), Some(counted as i64));
+    assert!(stats.has_losses());
+    vehicle.close();
+    shore.close();
+}
+
+fn free_udp_port() -> u16 {
+    std::net::UdpSocket::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
 }
