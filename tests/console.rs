@@ -1892,7 +1892,11 @@ async fn the_fleet_console_shows_three_vehicles_and_a_pilot_commands_the_one_cho
     screenshot(&c, "fleet.png").await;
     // the table commands nothing: control is taken on a vehicle's own page
     assert_eq!(
-        js(&c, "return document.querySelector('[data-testid=take-control]').hidden;").await,
+        js(
+            &c,
+            "return document.querySelector('[data-testid=take-control]').hidden;"
+        )
+        .await,
         json!(true)
     );
 
