@@ -230,6 +230,33 @@ fn every_shipped_config_is_valid() {
     assert!(layouts >= 2);
 }
 
+/// The fleet console's layouts, against the shore station they are for: valid, and every binding
+/// and command reaches something (a vehicle's commands go out over the fleet's medium).
+#[test]
+fn the_fleet_consoles_layouts_check_clean_against_the_shore() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/fleet");
+    for layout in ["fleet.xml", "vehicle.xml"] {
+        let path = dir.join("console").join(layout);
+        let out = seabus()
+            .args(["layout", "check"])
+            .arg(&path)
+            .arg(dir.join("shore.xml"))
+            .output()
+            .expect("seabus runs");
+        assert_eq!(
+            (out.status.code(), String::from_utf8_lossy(&out.stderr)),
+            (Some(0), "".into()),
+            "{}",
+            path.display()
+        );
+        assert!(
+            String::from_utf8_lossy(&out.stdout).contains(": valid ("),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+    }
+}
+
 #[test]
 fn a_routes_quality_of_service_needs_a_medium_that_carries_priorities() {
     expect_error(
