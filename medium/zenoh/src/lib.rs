@@ -355,16 +355,28 @@ pub fn schemes() -> Schemes {
     Schemes::with(&[register])
 }
 
-/// What a message becomes: its key, the bytes, and how they are sent.
+/// What a message becomes: the bytes, and the outlet of its topic and kind.
 #[derive(Clone)]
 pub struct Frame {
-    key: String,
+    outlet: Arc<Outlet>,
     payload: Bytes,
-    command: bool,
     /// `Some(datagram without payload)` for a datamap sent as JSON
     attachment: Option<Bytes>,
-    /// how it is sent: its kind's quality of service, or what was declared for its topic
+}
+
+/// The outlets of the topics sent: `[data, commands]`.
+type Outlets = [HashMap<Topic, Arc<Outlet>>; 2];
+
+/// How one topic of one kind goes out: its key, made once; its quality of service (its kind's, or
+/// what was declared for its topic); and its publisher, declared with the first message.
+pub struct Outlet {
+    key: String,
+    command: bool,
     qos: SendQos,
+    /// whether it is one of the medium's kept outlets (past [`MAX_PUBLISHERS`], messages are put
+    /// without a publisher of their own)
+    kept: bool,
+    publisher: tokio::sync::OnceCell<Publishing>,
 }
 
 /// A message's quality of service on the wire.
@@ -437,11 +449,35 @@ pub struct ZenohTransport {
     sender: u64,
     caps: Capabilities,
     session: watch::Receiver<Option<Session>>,
-    /// each publisher with the quality of service it was declared with
-    publishers: tokio::sync::Mutex<HashMap<(String, bool), (SendQos, Publishing)>>,
+    /// the session once open (it is opened once), taken without a lock or a count
+    opened: Arc<std::sync::OnceLock<Session>>,
+    /// the outlet of each topic sent, data's and commands'; dropped when a quality of service is
+    /// declared, so that each is made again with it
+    outlets: Mutex<Outlets>,
     /// the qualities of service declared for topics ([`Transport::set_qos`])
     overrides: RwLock<Overrides>,
     hearing: Hearing,
+}
+
+/// Declares the publisher of outlet `o`: for data, one that keeps its latest sample for late
+/// joiners and numbers its samples; for commands, a plain one.
+async fn declare(session: &Session, o: &Outlet) -> zenoh::Result<Publishing> {
+    let builder = session
+        .declare_publisher(o.key.clone())
+        .congestion_control(o.qos.congestion)
+        .priority(o.qos.priority)
+        .express(o.qos.express);
+    Ok(if o.command {
+        Publishing::Command(builder.await?)
+    } else {
+        Publishing::Data(
+            builder
+                .cache(CacheConfig::default().max_samples(1))
+                .sample_miss_detection(MissDetectionConfig::default().sporadic_heartbeat(HEARTBEAT))
+                .publisher_detection()
+                .await?,
+        )
+    })
 }
 
 /// A publisher of one key: data keeps its latest sample for late joiners and numbers its samples so
@@ -462,14 +498,39 @@ struct Hearing {
     subscriptions: Arc<Mutex<Subscriptions>>,
     /// the fleet's members, as their liveliness tokens come and go
     fleet: fleet::Fleet,
-    /// the topic of each publisher heard, for the samples it says were missed
-    sources: Arc<Mutex<HashMap<EntityGlobalId, String>>>,
-    /// the origins of the datagrams heard, shared rather than made again for each one
-    origins: Arc<Mutex<datagram::Origins>>,
+    /// what reading samples keeps from one to the next, under one lock
+    heard: Arc<Mutex<Heard>>,
 }
 
 /// Publishers whose topic is kept, at most; past this the map starts again.
 const MAX_SOURCES: usize = 4096;
+/// Keys whose topic is kept, at most; past this the map starts again.
+const MAX_KEYS: usize = 4096;
+
+/// What reading one sample leaves for the next: the topic of each key heard (a key is turned into
+/// a topic once), the topic of each publisher heard (for the samples it says were missed) and
+/// the origins of the datagrams heard (shared rather than made again for each one).
+#[derive(Default)]
+struct Heard {
+    topics: HashMap<Box<str>, Topic>,
+    sources: HashMap<EntityGlobalId, Topic>,
+    origins: datagram::Origins,
+}
+
+impl Heard {
+    /// The topic of `key`, under `prefix`.
+    fn topic(&mut self, prefix: &str, key: &str) -> Result<Topic, keys::KeyError> {
+        if let Some(t) = self.topics.get(key) {
+            return Ok(t.clone());
+        }
+        let topic = keys::key_topic(prefix, key)?;
+        if self.topics.len() >= MAX_KEYS {
+            self.topics.clear();
+        }
+        self.topics.insert(Box::from(key), topic.clone());
+        Ok(topic)
+    }
+}
 
 #[derive(Default)]
 struct Subscriptions {
@@ -478,8 +539,8 @@ struct Subscriptions {
 }
 
 impl Hearing {
-    fn origins(&self) -> std::sync::MutexGuard<'_, datagram::Origins> {
-        self.origins.lock().unwrap_or_else(|p| p.into_inner())
+    fn heard(&self) -> std::sync::MutexGuard<'_, Heard> {
+        self.heard.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     fn subscriptions(&self) -> std::sync::MutexGuard<'_, Subscriptions> {
@@ -526,14 +587,9 @@ impl Hearing {
 
     /// Samples a publisher sent and this medium never got: counted under the publisher's topic.
     fn missed(&self, miss: &Miss) {
-        let topic = self
-            .sources
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .get(&miss.source())
-            .cloned()
-            .unwrap_or_else(|| "(a publisher not heard yet)".to_string());
-        self.ingress.missed(&topic, u64::from(miss.nb()));
+        let topic = self.heard().sources.get(&miss.source()).cloned();
+        let topic = topic.as_ref().map_or("(a publisher not heard yet)", Topic::as_str);
+        self.ingress.missed(topic, u64::from(miss.nb()));
     }
 
     /// Declares the subscribers asked for before the session opened.
@@ -569,7 +625,8 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
         sender,
         caps: cfg.capabilities(),
         session: rx,
-        publishers: tokio::sync::Mutex::new(HashMap::new()),
+        opened: Arc::default(),
+        outlets: Mutex::default(),
         overrides: RwLock::new(Vec::new()),
         hearing: Hearing {
             prefix,
@@ -577,8 +634,7 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
             ingress: o.ingress.clone(),
             subscriptions: Arc::default(),
             fleet: fleet::Fleet::new(&cfg.fleet, o.ingress.clone()),
-            sources: Arc::default(),
-            origins: Arc::default(),
+            heard: Arc::default(),
         },
     });
     o.ingress
@@ -587,6 +643,7 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
     let router = cfg.mode == "router";
     let token = format!("{}/{}", cfg.fleet, o.node.name);
     let members = transport.hearing.fleet.clone();
+    let opened = transport.opened.clone();
     // The session's task is not aborted when the medium closes: a Zenoh session dropped while it
     // opens would keep what it had bound. It ends by itself, closing the session, once the
     // medium is closed.
@@ -595,6 +652,7 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
             return;
         };
         if hearing.ingress.is_open() {
+            let _ = opened.set(session.clone());
             let _ = tx.send(Some(session.clone()));
             hearing.declare_pending(&session).await;
             // (held while the session lasts: dropped, it tells the fleet this node is gone)
@@ -671,15 +729,15 @@ async fn watch_link(session: &Session, ingress: &Ingress, router: bool, members:
 
 impl ZenohTransport {
     /// The open session, waiting for it to open at most [`OPEN_WAIT`].
-    async fn session(&self) -> Result<Session, SendError> {
-        // (once open, no timer: the session is taken as it is)
-        if let Some(s) = self.session.borrow().as_ref() {
-            return Ok(s.clone());
+    async fn session(&self) -> Result<&Session, SendError> {
+        // (once open, no timer and no lock: the session is taken as it is)
+        if let Some(s) = self.opened.get() {
+            return Ok(s);
         }
         let mut rx = self.session.clone();
         let got = tokio::time::timeout(OPEN_WAIT, rx.wait_for(Option::is_some)).await;
-        match got {
-            Ok(Ok(s)) => Ok(s.clone().expect("waited for")),
+        match (got, self.opened.get()) {
+            (Ok(Ok(_)), Some(s)) => Ok(s),
             _ => Err(SendError::LinkDown {
                 medium: self.name.to_string(),
                 reason: "the Zenoh session is not open".to_string(),
@@ -699,6 +757,34 @@ impl ZenohTransport {
         SendQos::of(declared, command)
     }
 
+    fn outlets(&self) -> std::sync::MutexGuard<'_, Outlets> {
+        self.outlets.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The outlet of `topic` for `kind`: made with the first message, kept (at most
+    /// [`MAX_PUBLISHERS`]).
+    fn outlet(&self, topic: &Topic, kind: Kind) -> Result<Arc<Outlet>, SendError> {
+        let command = kind == Kind::Command;
+        if let Some(o) = self.outlets()[usize::from(command)].get(topic) {
+            return Ok(o.clone());
+        }
+        let key = keys::topic_key(&self.prefix, topic).map_err(|e| self.send_error(e))?;
+        let qos = self.qos_of(topic, kind);
+        let mut outlets = self.outlets();
+        let kept = outlets[0].len() + outlets[1].len() < MAX_PUBLISHERS;
+        let outlet = Arc::new(Outlet {
+            key,
+            command,
+            qos,
+            kept,
+            publisher: tokio::sync::OnceCell::new(),
+        });
+        if kept {
+            outlets[usize::from(command)].insert(topic.clone(), outlet.clone());
+        }
+        Ok(outlet)
+    }
+
     fn send_error(&self, reason: impl std::fmt::Display) -> SendError {
         SendError::Io {
             medium: self.name.to_string(),
@@ -714,22 +800,28 @@ type Dropped = (&'static str, String);
 /// what a program that is not seabus sent.
 fn read_sample(sample: &Sample, hearing: &Hearing) -> Result<(), Dropped> {
     let (prefix, me, ingress) = (&*hearing.prefix, hearing.sender, &hearing.ingress);
-    let topic = keys::key_topic(prefix, sample.key_expr().as_str())
-        .map_err(|e| ("bad-key", e.to_string()))?;
-    if let Some(info) = sample.source_info() {
-        let mut sources = hearing.sources.lock().unwrap_or_else(|p| p.into_inner());
-        if !sources.contains_key(info.source_id()) {
-            if sources.len() >= MAX_SOURCES {
-                sources.clear();
-            }
-            sources.insert(*info.source_id(), topic.to_string());
-        }
-    }
     let bytes = Bytes::from(sample.payload().to_bytes().into_owned());
     let encoding = sample.encoding();
-    if *encoding == *DATAGRAM {
-        let (sender, mut msg) = datagram::decode(&bytes, &mut hearing.origins())
-            .map_err(|e| (e.kind(), e.to_string()))?;
+    let datagram = *encoding == *DATAGRAM;
+    // (one lock for what samples share: the key's topic, the publisher's, the datagram's origin)
+    let (topic, decoded) = {
+        let mut heard = hearing.heard();
+        let topic = heard
+            .topic(prefix, sample.key_expr().as_str())
+            .map_err(|e| ("bad-key", e.to_string()))?;
+        if let Some(info) = sample.source_info()
+            && !heard.sources.contains_key(info.source_id())
+        {
+            if heard.sources.len() >= MAX_SOURCES {
+                heard.sources.clear();
+            }
+            heard.sources.insert(*info.source_id(), topic.clone());
+        }
+        let decoded = datagram.then(|| datagram::decode(&bytes, &mut heard.origins));
+        (topic, decoded)
+    };
+    if let Some(decoded) = decoded {
+        let (sender, mut msg) = decoded.map_err(|e| (e.kind(), e.to_string()))?;
         if sender != me {
             hearing.fleet.heard(&msg);
             msg.topic = topic;
@@ -742,7 +834,8 @@ fn read_sample(sample: &Sample, hearing: &Hearing) -> Result<(), Dropped> {
     // a datamap sent as JSON by seabus: its provenance in the attachment
     if let Some(att) = sample.attachment() {
         let att = Bytes::from(att.to_bytes().into_owned());
-        if let Ok((sender, mut msg)) = datagram::decode(&att, &mut hearing.origins()) {
+        let decoded = datagram::decode(&att, &mut hearing.heard().origins);
+        if let Ok((sender, mut msg)) = decoded {
             if sender == me {
                 return Ok(());
             }
@@ -783,9 +876,7 @@ impl Transport for ZenohTransport {
     }
 
     fn encode(&self, msg: &Message) -> Result<Frame, SendError> {
-        let key = keys::topic_key(&self.prefix, &msg.topic).map_err(|e| self.send_error(e))?;
-        let command = msg.kind == Kind::Command;
-        let qos = self.qos_of(&msg.topic, msg.kind);
+        let outlet = self.outlet(&msg.topic, msg.kind)?;
         if self.json
             && let Payload::Map(map) = &msg.payload
         {
@@ -795,20 +886,16 @@ impl Transport for ZenohTransport {
             let attachment =
                 datagram::encode(&header, self.sender).map_err(|e| self.send_error(e))?;
             return Ok(Frame {
-                key,
+                outlet,
                 payload: Bytes::from(text),
-                command,
                 attachment: Some(attachment),
-                qos,
             });
         }
         let payload = datagram::encode(msg, self.sender).map_err(|e| self.send_error(e))?;
         Ok(Frame {
-            key,
+            outlet,
             payload,
-            command,
             attachment: None,
-            qos,
         })
     }
 
@@ -820,37 +907,16 @@ impl Transport for ZenohTransport {
             } else {
                 DATAGRAM.clone()
             };
-            let mut publishers = self.publishers.lock().await;
-            let slot = (frame.key.clone(), frame.command);
-            let qos = frame.qos;
-            // a topic declared with a quality of service after its publisher: declared again
-            if publishers.get(&slot).is_some_and(|(q, _)| *q != qos) {
-                publishers.remove(&slot);
-            }
-            if !publishers.contains_key(&slot) && publishers.len() < MAX_PUBLISHERS {
-                let builder = session
-                    .declare_publisher(frame.key.clone())
-                    .congestion_control(qos.congestion)
-                    .priority(qos.priority)
-                    .express(qos.express);
-                let p = if frame.command {
-                    let p = builder.await;
-                    Publishing::Command(p.map_err(|e| self.send_error(e))?)
-                } else {
-                    let p = builder
-                        .cache(CacheConfig::default().max_samples(1))
-                        .sample_miss_detection(
-                            MissDetectionConfig::default().sporadic_heartbeat(HEARTBEAT),
-                        )
-                        .publisher_detection()
-                        .await;
-                    Publishing::Data(p.map_err(|e| self.send_error(e))?)
-                };
-                publishers.insert(slot.clone(), (qos, p));
-            }
-            let payload = ZBytes::from(frame.payload);
-            let attachment = frame.attachment.map(ZBytes::from);
-            let put = match publishers.get(&slot).map(|(_, p)| p) {
+            let o = &frame.outlet;
+            let (payload, attachment) = (ZBytes::from(frame.payload), frame.attachment);
+            let attachment = attachment.map(ZBytes::from);
+            let publisher = if o.kept {
+                let declared = o.publisher.get_or_try_init(|| declare(session, o)).await;
+                Some(declared.map_err(|e| self.send_error(e))?)
+            } else {
+                None
+            };
+            let put = match publisher {
                 Some(Publishing::Data(p)) => {
                     p.put(payload)
                         .encoding(encoding)
@@ -865,16 +931,16 @@ impl Transport for ZenohTransport {
                 }
                 None => {
                     session
-                        .put(frame.key.clone(), payload)
+                        .put(o.key.as_str(), payload)
                         .encoding(encoding)
                         .attachment(attachment)
-                        .congestion_control(qos.congestion)
-                        .priority(qos.priority)
-                        .express(qos.express)
+                        .congestion_control(o.qos.congestion)
+                        .priority(o.qos.priority)
+                        .express(o.qos.express)
                         .await
                 }
             };
-            put.map_err(|e| self.send_error(format!("publishing on {}: {e}", frame.key)))
+            put.map_err(|e| self.send_error(format!("publishing on {}: {e}", o.key)))
         })
     }
 
@@ -900,6 +966,9 @@ impl Transport for ZenohTransport {
         let declared = (pattern.clone(), kind, qos);
         if !overrides.contains(&declared) {
             overrides.push(declared);
+            // each topic's outlet is made again with the first message after, its publisher
+            // declared with what now holds for it
+            *self.outlets() = Outlets::default();
         }
     }
 

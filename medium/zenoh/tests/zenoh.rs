@@ -423,7 +423,8 @@ async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
     )
     .await
     .unwrap();
-    tokio::time::sleep(Duration::from_secs(2)).await;
+    // the shore station starts 10 s after the vehicle
+    tokio::time::sleep(Duration::from_secs(10)).await;
     let shore = open(
         "fleet",
         "shore",
