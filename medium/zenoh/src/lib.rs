@@ -588,7 +588,9 @@ impl Hearing {
     /// Samples a publisher sent and this medium never got: counted under the publisher's topic.
     fn missed(&self, miss: &Miss) {
         let topic = self.heard().sources.get(&miss.source()).cloned();
-        let topic = topic.as_ref().map_or("(a publisher not heard yet)", Topic::as_str);
+        let topic = topic
+            .as_ref()
+            .map_or("(a publisher not heard yet)", Topic::as_str);
         self.ingress.missed(topic, u64::from(miss.nb()));
     }
 
