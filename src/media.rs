@@ -28,6 +28,7 @@ media! {
     "dsaav" => seabus_medium_dsaav ["dsaav+eth", "dsaav+udp", "dsaav+inproc"];
     "moos" => seabus_medium_moos ["moos"];
     "zenoh" => seabus_medium_zenoh ["zenoh"];
+    "mavlink" => seabus_medium_mavlink ["mavlink"];
 }
 
 /// What `seabus --version` says: the version and the media compiled in.

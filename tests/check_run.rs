@@ -256,7 +256,7 @@ fn cases() -> Vec<Case> {
             )],
             &[],
             "{dir}/pilot.xml:1:22: unknown attribute `colour` on <layout>; expected one of: name, \
-             title, roles",
+             title, roles, vehicle",
         ),
         error(
             "a template that uses itself",

@@ -171,27 +171,38 @@ fn chromedriver() -> Driver {
         Path::new(CHROMEDRIVER).exists() && Path::new(CHROMIUM).exists(),
         "the console tests need Debian's chromium and chromium-driver (scripts/test installs them)"
     );
-    let port = common::free_port();
-    let child = Running(
-        std::process::Command::new(CHROMEDRIVER)
-            .arg(format!("--port={port}"))
-            .process_group(0)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("chromedriver starts"),
-    );
-    let group = child.0.id();
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
-        assert!(Instant::now() < deadline, "chromedriver does not listen");
-        std::thread::sleep(Duration::from_millis(50));
+    // (a port taken meanwhile by another test makes chromedriver exit: it is started again on
+    // another; on a loaded machine it may take long to listen)
+    for _ in 0..3 {
+        let port = common::free_port();
+        let mut child = Running(
+            std::process::Command::new(CHROMEDRIVER)
+                .arg(format!("--port={port}"))
+                .process_group(0)
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .spawn()
+                .expect("chromedriver starts"),
+        );
+        let group = child.0.id();
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if std::net::TcpStream::connect(("127.0.0.1", port)).is_ok() {
+                return Driver {
+                    _child: child,
+                    url: format!("http://127.0.0.1:{port}"),
+                    group,
+                };
+            }
+            let exited = child.0.try_wait().ok().flatten().is_some();
+            assert!(Instant::now() < deadline, "chromedriver does not listen");
+            if exited {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
     }
-    Driver {
-        _child: child,
-        url: format!("http://127.0.0.1:{port}"),
-        group,
-    }
+    panic!("chromedriver exited three times without listening")
 }
 
 async fn browser(driver: &Driver) -> Client {

@@ -6,7 +6,7 @@ mod common;
 use common::*;
 
 /// Every scheme of the default build with its family, in the order `seabus schemes` lists them.
-const SCHEMES: [(&str, &str); 14] = [
+const SCHEMES: [(&str, &str); 15] = [
     ("inproc", "inproc"),
     ("udp", "udp"),
     ("serial", "serial"),
@@ -21,6 +21,7 @@ const SCHEMES: [(&str, &str); 14] = [
     ("dsaav+inproc", "dsaav"),
     ("moos", "moos"),
     ("zenoh", "zenoh"),
+    ("mavlink", "mavlink"),
 ];
 
 fn stdout_of(args: &[&str]) -> String {
@@ -74,7 +75,7 @@ fn version_names_the_version_and_the_media_compiled_in() {
         media,
         "media: inproc (inproc) udp (udp) serial (serial, pty) \
          can (slcan, slcan+pty, cannelloni, socketcan) lcm (udpm) \
-         dsaav (dsaav+eth, dsaav+udp, dsaav+inproc) moos (moos) zenoh (zenoh)",
+         dsaav (dsaav+eth, dsaav+udp, dsaav+inproc) moos (moos) zenoh (zenoh) mavlink (mavlink)",
         "{text}"
     );
     // the families, without their schemes
@@ -88,7 +89,7 @@ fn version_names_the_version_and_the_media_compiled_in() {
     assert_eq!(
         families,
         [
-            "inproc", "udp", "serial", "can", "lcm", "dsaav", "moos", "zenoh"
+            "inproc", "udp", "serial", "can", "lcm", "dsaav", "moos", "zenoh", "mavlink"
         ]
     );
     assert_eq!(lines.next(), None, "no family is left out: {text}");

@@ -14,6 +14,7 @@ pub fn schemes() -> seabus_medium::Schemes {
         seabus_medium_lcm::register,
         seabus_medium_dsaav::register,
         seabus_medium_moos::register,
+        seabus_medium_mavlink::register,
     ])
 }
 
