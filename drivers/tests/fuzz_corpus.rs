@@ -21,4 +21,7 @@ seed_tests! {
     /// CAN signals made from the seed decode without a panic, their raw bits read back, and their
     /// values encode back to the same raw bits.
     dbc_signals_seeds => dbc_signals,
+    /// NMEA 2000 frames go through the driver without a panic, to bounded messages, finite values
+    /// and valid datasets; reassembled fast packets frame again to themselves.
+    n2k_frames_seeds => n2k_frames,
 }

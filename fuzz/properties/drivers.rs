@@ -227,3 +227,126 @@ pub fn dbc_signals(data: &[u8]) -> bool {
     }
     true
 }
+
+/// Every finite-number and list check of a decoded NMEA 2000 datamap: no NaN or infinity
+/// anywhere in it.
+fn n2k_finite(what: &str, v: &seabus_medium::Value) {
+    use seabus_medium::Value;
+    match v {
+        Value::Float(x) => assert!(x.is_finite(), "{what}: {x}"),
+        Value::List(items) => items.iter().for_each(|i| n2k_finite(what, i)),
+        Value::Map(m) => m
+            .iter()
+            .for_each(|(k, v)| n2k_finite(&format!("{what}.{k}"), v)),
+        _ => {}
+    }
+}
+
+/// NMEA 2000 frames through the `nmea2000` driver: the input is a sequence of frames, each a
+/// flags byte (bit 0 extended, bit 1 remote, bits 2–7 the milliseconds since the previous frame,
+/// ×16), four bytes of identifier (big-endian), a length byte (its value modulo 10, so that
+/// lengths past 8 occur) and that many data bytes. Any sequence is read without a panic; every
+/// message it gives is at most 1785 bytes; every value decoded is finite; every dataset made is
+/// one the catalogue accepts; at most `max_partial` messages are ever under way. Each message
+/// longer than a frame that came out of a fast packet, framed again by [`fast_frames`], comes out
+/// of a fresh assembler as the same bytes. True when at least one frame was whole.
+pub fn n2k_frames(data: &[u8]) -> bool {
+    use seabus_drivers::n2k::builtin;
+    use seabus_drivers::n2k::driver::Nmea2000;
+    use seabus_drivers::n2k::frame::{Assembler, Header, Limits, TP_DT, fast_frames};
+    use seabus_drivers::n2k::pgn::Packet;
+    use seabus_medium_can::frame::CanFrame;
+    use std::time::Duration;
+    let params = Params::from_pairs(&[("max_partial", "8")]);
+    let cat = Catalogue::built_in();
+    let (mut driver, _) = Nmea2000::new(&params, &cat).expect("a driver with no parameters");
+    let db = builtin::database();
+    let mut assembler = Assembler::new(Limits {
+        max_partial: 8,
+        ..Limits::default()
+    });
+    let mut now = tokio::time::Instant::now();
+    let mut rest = data;
+    let mut whole = false;
+    while rest.len() >= 6 {
+        let flags = rest[0];
+        let id = u32::from_be_bytes([rest[1], rest[2], rest[3], rest[4]]) & 0x1FFF_FFFF;
+        let len = usize::from(rest[5] % 10).min(rest.len() - 6);
+        let payload = &rest[6..6 + len];
+        rest = &rest[6 + len..];
+        now += Duration::from_millis(u64::from(flags >> 2) * 16);
+        let extended = flags & 1 == 1;
+        let frame = if flags & 2 == 2 {
+            CanFrame::remote(
+                if extended { id } else { id & 0x7FF },
+                extended,
+                len.min(8) as u8,
+            )
+        } else if len > 8 {
+            CanFrame::fd(
+                if extended { id } else { id & 0x7FF },
+                extended,
+                &[0; 12],
+                false,
+                false,
+            )
+        } else {
+            CanFrame::data(if extended { id } else { id & 0x7FF }, extended, payload)
+        };
+        let Ok(frame) = frame else { continue };
+        whole = true;
+        for (topic, dataset, map) in driver.take(&frame, now) {
+            for (k, v) in map.iter() {
+                n2k_finite(&format!("{topic}.{k}"), v);
+            }
+            if !dataset.is_empty()
+                && let Err(e) = cat.validate(dataset, &map)
+            {
+                panic!("{topic}: a {dataset} the catalogue refuses: {e}: {map:?}");
+            }
+        }
+        // the assembler alone, to look at what it gives
+        if let Some(m) = assembler.push(
+            frame.id(),
+            frame.is_extended(),
+            !matches!(frame.kind(), seabus_medium_can::frame::FrameKind::Data),
+            frame.payload(),
+            |pgn| db.packet(pgn),
+            now,
+        ) {
+            assert!(m.data.len() <= 1785, "a message of {} bytes", m.data.len());
+            let via_tp = Header::from_id(frame.id()).pgn == TP_DT;
+            let fast = db.packet(m.header.pgn) == Packet::Fast && !via_tp;
+            if fast && !m.data.is_empty() {
+                assert!(
+                    m.data.len() <= 223,
+                    "a fast packet of {} bytes",
+                    m.data.len()
+                );
+                let mut fresh = Assembler::new(Limits::default());
+                let again: Vec<_> = fast_frames(3, &m.data)
+                    .iter()
+                    .filter_map(|f| {
+                        fresh.push(m.header.id(), true, false, f, |pgn| db.packet(pgn), now)
+                    })
+                    .collect();
+                assert_eq!(again.len(), 1, "{:?} framed again", m.data);
+                assert_eq!(again[0].data, m.data, "framed again");
+                assert!(fresh.counts().is_empty(), "{:?}", fresh.counts());
+            }
+            // every definition of the set reads any message
+            for def in db.iter() {
+                for (k, v) in def.decode(&m.data).map.iter() {
+                    n2k_finite(&format!("{}.{k}", def.id), v);
+                }
+            }
+        }
+        assert!(
+            assembler.under_way() <= 8,
+            "{} under way",
+            assembler.under_way()
+        );
+        assembler.take_rejections();
+    }
+    whole
+}
