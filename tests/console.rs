@@ -927,7 +927,15 @@ fn only_the_demo_has_passwords_of_its_own_and_it_prints_them() {
 async fn a_designer_adds_a_bound_widget_and_saves_the_layout_as_xml() {
     let copy_dir = tempfile::tempdir().expect("dir");
     let layout = copy_dir.path().join("pilot.xml");
-    std::fs::copy(repo("configs/console/pilot.xml"), &layout).expect("copied");
+    // (a layout for one vehicle: what it says of its vehicle is saved with it)
+    let text = std::fs::read_to_string(repo("configs/console/pilot.xml")).expect("the layout");
+    let one = r#"roles="pilot">"#;
+    assert!(text.contains(one));
+    std::fs::write(
+        &layout,
+        text.replacen(one, r#"roles="pilot" vehicle="${vehicle}">"#, 1),
+    )
+    .expect("copied");
     let sys = start(std::slice::from_ref(&layout));
     let driver = chromedriver();
     let c = browser(&driver).await;
@@ -976,6 +984,10 @@ async fn a_designer_adds_a_bound_widget_and_saves_the_layout_as_xml() {
     };
     assert!(text.contains("nav.altitude.altitude"), "{text}");
     assert!(text.contains("roles=\"pilot\""), "roles kept: {text}");
+    assert!(
+        text.contains("vehicle=\"iver\""),
+        "the vehicle kept: {text}"
+    );
     assert!(copy_dir.path().join("pilot.xml.bak").exists());
     // what was saved reads, and checks against the system
     let out = seabus()

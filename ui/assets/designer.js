@@ -15,6 +15,7 @@ const ATTRS = {
   gauge: ['bind', 'min', 'max', 'unit', 'ranges', 'precision', 'fresh'],
   plot: ['window', 'min', 'max', 'fresh'],
   track: ['position', 'heading', 'trail', 'waypoints', 'grid', 'fresh'],
+  fleet: ['open', 'var', 'bind', 'mode', 'battery', 'severity', 'position', 'fresh'],
   health: ['bind', 'fresh'],
   log: ['topics', 'lines'],
   history: ['lines'],
@@ -27,7 +28,7 @@ const ATTRS = {
 const COMMON = ['id', 'label', 'role'];
 const SERIES = ['bind', 'label', 'colour', 'unit', 'angle'];
 const NUMERIC = new Set(['min', 'max', 'step', 'precision', 'columns', 'trail', 'lines']);
-const TEXTUAL = new Set(['label', 'unit', 'title', 'role', 'command', 'set', 'ranges', 'waypoints', 'topics', 'position', 'on', 'off', 'grid', 'id']);
+const TEXTUAL = new Set(['label', 'unit', 'title', 'role', 'command', 'set', 'ranges', 'waypoints', 'topics', 'position', 'on', 'off', 'grid', 'id', 'open', 'var', 'mode', 'battery', 'severity']);
 const BINDS = new Set(['bind', 'heading']);
 
 const clone = (x) => (x === undefined ? undefined : JSON.parse(JSON.stringify(x)));
@@ -130,7 +131,7 @@ function nodeXml(node, ind) {
 export function layoutToXml(L, leaseRole) {
   const out = [];
   const roles = Array.isArray(L.roles) ? L.roles.join(' ') : L.roles;
-  out.push(`<layout${attrsText([['name', L.name], ['title', L.title], ['roles', roles]])}>`);
+  out.push(`<layout${attrsText([['name', L.name], ['title', L.title], ['roles', roles], ['vehicle', L.vehicle]])}>`);
   for (const [n, v] of Object.entries(L.vars || {})) out.push(`  <var${attrsText([['name', n], ['default', scalar(v)]])}/>`);
   const cmds = Object.entries(L.commands || {});
   if (Object.keys(L.vars || {}).length && cmds.length) out.push('');
