@@ -59,7 +59,15 @@ async fn sensor_sentences_become_standard_datasets() {
     let mut got: BTreeMap<String, Vec<Message>> = BTreeMap::new();
     let deadline = Instant::now() + Duration::from_secs(10);
     // resend until every output has been seen (the far end may take a moment to be read)
-    while Instant::now() < deadline && got.len() < 5 {
+    let wanted = [
+        "nav.altitude",
+        "nav.attitude",
+        "nav.fix",
+        "nav.heading",
+        "nav.position",
+        "nav.velocity",
+    ];
+    while Instant::now() < deadline && !wanted.iter().all(|t| got.contains_key(*t)) {
         for s in &sentences {
             device
                 .send("raw", Payload::from(s.as_bytes()))
