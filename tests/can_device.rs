@@ -54,12 +54,11 @@ fn dbc_devices_publish_their_messages_and_take_commands() {
     let (_spy, rx) = spy_json(&bus, 40);
     let _run = spawn_run(&path, &[]);
     // the pseudo-terminal appears when the system runs
-    for _ in 0..100 {
-        if pty.exists() {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    assert!(
+        wait_for_path(&pty, Duration::from_secs(5)),
+        "the pseudo-terminal {} appeared",
+        pty.display()
+    );
     let mut devices = Running(
         Command::new("python3")
             .args(["-c", DEVICES])

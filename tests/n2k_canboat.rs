@@ -289,14 +289,8 @@ fn canboatjs_frames_become_the_same_values_and_the_standard_datasets() {
     );
     let (_spy, rx) = spy_json(&bus, 60);
     let _run = spawn_run(&path, &[]);
-    for _ in 0..200 {
-        if pty.exists() {
-            break;
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
     assert!(
-        pty.exists(),
+        wait_for_path(&pty, Duration::from_secs(10)),
         "the pseudo-terminal {} appeared",
         pty.display()
     );

@@ -237,6 +237,16 @@ pub fn enter_namespace(ns: &str) -> std::io::Result<()> {
     Ok(())
 }
 
+/// Waits (at most `limit`) until `path` exists, as a pseudo-terminal `seabus run` makes does;
+/// whether it does.
+pub fn wait_for_path(path: &Path, limit: Duration) -> bool {
+    let deadline = Instant::now() + limit;
+    while !path.exists() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    path.exists()
+}
+
 /// Starts `seabus spy URL --json --for SECS`; its messages arrive on the receiver as JSON values.
 pub fn spy_json(url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<serde_json::Value>) {
     use std::io::BufRead;

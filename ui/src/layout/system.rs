@@ -6,7 +6,7 @@
 
 use super::model::{Binding, CommandDecl, Layout, Node};
 use seabus_medium::xml::{FileError, Pos};
-use seabus_medium::{Kind, Pattern};
+use seabus_medium::{Capabilities, Kind, Pattern};
 use seabus_modules::datasets::Dataset;
 use seabus_modules::system::RouteSpec;
 use seabus_modules::{Catalogue, Registry, SystemSpec};
@@ -94,7 +94,7 @@ impl Layout {
         let mut ranges = Vec::new();
         for c in self.commands.values() {
             let acceptors = acceptors(c, &accepted, spec, medium);
-            if acceptors.is_empty() && sent_beyond(c, spec, medium).is_none() {
+            if acceptors.is_empty() && sent_beyond(c, spec, registry, medium).is_none() {
                 warnings.push(c.pos.error(format!(
                     "warning: no module of {} accepts command `{}` on `{}`",
                     spec.file,
@@ -222,9 +222,15 @@ fn acceptors<'a>(
 }
 
 /// The medium beyond this system a command is carried to, if a bridge route takes it from the
-/// console's medium onto a medium that reaches other systems (anything but in-process): a fleet
-/// console's `auv2.cmd.course` goes out to the vehicle, whose own system accepts it.
-fn sent_beyond<'a>(c: &CommandDecl, spec: &'a SystemSpec, console: &str) -> Option<&'a str> {
+/// console's medium onto a medium that reaches other systems (one with a wire: its capabilities
+/// are not the in-process medium's): a fleet console's `auv2.cmd.course` goes out to the vehicle,
+/// whose own system accepts it.
+fn sent_beyond<'a>(
+    c: &CommandDecl,
+    spec: &'a SystemSpec,
+    registry: &Registry,
+    console: &str,
+) -> Option<&'a str> {
     let topic = c.topic.as_str();
     route_legs(spec)
         .filter(|(from, _, r)| {
@@ -232,8 +238,11 @@ fn sent_beyond<'a>(c: &CommandDecl, spec: &'a SystemSpec, console: &str) -> Opti
         })
         .map(|(_, to, _)| to)
         .find(|to| {
-            spec.medium(to)
-                .is_some_and(|m| !m.url.trim_start().starts_with("inproc:"))
+            spec.medium(to).is_some_and(|m| {
+                registry
+                    .capabilities(&m.url, &m.pos)
+                    .is_ok_and(|caps| caps != Capabilities::IN_PROCESS)
+            })
         })
 }
 
@@ -623,7 +632,9 @@ mod tests {
 </seabus>"#,
         )
         .unwrap();
-        let registry = seabus_support::registry();
+        // (the UDP medium has a wire: what goes onto it reaches other systems)
+        let mut registry = seabus_support::registry();
+        registry.set_schemes(seabus_medium_udp::schemes());
         let catalogue = Catalogue::built_in();
         let l = parse(
             r#"<layout name="t" vehicle="auv2">
