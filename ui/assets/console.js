@@ -99,12 +99,9 @@ function consolePage() {
     /** Opens layout `name` for `vars` (a fleet table's vehicle): the page's address says which. */
     openFor(name, vars) {
       const params = new URLSearchParams();
-      params.set('layout', name);
       for (const [k, v] of Object.entries(vars || {})) params.set(k, v);
       history.replaceState(null, '', `${location.pathname}?${params}`);
-      designer.stop();
-      S.layoutName = name;
-      sendMsg({ type: 'open', layout: name, vars: queryVars() });
+      openLayout(name, true);
     },
     command: (n) => (S.layout && S.layout.commands && Object.prototype.hasOwnProperty.call(S.layout.commands, n) ? S.layout.commands[n] : null),
     commandRole(n) {
