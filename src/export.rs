@@ -1,8 +1,8 @@
-//! `seabus export`: a time window of the binary logs the `logger` module (or `seabus record`)
-//! writes, as JSON lines or as one CSV per topic.
+//! `seabus export`: a time window of the logs the `logger` module (or `seabus record`) writes —
+//! LCM event logs or MCAP files — as JSON lines or as one CSV per topic.
 
-use seabus_medium::eventlog::Reader;
-use seabus_medium::{DataMap, Pattern, Topic, Value, binary, json};
+use seabus_medium::{DataMap, Pattern, Payload, Topic, Value, binary, json};
+use seabus_record::log::Reader;
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -11,7 +11,8 @@ use std::process::ExitCode;
 /// What `seabus export` was asked to do.
 #[derive(clap::Args)]
 pub struct ExportArgs {
-    /// Log files, or directories whose `.lcmlog` files are read (in name order).
+    /// Log files (LCM event logs or MCAP), or directories whose `.lcmlog` and `.mcap` files are
+    /// read (in name order).
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
     /// Only events from this time on: seconds since 1970, or RFC 3339 (2026-11-21T10:00:00Z).
@@ -49,14 +50,25 @@ fn files(path: &Path) -> std::io::Result<Vec<PathBuf>> {
     }
     let mut v: Vec<PathBuf> = std::fs::read_dir(path)?
         .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "lcmlog"))
+        .filter(|p| p.extension().is_some_and(|x| x == "lcmlog" || x == "mcap"))
         .collect();
     v.sort();
     Ok(v)
 }
 
-/// An event's payload as a datamap: a binary datamap decoded, other bytes as `{"bytes": hex}`.
-fn payload_of(data: &[u8]) -> DataMap {
+/// An event's payload as a datamap: a datamap as it is, bytes that are a binary datamap decoded,
+/// other bytes as `{"bytes": hex}`, XML as its datamap or `{"xml": text}`.
+fn payload_of(payload: &Payload) -> DataMap {
+    let data: &[u8] = match payload {
+        Payload::Map(m) => return (**m).clone(),
+        Payload::Xml(x) => {
+            return match payload.to_map() {
+                Ok(m) => (*m).clone(),
+                Err(_) => DataMap::new().with("xml", &**x),
+            };
+        }
+        Payload::Bytes(b) => b,
+    };
     if data.starts_with(&binary::MAGIC)
         && let Ok(m) = binary::decode(data)
     {
@@ -166,23 +178,23 @@ pub fn export(args: ExportArgs) -> ExitCode {
                         break;
                     }
                 };
-                let t = event.timestamp as f64 / 1e6;
+                let t = event.micros as f64 / 1e6;
                 if from.is_some_and(|f| t < f) || to.is_some_and(|e| t >= e) {
                     continue;
                 }
-                let Ok(topic) = Topic::new(event.channel) else {
+                let Ok(topic) = Topic::new(&event.channel) else {
                     continue;
                 };
                 if !pattern.matches(&topic) {
                     continue;
                 }
-                let map = payload_of(event.data);
+                let map = payload_of(&event.payload);
                 let written = match &mut csv {
-                    Some(c) => c.row(event.channel, t, &map),
+                    Some(c) => c.row(&event.channel, t, &map),
                     None => {
                         let line = DataMap::new()
                             .with("time", t)
-                            .with("topic", event.channel)
+                            .with("topic", event.channel.as_str())
                             .with("payload", Value::Map(map));
                         match json::to_json(&line) {
                             Ok(j) => writeln!(json_out, "{j}"),

@@ -1,18 +1,26 @@
-//! `seabus record` and `seabus replay`: the traffic of any medium to and from LCM event logs, the
-//! files `lcm-logger` writes and `lcm-logplayer` plays.
+//! `seabus record` and `seabus replay`: the traffic of any medium to and from LCM event logs (the
+//! files `lcm-logger` writes and `lcm-logplayer` plays) and MCAP files (what Foxglove, ROS 2 and
+//! Python's `mcap` read).
 //!
-//! Recording writes one event per message: the channel is the topic, the timestamp is when
-//! `seabus record` received the message (microseconds since the Unix epoch, never going back, as
-//! `lcm-logger` stamps events on arrival), and the data is the payload's bytes: a byte payload as
-//! it is (on an LCM medium, the LCM message), a datamap in seabus's binary form, XML as its text.
-//! Kind (data or command) and provenance are not kept: a log has no room for them.
+//! Recording to an LCM event log writes one event per message: the channel is the topic, the
+//! timestamp is when `seabus record` received the message (microseconds since the Unix epoch, never
+//! going back, as `lcm-logger` stamps events on arrival), and the data is the payload's bytes: a
+//! byte payload as it is (on an LCM medium, the LCM message), a datamap in seabus's binary form,
+//! XML as its text. Kind (data or command) and provenance are not kept: a log has no room for them.
 //!
-//! Replaying publishes each event as data, the channel as topic and the data as a byte payload,
-//! paced by the log's timestamps.
+//! Recording to MCAP (a file named `.mcap`, or `--format mcap`) writes one channel per topic with
+//! its JSON Schema, datamaps as JSON, log time = when it was received, publish time = the message's
+//! stamp, and marks command channels ([`seabus_record`]). Every [`FLUSH_EVERY`] the chunk under way
+//! is closed, so a recording cut short by a crash reads up to there.
+//!
+//! Replaying publishes each event as data — never as a command, whatever it was recorded as — the
+//! channel as topic, paced by the log's timestamps: an LCM event's data as a byte payload, an MCAP
+//! message by its encoding (JSON as a datamap, other encodings as bytes).
 
 use seabus_medium::ChannelRegex;
-use seabus_medium::eventlog::{Damage, Reader, WriteError, Writer, event_data};
-use seabus_medium::{Interface, Kind, Message, Node, Payload, SendError, Stamp, Topic};
+use seabus_medium::{Interface, Kind, Message, Node, SendError, Stamp, Topic};
+use seabus_modules::Catalogue;
+use seabus_record::log::{Damage, Kind as LogKind, Reader, WriteError, Writer};
 use std::collections::{HashMap, HashSet};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -40,8 +48,11 @@ const NOT_SENT: u8 = 3;
 pub struct RecordArgs {
     /// The medium, for example udp://239.255.42.1:47800.
     pub url: String,
-    /// The log file to write.
+    /// The log file to write: MCAP when it is named `.mcap`, else an LCM event log.
     pub file: PathBuf,
+    /// `lcm` or `mcap`, whatever the file is named.
+    #[arg(long, value_name = "FORMAT")]
+    pub format: Option<String>,
     /// Stop after this many seconds.
     #[arg(long = "for", value_name = "SECS")]
     pub duration: Option<f64>,
@@ -94,6 +105,13 @@ pub async fn record(args: RecordArgs) -> ExitCode {
         Ok(c) => c,
         Err(code) => return code,
     };
+    let kind = match args.format.as_deref() {
+        None => LogKind::of_name(&args.file),
+        Some(f) => match LogKind::parse(f) {
+            Some(k) => k,
+            None => return usage(format!("--format {f}: expected lcm or mcap")),
+        },
+    };
     let node = Node::new(&format!("record-{}", std::process::id()));
     let medium = match crate::media::schemes().open("record", &args.url, &node) {
         Ok(m) => m,
@@ -107,11 +125,7 @@ pub async fn record(args: RecordArgs) -> ExitCode {
         Err(e) => return usage(format!("--topics: {e}")),
     };
     let file = args.file.display();
-    let created = if args.force {
-        Writer::create(&args.file)
-    } else {
-        Writer::create_new(&args.file)
-    };
+    let created = Writer::create(&args.file, kind, args.force, Catalogue::built_in());
     let writer = match created {
         Ok(w) => w,
         Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
@@ -151,7 +165,7 @@ pub async fn record(args: RecordArgs) -> ExitCode {
             m = port.recv() => {
                 let Some(m) = m else { break };
                 if let Err(e) = log.take(&m) {
-                    failure = Some(e.to_string());
+                    failure = Some(e);
                     break;
                 }
                 unflushed = true;
@@ -164,21 +178,23 @@ pub async fn record(args: RecordArgs) -> ExitCode {
         for _ in 0..pending {
             let Ok(m) = port.try_recv() else { break };
             if let Err(e) = log.take(&m) {
-                failure = Some(e.to_string());
+                failure = Some(e);
                 break;
             }
         }
     }
-    let flushed = log.writer.flush();
+    let events = log.writer.messages();
+    let finished = log.writer.finish();
     if failure.is_none()
-        && let Err(e) = flushed
+        && let Err(e) = finished
     {
         failure = Some(e.to_string());
     }
+    let bytes = std::fs::metadata(&args.file).map_or(0, |m| m.len());
     eprintln!(
         "seabus record: {}, {}, {} in {file}",
-        count(log.writer.events(), "event"),
-        count(log.writer.bytes(), "byte"),
+        count(events, "event"),
+        count(bytes, "byte"),
         count(log.seen.len() as u64, "channel")
     );
     let st = port.stats();
@@ -199,7 +215,7 @@ pub async fn record(args: RecordArgs) -> ExitCode {
 
 /// A log being recorded.
 struct Recording {
-    writer: Writer<std::fs::File>,
+    writer: Writer,
     /// `--channels`.
     channels: Option<ChannelRegex>,
     /// The topics recorded.
@@ -211,24 +227,27 @@ struct Recording {
 }
 
 impl Recording {
-    /// Writes `m` as an event, unless `--channels` leaves it out.
-    fn take(&mut self, m: &Message) -> Result<(), WriteError> {
+    /// Writes `m`, unless `--channels` leaves it out.
+    fn take(&mut self, m: &Message) -> Result<(), String> {
         if let Some(c) = &self.channels
             && !c.matches(&m.topic)
         {
             return Ok(());
         }
-        let data = match event_data(&m.payload) {
-            Ok(d) => d,
-            Err(e) => {
+        // arrival time, never going back (a log player waits on the differences)
+        self.last_stamp = now_micros().max(self.last_stamp);
+        match self
+            .writer
+            .write(m, Stamp(self.last_stamp.saturating_mul(1000)))
+        {
+            Ok(()) => {}
+            Err(WriteError::File(e)) => return Err(e),
+            Err(WriteError::Unwritable(e)) => {
                 self.unwritable += 1;
                 tracing::warn!(topic = %m.topic, "not recorded: {e}");
                 return Ok(());
             }
-        };
-        // arrival time, never going back (a log player waits on the differences)
-        self.last_stamp = now_micros().max(self.last_stamp);
-        self.writer.write(self.last_stamp, &m.topic, &data)?;
+        }
         if !self.seen.contains(&m.topic) {
             self.seen.insert(m.topic.clone());
         }
@@ -239,7 +258,8 @@ impl Recording {
 /// What `seabus replay` was asked to do.
 #[derive(clap::Args)]
 pub struct ReplayArgs {
-    /// The log file (written by seabus record, lcm-logger or any LCM event-log writer).
+    /// The log file: an LCM event log (seabus record, lcm-logger, any LCM event-log writer) or an
+    /// MCAP file (seabus record, Foxglove, ROS 2, Python's mcap), told apart by its first bytes.
     pub file: PathBuf,
     /// The medium, for example udp://239.255.42.1:47800.
     pub url: String,
@@ -381,12 +401,12 @@ impl Replay<'_> {
                     Ok(None) => return PassEnd::Done,
                     Err(d) => return PassEnd::Damaged(d),
                 };
-                let start = *first.get_or_insert(event.timestamp);
-                if event.timestamp < start.saturating_add(self.from_micros) {
+                let start = *first.get_or_insert(event.micros);
+                if event.micros < start.saturating_add(self.from_micros) {
                     self.tally.early += 1;
                     continue;
                 }
-                let channel = self.channel(event.channel);
+                let channel = self.channel(&event.channel);
                 if !channel.allowed {
                     self.tally.filtered += 1;
                     continue;
@@ -396,11 +416,7 @@ impl Replay<'_> {
                     continue;
                 };
                 channel.sent += 1;
-                (
-                    event.timestamp,
-                    topic,
-                    Payload::Bytes(bytes::Bytes::copy_from_slice(event.data)),
-                )
+                (event.micros, topic, event.payload)
             };
             if let Some(speed) = self.speed {
                 // a timestamp going back starts the pacing again from this event

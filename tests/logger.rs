@@ -1,18 +1,20 @@
 //! The central data logger run by `seabus run`: its CSV and its binary log, read back (the binary
 //! one through `seabus export`), hold exactly what was published on the bus, with seabus's
-//! timestamps; killed mid-run, it loses at most the last second.
+//! timestamps; killed mid-run, it loses at most the last second. In MCAP, its files rotate by
+//! age, each one complete for Python's `mcap`, together holding every message once; killed, the
+//! file it was writing reads up to its last second.
 
 mod common;
 use common::*;
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-fn system(bus: &str, dir: &std::path::Path, count: &str) -> String {
+fn system(bus: &str, dir: &std::path::Path, count: &str, logger: &str) -> String {
     format!(
         r#"<seabus node="log">
   <medium name="bus" url="{bus}"/>
   <module name="gen" type="generator" medium="bus" tick="50Hz" topic="test.counter" {count}/>
-  <module name="logger" type="logger" medium="bus" dir="{}" topics="test.**"/>
+  <module name="logger" type="logger" medium="bus" dir="{}" topics="test.**" {logger}/>
 </seabus>"#,
         dir.display()
     )
@@ -41,7 +43,7 @@ fn what_was_published_is_what_the_logs_hold() {
     let dir = tempfile::tempdir().unwrap();
     let logs = dir.path().join("logs");
     let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
-    let (_sys, path) = system_file("log.xml", &system(&bus, &logs, "count=\"60\""));
+    let (_sys, path) = system_file("log.xml", &system(&bus, &logs, "count=\"60\"", ""));
     let (_spy, rx) = spy_json(&bus, 20);
     std::thread::sleep(Duration::from_millis(300));
     let mut run = spawn_run(&path, &["--for", "3"]);
@@ -133,7 +135,7 @@ fn a_crash_loses_at_most_the_last_second() {
     let dir = tempfile::tempdir().unwrap();
     let logs = dir.path().join("logs");
     let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
-    let (_sys, path) = system_file("log.xml", &system(&bus, &logs, ""));
+    let (_sys, path) = system_file("log.xml", &system(&bus, &logs, "", ""));
     let mut run = spawn_run(&path, &[]);
     std::thread::sleep(Duration::from_millis(2500));
     run.0.kill().unwrap();
@@ -158,5 +160,116 @@ fn a_crash_loses_at_most_the_last_second() {
         events + 1 >= rows.len(),
         "{events} events, {} rows",
         rows.len()
+    );
+}
+
+/// The counters `seabus export` finds in `logs`, in order, its exit code and what it said.
+fn exported_counters(logs: &std::path::Path) -> (Vec<(i64, f64)>, Option<i32>, String) {
+    let out = seabus().arg("export").arg(logs).output().unwrap();
+    let counters = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .map(|v| {
+            (
+                v["payload"]["counter"].as_i64().unwrap(),
+                v["time"].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    (
+        counters,
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+/// The `.mcap` files in `dir`, in name (start time) order.
+fn mcap_files(dir: &std::path::Path) -> Vec<std::path::PathBuf> {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn mcap_logs_rotate_by_age_each_file_complete_every_message_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
+    let text = system(
+        &bus,
+        &logs,
+        "count=\"150\"",
+        r#"format="mcap" max_age="1s" csv="false""#,
+    );
+    let (_sys, path) = system_file("log.xml", &text);
+    let mut run = spawn_run(&path, &["--for", "4"]);
+    assert!(wait_for(&mut run, Duration::from_secs(20)).is_some_and(|s| s.success()));
+    let files = mcap_files(&logs);
+    assert!(
+        (3..=5).contains(&files.len()),
+        "three seconds of messages in files of one second: {files:?}"
+    );
+    // each file finished: Python reads its summary and its statistics
+    let script = r#"
+import json, sys
+from mcap.reader import make_reader
+counts = []
+for name in sys.argv[1:]:
+    with open(name, "rb") as f:
+        summary = make_reader(f).get_summary()
+        counts.append(summary.statistics.message_count if summary else None)
+print(json.dumps(counts))
+"#;
+    let names: Vec<&str> = files.iter().map(|f| f.to_str().unwrap()).collect();
+    let counts: Vec<Option<u64>> = serde_json::from_str(&python(script, &names, &[])).unwrap();
+    assert!(
+        counts.iter().all(|c| c.is_some_and(|c| c > 0)),
+        "{counts:?}"
+    );
+    assert_eq!(counts.iter().flatten().sum::<u64>(), 150, "{counts:?}");
+    let (counters, code, said) = exported_counters(&logs);
+    assert_eq!(code, Some(0), "{said}");
+    let values: Vec<i64> = counters.iter().map(|c| c.0).collect();
+    assert_eq!(values, (0..150).collect::<Vec<_>>());
+}
+
+#[test]
+fn a_crash_leaves_an_mcap_log_readable_up_to_its_last_second() {
+    let dir = tempfile::tempdir().unwrap();
+    let logs = dir.path().join("logs");
+    let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
+    let (_sys, path) = system_file(
+        "log.xml",
+        &system(&bus, &logs, "", r#"format="mcap" csv="false""#),
+    );
+    let mut run = spawn_run(&path, &[]);
+    std::thread::sleep(Duration::from_millis(2500));
+    run.0.kill().unwrap();
+    let killed = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64();
+    let _ = run.0.wait();
+    let files = mcap_files(&logs);
+    assert_eq!(files.len(), 1, "{files:?}");
+    let (counters, code, said) = exported_counters(&logs);
+    assert_eq!(code, Some(1), "the file has no footer: {said}");
+    assert!(
+        said.contains(&format!("{}: byte ", files[0].display())) && said.contains("(cut short"),
+        "{said}"
+    );
+    let last = counters.last().expect("messages were read").1;
+    assert!(
+        killed - last <= 1.1,
+        "the last message read is {:.3} s before the kill",
+        killed - last
+    );
+    assert!(
+        counters.iter().enumerate().all(|(i, c)| c.0 == i as i64),
+        "no gaps: {counters:?}"
     );
 }

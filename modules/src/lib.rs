@@ -14,6 +14,8 @@
 //! - [`runtime`] — the container: opens media, starts services, supervises modules (restart with
 //!   back-off), publishes every medium's counters (`seabus.media`), shuts down on request.
 //! - [`datasets`] — the standard datasets of `configs/datasets.xml` and validation against them.
+//! - [`schema`] — JSON Schemas of topics (from their dataset, or read off a message) for MCAP files
+//!   and live views.
 //! - [`params`] — module parameters with their places in the file.
 //! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.
 //!
@@ -30,6 +32,7 @@ pub mod module;
 pub mod params;
 pub mod registry;
 pub mod runtime;
+pub mod schema;
 pub mod system;
 
 pub use datasets::Catalogue;

@@ -291,3 +291,41 @@ pub fn wait_for_line(
     }
     panic!("no {what} within {limit:?}");
 }
+
+/// Runs a Python script with arguments and environment; fails the test when it fails.
+pub fn python(script: &str, args: &[&str], env: &[(&str, &str)]) -> String {
+    let out = Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .args(args)
+        .envs(env.iter().copied())
+        .output()
+        .expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "python3 failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// Sends SIGINT to a child (as Ctrl-C would).
+pub fn interrupt(child: &Child) {
+    // SAFETY: kill(2) on our own child's pid
+    unsafe {
+        libc::kill(child.id() as libc::pid_t, libc::SIGINT);
+    }
+}
+
+/// Waits at most 10 s for a child's exit and output.
+pub fn finish(mut child: Child) -> Output {
+    let status = wait_for(&mut child, Duration::from_secs(10));
+    let out = child.wait_with_output().expect("the output of a child");
+    assert!(status.is_some(), "the child did not exit within 10 s");
+    out
+}
+
+/// What a child wrote on its standard error.
+pub fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}

@@ -26,7 +26,7 @@ pub fn secs(seconds: f64) -> Option<Duration> {
     }
 }
 
-/// Parses `250ms`, `2s`, `0.5s`, `100us`, `1min` or a bare number of milliseconds.
+/// Parses `250ms`, `2s`, `0.5s`, `100us`, `1min`, `2h` or a bare number of milliseconds.
 pub fn parse_duration(text: &str) -> Option<Duration> {
     let t = text.trim();
     let (num, scale) = if let Some(n) = t.strip_suffix("ms") {
@@ -35,6 +35,8 @@ pub fn parse_duration(text: &str) -> Option<Duration> {
         (n, 1e-6)
     } else if let Some(n) = t.strip_suffix("min") {
         (n, 60.0)
+    } else if let Some(n) = t.strip_suffix('h') {
+        (n, 3600.0)
     } else if let Some(n) = t.strip_suffix('s') {
         (n, 1.0)
     } else {
@@ -127,6 +129,7 @@ mod tests {
         assert_eq!(parse_duration("5ms"), Some(Duration::from_millis(5)));
         assert_eq!(parse_duration("0.5s"), Some(Duration::from_millis(500)));
         assert_eq!(parse_duration("2min"), Some(Duration::from_secs(120)));
+        assert_eq!(parse_duration("1.5h"), Some(Duration::from_secs(5400)));
         assert_eq!(parse_duration("250"), Some(Duration::from_millis(250)));
         assert_eq!(parse_duration("-1s"), None);
         assert_eq!(parse_duration("1e300s"), None);

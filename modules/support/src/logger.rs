@@ -7,21 +7,26 @@
 //!
 //! It keeps, in `dir` (relative to the system file, made if missing):
 //!
-//! - one complete binary log, `seabus-<start>.lcmlog`: every message as an event (LCM event-log
-//!   format; timestamp = the message's seabus stamp in µs; channel = topic; data = the payload,
-//!   datamaps in seabus's binary form) — `seabus export` and `seabus replay` read it;
+//! - one complete binary log of every message: with `format="lcm"` (the default)
+//!   `seabus-<start>.lcmlog`, an LCM event log (timestamp = the message's seabus stamp in µs;
+//!   channel = topic; data = the payload, datamaps in seabus's binary form); with `format="mcap"`
+//!   `seabus-<start>.mcap`, an MCAP file (a channel per topic with its JSON Schema, datamaps as
+//!   JSON, log time = the message's seabus stamp; see `seabus-record`), which Foxglove, Lichtblick,
+//!   PlotJuggler and Python's `mcap` open — `seabus export` and `seabus replay` read both;
 //! - one CSV per topic, `<topic>.csv`: a `time` column (the seabus stamp, seconds) and one column
 //!   per field of the topic's first message; later fields the header lacks are in the binary log
 //!   only (counted). Nested values are written as JSON.
 //!
-//! Files are flushed every second, so a crash loses at most the last second. When a file passes
-//! `max_size` (bytes, default 100 MB) it is closed and a new one begun: the binary log under a new
-//! start time, a CSV as `<topic>.<n>.csv`. Parameters: `dir` (required), `topics` (patterns,
-//! comma-separated; default everything but `seabus.*` reports), `max_size`, `csv` (default true).
+//! Files are flushed every second, so a crash loses at most the last second (an MCAP file closes
+//! its chunk under way each second: cut short, it reads up to there). When a file passes
+//! `max_size` (bytes, default 100 MB), or the binary log is older than `max_age` (`30min`, `2h`;
+//! default none), it is closed and a new one begun: the binary log under a new start time (an MCAP
+//! file finished with its summary and indexes), a CSV as `<topic>.<n>.csv`. Parameters: `dir`
+//! (required), `format` (`lcm` or `mcap`), `topics` (patterns, comma-separated; default everything
+//! but `seabus.*` reports), `max_size`, `max_age`, `csv` (default true).
 
 use async_trait::async_trait;
 use seabus_medium::csv::cell;
-use seabus_medium::eventlog::{Writer, event_data};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Message, Stamp, Topic, Value};
@@ -30,10 +35,12 @@ use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
 };
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
+use seabus_record::log::{Kind as LogKind, WriteError, Writer};
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Duration;
 
 /// The `logger` module type.
@@ -55,17 +62,34 @@ struct Csv {
     part: u32,
 }
 
+/// The binary log being written.
+struct Binary {
+    writer: Writer,
+    path: PathBuf,
+    /// Its size at the last flush.
+    size: u64,
+    opened: tokio::time::Instant,
+}
+
 struct Logger {
     dir: PathBuf,
+    format: LogKind,
+    catalogue: Arc<Catalogue>,
     max_size: u64,
+    max_age: Option<Duration>,
     csv: bool,
-    binary: Option<(Writer<File>, PathBuf)>,
+    binary: Option<Binary>,
     csvs: HashMap<Topic, Csv>,
     tally: Tally,
 }
 
-fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
+fn build(cfg: &ModuleConfig, catalogue: &Catalogue) -> Result<Built, FileError> {
     let p = &cfg.params;
+    let format = match p.get("format") {
+        None => LogKind::Lcm,
+        Some(a) => LogKind::parse(&a.value)
+            .ok_or_else(|| a.error(format!("`{}` is not lcm or mcap", a.value)))?,
+    };
     let Some(dir) = p.get("dir") else {
         return Err(cfg
             .pos
@@ -90,6 +114,12 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         decl,
         module: Box::new(Logger {
             dir: seabus_modules::system::beside(&cfg.pos, &dir.value),
+            format,
+            catalogue: Arc::new(catalogue.clone()),
+            max_age: match p.get("max_age") {
+                None => None,
+                Some(_) => Some(p.duration_or("max_age", Duration::ZERO)?),
+            },
             max_size: p
                 .parse("max_size", "a size in bytes")?
                 .unwrap_or(100_000_000),
@@ -105,14 +135,31 @@ impl Logger {
     fn open_binary(&mut self, stamp: Stamp) -> std::io::Result<()> {
         let when = std::time::UNIX_EPOCH + Duration::from_secs_f64(stamp.as_secs_f64().max(0.0));
         let name = format!(
-            "seabus-{}.lcmlog",
+            "seabus-{}.{}",
             humantime::format_rfc3339_millis(when)
                 .to_string()
-                .replace(':', "-")
+                .replace(':', "-"),
+            match self.format {
+                LogKind::Lcm => "lcmlog",
+                LogKind::Mcap => "mcap",
+            }
         );
         let path = self.dir.join(name);
-        self.binary = Some((Writer::create(&path)?, path));
+        let writer = Writer::create(&path, self.format, true, self.catalogue.clone())?;
+        self.binary = Some(Binary {
+            writer,
+            path,
+            size: 0,
+            opened: tokio::time::Instant::now(),
+        });
         Ok(())
+    }
+
+    /// Whether the binary log is due to be closed and a new one begun.
+    fn binary_full(&self) -> bool {
+        self.binary.as_ref().is_none_or(|b| {
+            b.size > self.max_size || self.max_age.is_some_and(|age| b.opened.elapsed() >= age)
+        })
     }
 
     fn csv_path(&self, topic: &Topic, part: u32) -> PathBuf {
@@ -187,28 +234,21 @@ impl Logger {
         if msg.topic.starts_with("seabus.") {
             return Ok(());
         }
-        let rotate = self
-            .binary
-            .as_ref()
-            .is_none_or(|(w, _)| w.bytes() > self.max_size);
-        if rotate {
-            if let Some((mut w, _)) = self.binary.take() {
-                w.flush()?;
+        if self.binary_full() {
+            if let Some(b) = self.binary.take() {
+                b.writer.finish()?;
             }
             std::fs::create_dir_all(&self.dir)?;
             self.open_binary(msg.stamp)?;
         }
-        match event_data(&msg.payload) {
-            Ok(data) => {
-                if let Some((w, _)) = &mut self.binary {
-                    let micros = (msg.stamp.as_secs_f64() * 1e6) as i64;
-                    w.write(micros, msg.topic.as_str(), &data)
-                        .map_err(|e| std::io::Error::other(e.to_string()))?;
+        if let Some(b) = &mut self.binary {
+            match b.writer.write(msg, msg.stamp) {
+                Ok(()) => {}
+                Err(WriteError::File(e)) => return Err(std::io::Error::other(e)),
+                Err(WriteError::Unwritable(e)) => {
+                    self.tally
+                        .record("logger", "unwritable", format_args!("{e}"));
                 }
-            }
-            Err(e) => {
-                self.tally
-                    .record("logger", "unwritable", format_args!("`{}`: {e}", msg.topic));
             }
         }
         if self.csv {
@@ -218,8 +258,9 @@ impl Logger {
     }
 
     fn flush(&mut self) -> std::io::Result<()> {
-        if let Some((w, _)) = &mut self.binary {
-            w.flush()?;
+        if let Some(b) = &mut self.binary {
+            b.writer.flush()?;
+            b.size = std::fs::metadata(&b.path)?.len();
         }
         for c in self.csvs.values_mut() {
             c.out.flush()?;
@@ -253,7 +294,10 @@ impl Module for Logger {
     }
 
     async fn stop(&mut self, _ctx: &mut Context) {
-        if let Err(e) = self.flush() {
+        let finished = self
+            .flush()
+            .and_then(|()| self.binary.take().map_or(Ok(()), |b| b.writer.finish()));
+        if let Err(e) = finished {
             tracing::error!("logger: {}: {e}", self.dir.display());
         }
     }

@@ -1,0 +1,217 @@
+use super::*;
+use seabus_medium::{Origin, Provenance, Value};
+use std::io::Cursor;
+
+fn msg(topic: &str, kind: Kind, payload: Payload, stamp: i64, seq: u64) -> Message {
+    Message {
+        topic: Topic::new(topic).unwrap(),
+        kind,
+        provenance: Provenance {
+            origin: Origin::new("auv1", "bus", 7),
+            seq,
+            hops: 0,
+        },
+        stamp: Stamp(stamp),
+        payload,
+    }
+}
+
+fn attitude(i: i64) -> DataMap {
+    DataMap::new()
+        .with("yaw", 10.0 + i as f64)
+        .with("pitch", 1.5)
+        .with("roll", -2.25)
+}
+
+/// A writer's output that the test can look at while the writer has it.
+#[derive(Clone, Default)]
+struct Shared(std::rc::Rc<std::cell::RefCell<Cursor<Vec<u8>>>>);
+
+impl Write for Shared {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.0.borrow_mut().write(buf)
+    }
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Seek for Shared {
+    fn seek(&mut self, pos: io::SeekFrom) -> io::Result<u64> {
+        self.0.borrow_mut().seek(pos)
+    }
+}
+
+/// A file of `n` attitudes, a command, bytes and a topic no dataset names, flushed every
+/// `flush_every` messages; its bytes and the offsets after each flush.
+fn recording(n: i64, flush_every: i64) -> (Vec<u8>, Vec<u64>) {
+    let out = Shared::default();
+    let mut w = Writer::new(out.clone(), Catalogue::built_in()).unwrap();
+    let mut flushed = Vec::new();
+    for i in 0..n {
+        let m = msg(
+            "nav.attitude",
+            Kind::Data,
+            Payload::from(attitude(i)),
+            1_000 + i,
+            i as u64 + 1,
+        );
+        w.write(&m, Stamp(2_000 + i)).unwrap();
+        if (i + 1) % flush_every == 0 {
+            w.flush().unwrap();
+            flushed.push(out.0.borrow().get_ref().len() as u64);
+        }
+    }
+    let course = DataMap::new().with("heading", 90.0).with("depth", 2.0);
+    w.write(
+        &msg("cmd.course", Kind::Command, Payload::from(course), 5, 1),
+        Stamp(6),
+    )
+    .unwrap();
+    w.write(
+        &msg("lcm.RAW", Kind::Data, Payload::from(vec![1u8, 2, 3]), 7, 2),
+        Stamp(8),
+    )
+    .unwrap();
+    let lab = DataMap::new()
+        .with("count", 3i64)
+        .with("label", "x")
+        .with("blob", Value::Bytes(vec![0, 255]));
+    w.write(
+        &msg("lab.thing", Kind::Data, Payload::from(lab), 9, 3),
+        Stamp(10),
+    )
+    .unwrap();
+    assert_eq!(w.messages(), n as u64 + 3);
+    assert_eq!(w.channels(), 4);
+    w.finish().unwrap();
+    let bytes = out.0.borrow().get_ref().clone();
+    (bytes, flushed)
+}
+
+fn read_all(bytes: &[u8]) -> (Vec<ReadMessage>, Option<Damage>) {
+    let mut r = Reader::new(Cursor::new(bytes.to_vec()));
+    let mut out = Vec::new();
+    for _ in 0..100_000 {
+        match r.next_message() {
+            Ok(Some(m)) => out.push(m),
+            Ok(None) => return (out, None),
+            Err(d) => return (out, Some(d)),
+        }
+    }
+    panic!("the reader never ended");
+}
+
+#[test]
+fn what_is_written_reads_back_with_channels_schemas_and_times() {
+    let (bytes, _) = recording(50, 1000);
+    let (messages, damage) = read_all(&bytes);
+    assert_eq!(damage, None);
+    assert_eq!(messages.len(), 53);
+    let first = &messages[0];
+    assert_eq!(first.channel.topic, "nav.attitude");
+    assert_eq!(first.channel.message_encoding, JSON);
+    assert_eq!(first.channel.schema_name, "seabus.attitude");
+    assert_eq!(first.channel.schema_encoding, JSON_SCHEMA);
+    let schema: serde_json::Value = serde_json::from_slice(&first.channel.schema).unwrap();
+    assert_eq!(schema["properties"]["yaw"]["type"], "number");
+    assert_eq!((first.log_time, first.publish_time), (2_000, 1_000));
+    for (i, m) in messages[..50].iter().enumerate() {
+        assert_eq!(m.sequence, i as u32);
+        let Payload::Map(map) = payload_of(m).unwrap() else {
+            panic!("a map")
+        };
+        assert_eq!(*map, attitude(i as i64));
+    }
+    let course = &messages[50];
+    assert!(course.channel.is_command());
+    assert!(!first.channel.is_command());
+    let raw = &messages[51];
+    assert_eq!(raw.channel.message_encoding, BYTES);
+    assert_eq!(raw.channel.schema_name, "");
+    assert_eq!(payload_of(raw).unwrap(), Payload::from(vec![1u8, 2, 3]));
+    let lab = &messages[52];
+    assert_eq!(lab.channel.schema_name, "lab.thing");
+    let Payload::Map(map) = payload_of(lab).unwrap() else {
+        panic!("a map")
+    };
+    assert_eq!(map.get("blob"), Some(&Value::Bytes(vec![0, 255])));
+}
+
+#[test]
+fn a_file_cut_short_reads_up_to_its_last_flushed_chunk_and_says_where() {
+    let (bytes, flushed) = recording(40, 10);
+    assert_eq!(flushed.len(), 4);
+    // cut in the middle of the chunk after the second flush
+    let cut = (flushed[1] + flushed[2]) / 2;
+    let (messages, damage) = read_all(&bytes[..cut as usize]);
+    assert_eq!(messages.len(), 20, "the two flushed chunks read whole");
+    let damage = damage.expect("the cut is reported");
+    assert_eq!(damage.offset, flushed[1], "{damage}");
+    assert!(
+        damage.problem.contains(&format!(
+            "the file ends at byte {cut} inside a chunk record"
+        )),
+        "{damage}"
+    );
+    // cut exactly after a flush: every flushed message, and the footer missing
+    let (messages, damage) = read_all(&bytes[..flushed[3] as usize]);
+    assert_eq!(messages.len(), 40);
+    let damage = damage.unwrap();
+    assert_eq!(damage.offset, flushed[3]);
+    assert!(damage.problem.contains("without its footer"), "{damage}");
+}
+
+#[test]
+fn bad_magic_and_a_corrupt_chunk_are_reported_at_their_byte() {
+    let (mut bytes, flushed) = recording(30, 10);
+    let (_, damage) = read_all(b"LCM log, not MCAP");
+    assert_eq!(damage.unwrap().offset, 0);
+    let (_, damage) = read_all(b"\x89MCAP0\r\nabc");
+    let d = damage.unwrap();
+    assert!(d.problem.contains("inside a record's header"), "{d}");
+    assert_eq!(d.offset, 8);
+    // flip a byte inside the second chunk's compressed records (past its 57-byte header: opcode,
+    // length, times, sizes, CRC, "zstd"): it no longer decompresses to what its CRC says
+    let inside = flushed[0] + 70;
+    bytes[inside as usize] ^= 0x55;
+    let (messages, damage) = read_all(&bytes);
+    assert_eq!(messages.len(), 10, "the first chunk reads");
+    let d = damage.unwrap();
+    assert_eq!(d.offset, flushed[0], "{d}");
+}
+
+#[test]
+fn a_chunk_the_writer_never_closed_is_reported_as_unfinished() {
+    let out = Shared::default();
+    let mut w = Writer::new(out.clone(), Catalogue::built_in()).unwrap();
+    let write = |w: &mut Writer<Shared>, i: i64| {
+        let m = msg(
+            "nav.attitude",
+            Kind::Data,
+            Payload::from(attitude(i)),
+            i,
+            i as u64 + 1,
+        );
+        w.write(&m, Stamp(i)).unwrap();
+    };
+    for i in 0..10 {
+        write(&mut w, i);
+    }
+    w.flush().unwrap();
+    let flushed = out.0.borrow().get_ref().len() as u64;
+    for i in 10..15 {
+        write(&mut w, i);
+    }
+    // the process dies here: what is in the file is all there is
+    let bytes = out.0.borrow().get_ref().clone();
+    assert!(
+        bytes.len() as u64 > flushed,
+        "the open chunk is in the file"
+    );
+    let (messages, damage) = read_all(&bytes);
+    assert_eq!(messages.len(), 10);
+    let d = damage.unwrap();
+    assert_eq!(d.offset, flushed, "{d}");
+    assert!(d.problem.starts_with("an unfinished chunk"), "{d}");
+}

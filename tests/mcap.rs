@@ -1,0 +1,412 @@
+//! MCAP recordings against the official readers and writers of other languages: what `seabus
+//! record` writes is read by Python's `mcap` (its seeking reader, through the summary and indexes)
+//! and by `@mcap/core` in Node (its indexed reader, as Foxglove reads files), with a channel and
+//! JSON Schema per topic and the values sent; a recording cut short mid-chunk reads up to the
+//! damage in Python and in `seabus replay`, which says where; an MCAP file Python writes with JSON
+//! messages is replayed onto a medium; corrupt files are refused with their byte offset.
+//!
+//! Needs Python's `mcap` and Node with `@mcap/core` and `fzstd`, which `scripts/test` installs
+//! (the Node packages under `target/node-mcap`, named in `SEABUS_MCAP_NODE`).
+
+mod common;
+use common::*;
+use serde_json::Value as Json;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::Duration;
+
+/// A loopback multicast medium of the test's own.
+fn udp_url() -> String {
+    format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port())
+}
+
+fn require_python_mcap() {
+    let ok = Command::new("python3")
+        .args(["-c", "import mcap, zstandard"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    assert!(
+        ok,
+        "the python3 package `mcap` is missing: run ./scripts/test, which installs it"
+    );
+}
+
+/// Where `@mcap/core` and `fzstd` are: `SEABUS_MCAP_NODE`, else where `scripts/test` puts them.
+fn node_modules() -> PathBuf {
+    let modules = match std::env::var_os("SEABUS_MCAP_NODE") {
+        Some(m) => PathBuf::from(m),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/node-mcap/node_modules"),
+    };
+    assert!(
+        modules.join("@mcap/core/package.json").is_file() && modules.join("fzstd").is_dir(),
+        "@mcap/core and fzstd are not in {}: run ./scripts/test, which installs them",
+        modules.display()
+    );
+    modules
+}
+
+fn publish(url: &str, args: &[&str]) {
+    let out = seabus().arg("pub").arg(url).args(args).output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+}
+
+/// Records on `url` while `send` runs, then stops the recorder as Ctrl-C would.
+fn record(url: &str, file: &Path, send: impl FnOnce()) -> Output {
+    let recorder = seabus()
+        .args(["record", url])
+        .arg(file)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("record starts");
+    std::thread::sleep(Duration::from_millis(400));
+    send();
+    std::thread::sleep(Duration::from_millis(300));
+    interrupt(&recorder);
+    let out = finish(recorder);
+    assert!(out.status.success(), "record failed: {}", stderr(&out));
+    out
+}
+
+/// Python's reading of an MCAP file: summary, chunk indexes, channels and the messages by topic,
+/// read through the index.
+const PY_READ: &str = r#"
+import json, sys
+from mcap.reader import make_reader
+with open(sys.argv[1], "rb") as f:
+    reader = make_reader(f)
+    summary = reader.get_summary()
+    out = {
+        "statistics": summary.statistics.message_count,
+        "chunks": [
+            {"start": c.chunk_start_offset, "length": c.chunk_length,
+             "compression": c.compression, "first": c.message_start_time}
+            for c in summary.chunk_indexes
+        ],
+        "channels": {},
+    }
+    for c in summary.channels.values():
+        s = summary.schemas.get(c.schema_id)
+        out["channels"][c.topic] = {
+            "encoding": c.message_encoding,
+            "schema": s.name if s else "",
+            "schema_encoding": s.encoding if s else "",
+            "schema_data": json.loads(s.data) if s else None,
+            "metadata": dict(c.metadata),
+            "messages": [],
+        }
+    for schema, channel, message in reader.iter_messages(log_time_order=True):
+        data = json.loads(message.data) if channel.message_encoding == "json" else message.data.hex()
+        out["channels"][channel.topic]["messages"].append(
+            {"data": data, "log_time": message.log_time, "publish_time": message.publish_time})
+print(json.dumps(out))
+"#;
+
+/// The messages Python's stream reader gets from a file before it fails, and whether it failed.
+const PY_STREAM: &str = r#"
+import json, sys
+from mcap.stream_reader import StreamReader
+from mcap.records import Message
+count, failed = 0, None
+with open(sys.argv[1], "rb") as f:
+    try:
+        for record in StreamReader(f, skip_magic=False).records:
+            if isinstance(record, Message):
+                count += 1
+    except Exception as e:
+        failed = type(e).__name__
+print(json.dumps({"messages": count, "failed": failed}))
+"#;
+
+#[test]
+fn python_and_node_read_what_seabus_records_with_channels_schemas_and_values() {
+    require_python_mcap();
+    let modules = node_modules();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("session.mcap");
+    let url = udp_url();
+    let out = record(&url, &file, || {
+        publish(
+            &url,
+            &[
+                "nav.attitude",
+                "yaw=12.5",
+                "pitch=-1.25",
+                "roll=3.5",
+                "--count",
+                "20",
+                "--rate",
+                "100",
+            ],
+        );
+        publish(
+            &url,
+            &["cmd.course", "heading=90", "depth=2.5", "--command"],
+        );
+        publish(&url, &["lab.thing", "n=3", "label=probe"]);
+    });
+    assert!(
+        stderr(&out).contains("22 events"),
+        "record says what it wrote: {}",
+        stderr(&out)
+    );
+
+    let py: Json = serde_json::from_str(&python(PY_READ, &[file.to_str().unwrap()], &[])).unwrap();
+    assert_eq!(py["statistics"], 22, "{py}");
+    let chunks = py["chunks"].as_array().unwrap();
+    assert!(!chunks.is_empty(), "chunk indexes in the summary: {py}");
+    assert!(chunks.iter().all(|c| c["compression"] == "zstd"), "{py}");
+    let channels = py["channels"].as_object().unwrap();
+    let mut topics: Vec<&str> = channels.keys().map(String::as_str).collect();
+    topics.sort_unstable();
+    assert_eq!(topics, ["cmd.course", "lab.thing", "nav.attitude"]);
+
+    let att = &channels["nav.attitude"];
+    assert_eq!(
+        (&att["encoding"], &att["schema"], &att["schema_encoding"]),
+        (
+            &Json::from("json"),
+            &Json::from("seabus.attitude"),
+            &Json::from("jsonschema")
+        )
+    );
+    let props = &att["schema_data"]["properties"];
+    assert_eq!(props["yaw"]["type"], "number");
+    assert!(
+        props["yaw"]["description"]
+            .as_str()
+            .unwrap()
+            .contains("deg"),
+        "units in the schema: {props}"
+    );
+    let messages = att["messages"].as_array().unwrap();
+    assert_eq!(messages.len(), 20);
+    for m in messages {
+        assert_eq!(
+            (&m["data"]["yaw"], &m["data"]["pitch"], &m["data"]["roll"]),
+            (&Json::from(12.5), &Json::from(-1.25), &Json::from(3.5)),
+            "{m}"
+        );
+        // recorded after it was published, on one machine's clock
+        let (log, publish) = (
+            m["log_time"].as_u64().unwrap(),
+            m["publish_time"].as_u64().unwrap(),
+        );
+        assert!(publish <= log && log - publish < 5_000_000_000, "{m}");
+    }
+    let course = &channels["cmd.course"];
+    assert_eq!(course["metadata"]["seabus.kind"], "command");
+    assert_eq!(course["messages"][0]["data"]["heading"], 90.0);
+    let lab = &channels["lab.thing"];
+    assert_eq!(lab["schema"], "lab.thing");
+    assert_eq!(lab["schema_data"]["properties"]["n"]["type"], "integer");
+    assert_eq!(lab["messages"][0]["data"]["label"], "probe");
+
+    let node = Command::new("node")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/mcap_read.js"))
+        .arg(&file)
+        .env("NODE_PATH", &modules)
+        .output()
+        .expect("node runs");
+    assert!(node.status.success(), "{}", stderr(&node));
+    let js: Json = serde_json::from_slice(&node.stdout).unwrap();
+    assert_eq!(js["messageCount"], 22, "{js}");
+    assert_eq!(js["compression"], serde_json::json!(["zstd"]));
+    assert_eq!(js["chunks"].as_u64().unwrap(), chunks.len() as u64);
+    let c = &js["channels"];
+    assert_eq!(
+        (
+            &c["nav.attitude"]["count"],
+            &c["cmd.course"]["count"],
+            &c["lab.thing"]["count"]
+        ),
+        (&Json::from(20), &Json::from(1), &Json::from(1))
+    );
+    assert_eq!(c["nav.attitude"]["schema"], "seabus.attitude");
+    assert_eq!(c["nav.attitude"]["first"]["roll"], 3.5);
+    assert_eq!(c["cmd.course"]["metadata"]["seabus.kind"], "command");
+
+    // seabus export reads it too
+    let export = seabus()
+        .args(["export"])
+        .arg(&file)
+        .args(["--topics", "cmd.**"])
+        .output()
+        .unwrap();
+    assert!(export.status.success(), "{}", stderr(&export));
+    let lines: Vec<Json> = String::from_utf8_lossy(&export.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 1);
+    assert_eq!(lines[0]["topic"], "cmd.course");
+    assert_eq!(lines[0]["payload"]["depth"], 2.5);
+}
+
+/// Replays `file` on a fresh medium as fast as it can; what a spy saw there, and replay's output.
+fn replay_seen(file: &Path) -> (Vec<Json>, Output) {
+    let url = udp_url();
+    let (spy, rx) = spy_json(&url, 30);
+    std::thread::sleep(Duration::from_millis(400));
+    let mut child = seabus()
+        .arg("replay")
+        .arg(file)
+        .args([&url, "--speed", "max"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let status = wait_for(&mut child, Duration::from_secs(15));
+    let out = child.wait_with_output().unwrap();
+    assert!(status.is_some(), "replay did not end: {}", stderr(&out));
+    std::thread::sleep(Duration::from_millis(400));
+    drop(spy);
+    let mut seen = Vec::new();
+    while let Ok(v) = rx.recv_timeout(Duration::from_millis(200)) {
+        seen.push(v);
+    }
+    (seen, out)
+}
+
+#[test]
+fn a_recording_cut_short_mid_chunk_reads_up_to_the_damage() {
+    require_python_mcap();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("cut.mcap");
+    let url = udp_url();
+    // a second of messages: the recorder closes a chunk every 200 ms
+    record(&url, &file, || {
+        publish(
+            &url,
+            &["nav.depth", "depth=4.5", "--count", "50", "--rate", "50"],
+        )
+    });
+    let py: Json = serde_json::from_str(&python(PY_READ, &[file.to_str().unwrap()], &[])).unwrap();
+    let chunks = py["chunks"].as_array().unwrap();
+    assert!(chunks.len() >= 3, "several chunks: {py}");
+    let damaged = &chunks[chunks.len() - 2];
+    let start = damaged["start"].as_u64().unwrap();
+    let cut = start + damaged["length"].as_u64().unwrap() / 2;
+    // the messages of the chunks before the damaged one
+    let before = py["channels"]["nav.depth"]["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| m["log_time"].as_u64() < damaged["first"].as_u64())
+        .count();
+    assert!(before > 0);
+    let bytes = std::fs::read(&file).unwrap();
+    std::fs::write(&file, &bytes[..cut as usize]).unwrap();
+
+    let stream: Json =
+        serde_json::from_str(&python(PY_STREAM, &[file.to_str().unwrap()], &[])).unwrap();
+    assert_eq!(stream["messages"], before as u64, "{stream}");
+    assert!(
+        stream["failed"].is_string(),
+        "Python says it is cut: {stream}"
+    );
+
+    let (seen, out) = replay_seen(&file);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let said = stderr(&out);
+    assert!(
+        said.contains(&format!(
+            "damaged at byte {start}: the file ends at byte {cut} inside a chunk record"
+        )),
+        "{said}"
+    );
+    let depths: Vec<&Json> = seen.iter().filter(|v| v["topic"] == "nav.depth").collect();
+    assert_eq!(depths.len(), before, "{said}");
+    assert!(depths.iter().all(|v| v["payload"]["depth"] == 4.5));
+}
+
+#[test]
+fn an_mcap_file_python_writes_is_replayed_onto_a_medium() {
+    require_python_mcap();
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("python.mcap");
+    let script = r#"
+import json, sys
+from mcap.writer import Writer
+with open(sys.argv[1], "wb") as f:
+    w = Writer(f)
+    w.start()
+    schema = w.register_schema(name="Fix", encoding="jsonschema",
+        data=json.dumps({"type": "object", "properties": {"lat": {"type": "number"}}}).encode())
+    fix = w.register_channel(topic="/gps/fix", message_encoding="json", schema_id=schema)
+    raw = w.register_channel(topic="raw.bytes", message_encoding="cdr", schema_id=0)
+    for i in range(5):
+        t = 1_700_000_000_000_000_000 + i * 10_000_000
+        w.add_message(channel_id=fix, log_time=t, publish_time=t, sequence=i,
+            data=json.dumps({"lat": 43.5 + i, "lon": 16.25, "ok": True}).encode())
+    w.add_message(channel_id=raw, log_time=t, publish_time=t, sequence=0, data=bytes([1, 2, 3]))
+    w.finish()
+"#;
+    python(script, &[file.to_str().unwrap()], &[]);
+    let (seen, out) = replay_seen(&file);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let fixes: Vec<&Json> = seen.iter().filter(|v| v["topic"] == "/gps/fix").collect();
+    let lats: Vec<f64> = fixes
+        .iter()
+        .map(|v| v["payload"]["lat"].as_f64().unwrap())
+        .collect();
+    assert_eq!(lats, [43.5, 44.5, 45.5, 46.5, 47.5], "{seen:?}");
+    assert!(
+        fixes
+            .iter()
+            .all(|v| v["kind"] == "data" && v["payload"]["ok"] == true)
+    );
+    let raw: Vec<&Json> = seen.iter().filter(|v| v["topic"] == "raw.bytes").collect();
+    assert_eq!(raw.len(), 1, "{seen:?}");
+    assert_eq!(raw[0]["format"], "bytes");
+}
+
+#[test]
+fn corrupt_mcap_files_are_refused_with_the_byte_where_reading_stopped() {
+    let dir = tempfile::tempdir().unwrap();
+    let url = udp_url();
+    let good = dir.path().join("good.mcap");
+    record(&url, &good, || {
+        publish(
+            &url,
+            &["nav.depth", "depth=1", "--count", "20", "--rate", "40"],
+        )
+    });
+    let bytes = std::fs::read(&good).unwrap();
+    let replay = |name: &str, content: &[u8]| {
+        let path = dir.path().join(name);
+        std::fs::write(&path, content).unwrap();
+        let out = seabus()
+            .arg("replay")
+            .arg(&path)
+            .args([&udp_url(), "--speed", "max"])
+            .output()
+            .unwrap();
+        (out.status.code(), stderr(&out))
+    };
+    let mut bad_magic = bytes.clone();
+    bad_magic[1] = b'X';
+    let (code, said) = replay("magic.mcap", &bad_magic);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(
+        said.contains("damaged at byte 0: the file's opening magic is wrong: not an MCAP file"),
+        "{said}"
+    );
+    // the first chunk starts after the magic and the header record
+    let header_len = u64::from_le_bytes(bytes[9..17].try_into().unwrap());
+    let first_record = 8 + 9 + header_len;
+    let mut bad_crc = bytes.clone();
+    bad_crc[first_record as usize + 80] ^= 0x5A;
+    let (code, said) = replay("crc.mcap", &bad_crc);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(
+        said.contains(&format!("damaged at byte {first_record}: ")),
+        "{said}"
+    );
+    let (code, said) = replay("short.mcap", &bytes[..12]);
+    assert_eq!(code, Some(1), "{said}");
+    assert!(
+        said.contains("damaged at byte 8: the file ends inside a record's header"),
+        "{said}"
+    );
+}
