@@ -153,3 +153,32 @@ pub fn write_demo(text: &str) -> Result<(PathBuf, PathBuf), String> {
     let system = write("demo.xml", text)?;
     Ok((dir, system))
 }
+
+/// Starts the Foxglove servers a system file asks for (`<foxglove>`), on the runtime's media. The
+/// demo's takes any free port when its usual one is taken.
+pub async fn start_foxglove(
+    spec: &SystemSpec,
+    runtime: &Runtime,
+    demo: bool,
+) -> Result<Vec<seabus_ui::foxglove::Foxglove>, String> {
+    use seabus_ui::foxglove::{Foxglove, specs};
+    let mut out = Vec::new();
+    for mut fs in specs(spec).map_err(|e| e.to_string())? {
+        let Some(medium) = runtime.medium(&fs.medium) else {
+            return Err(fs
+                .element
+                .error(format!("no medium `{}`", fs.medium))
+                .to_string());
+        };
+        let server = match Foxglove::start(&fs, medium, Catalogue::built_in()).await {
+            Err(e) if demo => {
+                eprintln!("  {e}; the Foxglove server takes another port");
+                fs.listen.set_port(0);
+                Foxglove::start(&fs, medium, Catalogue::built_in()).await?
+            }
+            other => other?,
+        };
+        out.push(server);
+    }
+    Ok(out)
+}

@@ -418,6 +418,21 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
     for c in &consoles {
         eprintln!("  Console: http://{}", c.addr());
     }
+    let foxgloves = match console::start_foxglove(&spec, &runtime, demo).await {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("{e}");
+            drop(consoles);
+            runtime.shutdown().await;
+            return ExitCode::from(2);
+        }
+    };
+    for f in &foxgloves {
+        eprintln!(
+            "  Foxglove: {} (open it in Foxglove or Lichtblick)",
+            f.url()
+        );
+    }
     tracing::info!(
         node = %runtime.node().name,
         "running {}: media {}; modules {}",
@@ -440,6 +455,7 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
         None => terminated().await,
     }
     tracing::info!("shutting down");
+    drop(foxgloves);
     drop(consoles);
     if let Some(dir) = demo_dir {
         let _ = std::fs::remove_dir_all(dir);

@@ -194,6 +194,7 @@ pub fn check(
     given: Option<&Users>,
 ) -> Result<Checked, FileError> {
     let report = system::check(spec, registry, catalogue)?;
+    crate::foxglove::specs(spec)?;
     let specs = specs(spec)?;
     distinct_addresses(&specs)?;
     distinct_sessions(&specs)?;

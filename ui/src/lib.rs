@@ -20,12 +20,15 @@
 //! - [`server`] serves the page ([`assets`], embedded), log-in and the WebSocket; each connection
 //!   is a [`hub::Client`].
 //! - [`console`] reads the `<console>` element of a system file and starts all of it.
+//! - [`foxglove`] serves a medium's traffic to Foxglove and Lichtblick (the `<foxglove>` element),
+//!   through the `foxglove` crate's WebSocket server.
 //!
 //! Who may depend on it: the program. It depends on the core and the module framework.
 
 pub mod assets;
 pub mod auth;
 pub mod console;
+pub mod foxglove;
 pub mod hub;
 pub mod layout;
 pub mod server;
@@ -35,7 +38,8 @@ pub use layout::{
     AxisBinding, Binding, CommandDecl, Confirm, KeyBinding, Layout, Node, Offset, PadButton,
 };
 
-/// Registers what this crate reads in system files (the `<console>` element).
+/// Registers what this crate reads in system files (the `<console>` and `<foxglove>` elements).
 pub fn register(reg: &mut seabus_modules::Registry) {
     reg.add_section(console::SECTION);
+    reg.add_section(foxglove::SECTION);
 }

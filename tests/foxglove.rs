@@ -1,0 +1,199 @@
+//! The Foxglove live view of `seabus demo` against the official protocol library
+//! (`@foxglove/ws-protocol` in Node, `tests/peers/foxglove_client.js`): the channels advertised
+//! with their JSON Schemas, Foxglove's well-known messages beside them, twenty messages of the
+//! position and the attitude whose values are those `seabus spy` sees on the demo's uplink, a
+//! command the server does not take refused with a status, and one it takes sent on the bus.
+//!
+//! Needs Node with `@foxglove/ws-protocol` and `ws`, which `scripts/test` installs under
+//! `target/node-foxglove` (named in `SEABUS_FOXGLOVE_NODE`).
+
+mod common;
+use common::*;
+use serde_json::Value as Json;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+/// Where `@foxglove/ws-protocol` and `ws` are: `SEABUS_FOXGLOVE_NODE`, else where `scripts/test`
+/// puts them.
+fn node_modules() -> PathBuf {
+    let modules = match std::env::var_os("SEABUS_FOXGLOVE_NODE") {
+        Some(m) => PathBuf::from(m),
+        None => PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("target/node-foxglove/node_modules"),
+    };
+    assert!(
+        modules.join("@foxglove/ws-protocol/package.json").is_file() && modules.join("ws").is_dir(),
+        "@foxglove/ws-protocol and ws are not in {}: run ./scripts/test, which installs them",
+        modules.display()
+    );
+    modules
+}
+
+/// Whether two JSON values hold the same values, numbers compared as numbers (JavaScript writes the
+/// float 0.0 as `0`).
+fn same_values(a: &Json, b: &Json) -> bool {
+    match (a, b) {
+        (Json::Number(x), Json::Number(y)) => x.as_f64() == y.as_f64(),
+        (Json::Object(x), Json::Object(y)) => {
+            x.len() == y.len()
+                && x.iter()
+                    .all(|(k, v)| y.get(k).is_some_and(|w| same_values(v, w)))
+        }
+        (Json::Array(x), Json::Array(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|(v, w)| same_values(v, w))
+        }
+        _ => a == b,
+    }
+}
+
+/// The demo's uplink: every bus topic, as the demo's system file says.
+const UPLINK: &str = "udp://239.255.42.1:47800?ttl=0";
+
+#[test]
+fn foxglove_s_own_client_sees_the_demo_s_channels_values_and_command_rules() {
+    let modules = node_modules();
+    let mut demo = Running(
+        seabus()
+            .args(["demo", "--for", "40"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("the demo starts"),
+    );
+    let (tx, rx) = mpsc::channel();
+    let err = demo.0.stderr.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                return;
+            }
+        }
+    });
+    let url = loop {
+        let line = rx
+            .recv_timeout(Duration::from_secs(20))
+            .expect("the demo prints its Foxglove URL within 20 s");
+        if let Some(rest) = line.trim().strip_prefix("Foxglove: ") {
+            break rest.split_whitespace().next().unwrap().to_string();
+        }
+    };
+    assert!(url.starts_with("ws://127.0.0.1:"), "{url}");
+    let (_spy, seen) = spy_json(UPLINK, 40);
+    std::thread::sleep(Duration::from_millis(300));
+
+    let client = Command::new("node")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/foxglove_client.js"))
+        .args([
+            &url,
+            "20",
+            "nav.position",
+            "nav.attitude",
+            "foxglove/nav.position",
+        ])
+        .env("NODE_PATH", &modules)
+        .output()
+        .expect("node runs");
+    assert!(
+        client.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&client.stderr),
+        String::from_utf8_lossy(&client.stdout)
+    );
+    let got: Json = serde_json::from_slice(&client.stdout).unwrap();
+
+    let channel = |topic: &str| -> &Json {
+        got["channels"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|c| c["topic"] == topic)
+            .unwrap_or_else(|| panic!("`{topic}` is not advertised: {}", got["channels"]))
+    };
+    let position = channel("nav.position");
+    assert_eq!(
+        (
+            &position["encoding"],
+            &position["schemaName"],
+            &position["schemaEncoding"]
+        ),
+        (
+            &Json::from("json"),
+            &Json::from("seabus.position"),
+            &Json::from("jsonschema")
+        )
+    );
+    let schema: Json = serde_json::from_str(position["schema"].as_str().unwrap()).unwrap();
+    assert_eq!(schema["properties"]["lat"]["type"], "number");
+    assert!(
+        schema["required"]
+            .as_array()
+            .unwrap()
+            .contains(&Json::from("lat"))
+    );
+    assert_eq!(channel("nav.attitude")["schemaName"], "seabus.attitude");
+    let fix = channel("foxglove/nav.position");
+    assert_eq!(
+        (&fix["schemaName"], &fix["encoding"]),
+        (&Json::from("foxglove.LocationFix"), &Json::from("protobuf"))
+    );
+    assert_eq!(
+        channel("foxglove/tf")["schemaName"],
+        "foxglove.FrameTransform"
+    );
+    assert_eq!(
+        got["messages"]["foxglove/nav.position"]
+            .as_array()
+            .unwrap()
+            .len(),
+        20
+    );
+
+    // every message the client decoded is one the spy saw on the uplink: same stamp, same values
+    let mut spied: Vec<Json> = Vec::new();
+    for topic in ["nav.position", "nav.attitude"] {
+        let messages = got["messages"][topic].as_array().unwrap();
+        assert_eq!(messages.len(), 20, "{topic}");
+        for m in messages {
+            let ns: i64 = m["timestamp"].as_str().unwrap().parse().unwrap();
+            let same = |v: &Json| {
+                v["topic"] == topic
+                    && v["stamp"]
+                        .as_f64()
+                        .is_some_and(|s| ((s * 1e9) as i64 - ns).abs() < 2_000)
+            };
+            let spy = match spied.iter().find(|v| same(v)) {
+                Some(v) => v.clone(),
+                None => wait_for_line(&seen, &mut spied, Duration::from_secs(5), topic, same),
+            };
+            assert!(
+                same_values(&spy["payload"], &m["data"]),
+                "{topic} at {ns}: the spy saw {}, the client got {}",
+                spy["payload"],
+                m["data"]
+            );
+        }
+    }
+
+    // the server takes cmd.course only; the course reached the bus as a command
+    let statuses = got["statuses"].as_array().unwrap();
+    assert_eq!(statuses.len(), 1, "{statuses:?}");
+    assert_eq!(
+        statuses[0]["message"],
+        "refused: `cmd.mission` is not a command this server takes (it takes: cmd.course)"
+    );
+    let course = wait_for_line(
+        &seen,
+        &mut spied,
+        Duration::from_secs(5),
+        "the client's course on the bus",
+        |v| v["topic"] == "cmd.course" && v["payload"]["heading"] == 123.0,
+    );
+    assert_eq!(course["kind"], "command");
+    assert_eq!(course["payload"]["speed"], 1.25);
+    assert!(
+        spied.iter().all(|v| v["topic"] != "cmd.mission"),
+        "a refused command never reaches the bus"
+    );
+}
