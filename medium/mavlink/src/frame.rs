@@ -115,18 +115,28 @@ pub fn read(dialect: Dialect, buf: &[u8], at: usize, end: End) -> Read {
     let Some(&start) = rest.first() else {
         return Read::Incomplete;
     };
-    let (version, header) = match start {
-        MAV_STX_V2 => (MavlinkVersion::V2, consts::STX_SIZE + v2::HEADER_SIZE),
-        MAV_STX => (MavlinkVersion::V1, consts::STX_SIZE + v1::HEADER_SIZE),
+    let version = match start {
+        MAV_STX_V2 => MavlinkVersion::V2,
+        MAV_STX => MavlinkVersion::V1,
         _ => return garbage(rest, at, 0),
     };
-    let signed = match version {
+    // a MAVLink 2 header is longer when its system id takes 32 bits
+    let (header, signed) = match version {
         MavlinkVersion::V2 => match rest.get(v2::INCOMPAT_FLAGS_OFFSET) {
-            None => return short(rest, at, end, header),
+            None => return short(rest, at, end, consts::STX_SIZE + v2::MIN_HEADER_SIZE),
             Some(flags) if flags & !v2::SUPPORTED_IFLAGS != 0 => return garbage(rest, at, 1),
-            Some(flags) => flags & v2::IFLAG_SIGNED != 0,
+            Some(flags) => (
+                consts::STX_SIZE
+                    + v2::MIN_HEADER_SIZE
+                    + if flags & v2::IFLAG_SYSID32 != 0 {
+                        v2::SYSID32_EXTRA_HEADER_SIZE
+                    } else {
+                        0
+                    },
+                flags & v2::IFLAG_SIGNED != 0,
+            ),
         },
-        MavlinkVersion::V1 => false,
+        MavlinkVersion::V1 => (consts::STX_SIZE + v1::HEADER_SIZE, false),
     };
     let Some(&payload) = rest.get(consts::PAYLOAD_LEN_OFFSET) else {
         return short(rest, at, end, header);
