@@ -139,7 +139,7 @@ fn best_rates(
     mut a: impl FnMut() -> usize,
     mut b: impl FnMut() -> usize,
 ) -> (f64, f64) {
-    let mut rate = |f: &mut dyn FnMut() -> usize| {
+    let rate = |f: &mut dyn FnMut() -> usize| {
         let start = Instant::now();
         let got = f();
         assert_eq!(got, n, "every message read");
