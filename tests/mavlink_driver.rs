@@ -8,10 +8,24 @@
 //! the health monitor within 3 s, and commands are refused at once.
 //!
 //! Commands come as an operator's tools send them: `seabus pub --command` on a network medium
-//! bridged to the bus; what the system publishes is read with `seabus spy` on that medium.
+//! bridged to the bus; what the system publishes is read with `seabus spy` on that medium. The
+//! seeds of the driver's fuzz target (`fuzz/corpus/mavlink_datasets`) are replayed here as well.
 
 mod common;
 use common::*;
+
+// the seeds of the driver's fuzz target run here too
+#[path = "../fuzz/properties/mavlink_driver.rs"]
+mod properties;
+#[macro_use]
+#[path = "../fuzz/properties/replay.rs"]
+mod replay;
+
+seed_tests! {
+    /// MAVLink messages through the driver's mappings: datasets with finite numbers and their
+    /// required fields, or none; unknown values never published; a stick's values never changed.
+    mavlink_datasets_seeds => mavlink_datasets,
+}
 use serde_json::Value;
 use std::io::{BufRead, BufReader, Write};
 use std::process::{ChildStdin, Command, Stdio};
