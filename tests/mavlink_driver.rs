@@ -2,9 +2,9 @@
 //! UDP loopback (`tests/peers/mavlink_ardusub.py`): `seabus run` publishes the standard datasets
 //! with the values the vehicle sent (and leaves out what it marked unknown); arming and a mode
 //! change are acknowledged on `cmd.status`, a mode the vehicle denies is refused with its result, a
-//! command it does not answer goes three times (confirmation 0, 1, 2) and times out; a stick's
-//! stream of `cmd.manual` reaches it as MANUAL_CONTROL with the same values at the rate sent, and
-//! neutral once when it stops; when its heartbeat stops, the link and the vehicle go OFFLINE in
+//! course goes as a GUIDED target and an altitude is refused; a command it does not answer goes
+//! three times (confirmation 0, 1, 2) and times out; a stick's stream of `cmd.manual` reaches it
+//! as MANUAL_CONTROL with the same values at the rate sent, and neutral once when it stops; when its heartbeat stops, the link and the vehicle go OFFLINE in
 //! the health monitor within 3 s, and commands are refused at once.
 //!
 //! Commands come as an operator's tools send them: `seabus pub --command` on a network medium
@@ -331,6 +331,42 @@ fn datasets_commands_refusals_and_a_lost_vehicle() {
             .as_str()
             .is_some_and(|e| e.contains("its modes are STABILIZE")),
         "{unknown}"
+    );
+
+    // a course: a GUIDED target, which MAVLink does not acknowledge (`sent`)
+    command(
+        &net,
+        "cmd.course",
+        &["heading=90.0", "depth=5.0", "speed=0.5"],
+        &[],
+    );
+    let target = rov.wait("target", second, |_| true);
+    // MAV_FRAME_GLOBAL_RELATIVE_ALT_INT; position, vertical speed, accelerations, yaw rate ignored
+    assert_eq!(
+        (&target["frame"], &target["type_mask"]),
+        (&Value::from(6), &Value::from(2531))
+    );
+    assert!((f(&target, "alt") + 5.0).abs() < 1e-4, "{target}");
+    assert!(f(&target, "vx").abs() < 1e-4, "{target}");
+    assert!((f(&target, "vy") - 0.5).abs() < 1e-4, "{target}");
+    assert!(
+        (f(&target, "yaw") - std::f64::consts::FRAC_PI_2).abs() < 1e-4,
+        "{target}"
+    );
+    spy.status("SET_POSITION_TARGET_GLOBAL_INT", "sent", second);
+    // an altitude above the floor (a negative depth) is no MAVLink target: refused
+    command(
+        &net,
+        "cmd.course",
+        &["heading=90.0", "depth=-2.0", "speed=0.5"],
+        &[],
+    );
+    let altitude = spy.status("SET_POSITION_TARGET_GLOBAL_INT", "refused", second);
+    assert!(
+        altitude["error"]
+            .as_str()
+            .is_some_and(|e| e.contains("not an altitude")),
+        "{altitude}"
     );
 
     // no answer: sent again with confirmation 1 and 2, then timed out
