@@ -519,3 +519,37 @@ fn a_stick_stream_reaches_the_rov_at_its_rate_and_goes_neutral_once_when_it_stop
     });
     assert_eq!(said["state"], "sent");
 }
+
+#[test]
+fn a_bad_parameter_is_refused_with_its_place_and_value() {
+    for (attrs, line_col, why) in [
+        (
+            r#"water="brine""#,
+            "3:53",
+            "parameter `water`: `brine` is not `salt`, `fresh` or a density in kg/m³ from 900 to 1100",
+        ),
+        (
+            r#"sysid="300""#,
+            "3:53",
+            "parameter `sysid`: `300` is not a vehicle's system id (1 to 255)",
+        ),
+        (
+            r#"pressure="BAROMETER""#,
+            "3:53",
+            "parameter `pressure`: `BAROMETER` is not SCALED_PRESSURE, SCALED_PRESSURE2 or SCALED_PRESSURE3",
+        ),
+    ] {
+        let text = format!(
+            "<seabus node=\"rov\">\n  <medium name=\"bus\" url=\"inproc://\"/>\n  <module name=\"rov\" type=\"mavlink\" media=\"bus bus\" {attrs}/>\n</seabus>\n"
+        );
+        let (_dir, path) = system_file("system.xml", &text);
+        let out = check(&path);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert_eq!(
+            stderr.trim_end(),
+            format!("{}:{line_col}: {why}", path.display()),
+            "{attrs}"
+        );
+    }
+}

@@ -221,20 +221,29 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
                 .trim()
                 .parse::<u32>()
                 .ok()
-                .filter(|n| *n >= 1)
-                .ok_or_else(|| param.error("a vehicle's system id, 1 or more"))?,
+                .filter(|n| (1..=255).contains(n))
+                .ok_or_else(|| {
+                    param.error(format!(
+                        "`{}` is not a vehicle's system id (1 to 255)",
+                        param.value.trim()
+                    ))
+                })?,
         ),
     };
     let pressure = p.str("pressure").unwrap_or("SCALED_PRESSURE").to_string();
     if !["SCALED_PRESSURE", "SCALED_PRESSURE2", "SCALED_PRESSURE3"].contains(&pressure.as_str()) {
-        return Err(p
-            .required("pressure")?
-            .error("SCALED_PRESSURE, SCALED_PRESSURE2 or SCALED_PRESSURE3"));
+        return Err(p.required("pressure")?.error(format!(
+            "`{pressure}` is not SCALED_PRESSURE, SCALED_PRESSURE2 or SCALED_PRESSURE3"
+        )));
     }
     let depth_from = match p.str("depth").unwrap_or("pressure") {
         "pressure" => DepthFrom::Pressure,
         "position" => DepthFrom::Position,
-        _ => return Err(p.required("depth")?.error("`pressure` or `position`")),
+        other => {
+            return Err(p
+                .required("depth")?
+                .error(format!("`{other}` is not `pressure` or `position`")));
+        }
     };
     let density = match p.str("water").unwrap_or("salt") {
         "salt" => ardupilot::SALT,
@@ -245,10 +254,12 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
             .ok()
             .filter(|d| (900.0..=1100.0).contains(d))
             .ok_or_else(|| {
-                p.get("water").map_or_else(
-                    || cfg.pos.error("water"),
-                    |w| w.error("`salt`, `fresh` or a density in kg/m³ from 900 to 1100"),
-                )
+                let why = format!(
+                    "`{}` is not `salt`, `fresh` or a density in kg/m³ from 900 to 1100",
+                    other.trim()
+                );
+                p.get("water")
+                    .map_or_else(|| cfg.pos.error(&why), |w| w.error(&why))
             })?,
     };
     let retries: u8 = p.parse_or("retries", 2, "a number of re-sends from 0 to 5")?;
@@ -264,10 +275,13 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
     )?;
     let z_min: i64 = p.parse_or("z_min", 0, "MANUAL_CONTROL's lowest z, -1000 to 1000")?;
     if !(-1000..=1000).contains(&z_min) || !(z_min..=1000).contains(&neutral_z) {
-        return Err(p.get("neutral_z").or_else(|| p.get("z_min")).map_or_else(
-            || cfg.pos.error("z"),
-            |q| q.error("z_min ≤ neutral_z ≤ 1000, z_min ≥ -1000"),
-        ));
+        let why = format!(
+            "neutral_z ({neutral_z}) must lie from z_min ({z_min}) to 1000, and z_min from -1000"
+        );
+        return Err(p
+            .get("neutral_z")
+            .or_else(|| p.get("z_min"))
+            .map_or_else(|| cfg.pos.error(&why), |q| q.error(&why)));
     }
     let s = Settings {
         sysid,
