@@ -23,6 +23,8 @@
            out of this build)."
 )]
 //! - [`iver`] — the Iver2/Iver3 frontseat: Remote Helm protocol, backseat driver, simulated frontseat.
+//! - [`mavlink`] — MAVLink vehicles (ArduSub, ArduRover): the `mavlink` driver on a MAVLink medium's
+//!   topics.
 //! - [`nmea`] — NMEA 0183 sentences and the GPS, heading, echo-sounder, wind, speed-log and
 //!   steering drivers built on them.
 //! - [`units`] — unit conversions of device protocols.
@@ -39,6 +41,7 @@
 #[cfg(feature = "can")]
 pub mod can;
 pub mod iver;
+pub mod mavlink;
 #[cfg(feature = "can")]
 pub mod n2k;
 pub mod nmea;
@@ -58,7 +61,8 @@ pub fn register(reg: &mut Registry) {
         .add_module(nmea::sensors::LOG)
         .add_module(nmea::sensors::STEERING)
         .add_module(iver::driver::TYPE)
-        .add_module(iver::sim::TYPE);
+        .add_module(iver::sim::TYPE)
+        .add_module(mavlink::driver::TYPE);
     #[cfg(feature = "can")]
     reg.add_module(can::device::TYPE)
         .add_module(n2k::driver::TYPE);

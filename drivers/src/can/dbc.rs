@@ -417,7 +417,11 @@ fn motorola_bits(start: u32, size: u32, bytes: usize) -> Option<Vec<u32>> {
         }
         out.push(pos);
         if i + 1 < size {
-            pos = if pos % 8 == 0 { pos + 15 } else { pos - 1 };
+            pos = if pos.is_multiple_of(8) {
+                pos + 15
+            } else {
+                pos - 1
+            };
         }
     }
     Some(out)

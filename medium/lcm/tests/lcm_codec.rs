@@ -203,7 +203,7 @@ fn view_map(map: &DataMap) -> serde_json::Value {
 
 /// Bytes from hexadecimal text.
 fn unhex(text: &str) -> Vec<u8> {
-    assert!(text.len() % 2 == 0, "odd hex {text:?}");
+    assert!(text.len().is_multiple_of(2), "odd hex {text:?}");
     (0..text.len() / 2)
         .map(|i| {
             text.get(2 * i..2 * i + 2)

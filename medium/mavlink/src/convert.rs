@@ -22,7 +22,7 @@
 //! byte string fills an array of bytes.
 
 use mavlink::Message;
-use seabus_medium::datamap::{DataMap, Value};
+use seabus_medium::datamap::{DataMap, Text, Value};
 use serde::de::value::{MapDeserializer, SeqDeserializer};
 use serde::de::{DeserializeOwned, IntoDeserializer, Visitor};
 use serde::ser::{
@@ -30,6 +30,7 @@ use serde::ser::{
     SerializeTupleStruct, SerializeTupleVariant,
 };
 use serde::{Serialize, Serializer};
+use std::borrow::Cow;
 use std::fmt;
 
 /// The fields a received message's datamap carries besides the message's own: who sent it
@@ -44,11 +45,11 @@ enum Node {
     Int(i64),
     UInt(u64),
     Float(f64),
-    Str(String),
+    Str(Text),
     /// Text a bitmask wrote of itself (`A | B`): told apart from a `char[N]` field's text.
     Flags(String),
     Seq(Vec<Node>),
-    Map(Vec<(String, Node)>),
+    Map(Vec<(Text, Node)>),
 }
 
 /// Why a value could not be converted (serde's errors, in words).
@@ -78,7 +79,11 @@ impl serde::de::Error for Error {
 /// A `float` as the shortest decimal that reads back to the same `float`.
 fn widen(v: f32) -> f64 {
     if v.is_finite() {
-        v.to_string().parse().unwrap_or(f64::from(v))
+        // written to a buffer on the stack: no allocation for each float of each message
+        ryu::Buffer::new()
+            .format_finite(v)
+            .parse()
+            .unwrap_or(f64::from(v))
     } else {
         f64::from(v)
     }
@@ -90,8 +95,8 @@ struct Ser;
 struct SeqSer(Vec<Node>);
 
 struct MapSer {
-    entries: Vec<(String, Node)>,
-    key: Option<String>,
+    entries: Vec<(Text, Node)>,
+    key: Option<Text>,
 }
 
 impl Serializer for Ser {
@@ -139,10 +144,10 @@ impl Serializer for Ser {
         Ok(Node::Float(v))
     }
     fn serialize_char(self, v: char) -> Result<Node, Error> {
-        Ok(Node::Str(v.to_string()))
+        Ok(Node::Str(Cow::Owned(v.to_string())))
     }
     fn serialize_str(self, v: &str) -> Result<Node, Error> {
-        Ok(Node::Str(v.to_string()))
+        Ok(Node::Str(Cow::Owned(v.to_owned())))
     }
     fn serialize_bytes(self, v: &[u8]) -> Result<Node, Error> {
         Ok(Node::Seq(
@@ -167,7 +172,7 @@ impl Serializer for Ser {
         _: u32,
         variant: &'static str,
     ) -> Result<Node, Error> {
-        Ok(Node::Str(variant.to_string()))
+        Ok(Node::Str(Cow::Borrowed(variant)))
     }
     fn serialize_newtype_struct<T: ?Sized + Serialize>(
         self,
@@ -183,7 +188,7 @@ impl Serializer for Ser {
         variant: &'static str,
         v: &T,
     ) -> Result<Node, Error> {
-        Ok(Node::Map(vec![(variant.to_string(), v.serialize(Ser)?)]))
+        Ok(Node::Map(vec![(Cow::Borrowed(variant), v.serialize(Ser)?)]))
     }
     fn serialize_seq(self, len: Option<usize>) -> Result<SeqSer, Error> {
         Ok(SeqSer(Vec::with_capacity(len.unwrap_or(0))))
@@ -277,8 +282,12 @@ impl SerializeMap for MapSer {
     type Error = Error;
     fn serialize_key<T: ?Sized + Serialize>(&mut self, key: &T) -> Result<(), Error> {
         match key.serialize(Ser)? {
-            Node::Str(k) | Node::Flags(k) => {
+            Node::Str(k) => {
                 self.key = Some(k);
+                Ok(())
+            }
+            Node::Flags(k) => {
+                self.key = Some(Cow::Owned(k));
                 Ok(())
             }
             other => Err(Error(format!("a map key that is not text: {other:?}"))),
@@ -305,7 +314,7 @@ impl SerializeStruct for MapSer {
         key: &'static str,
         v: &T,
     ) -> Result<(), Error> {
-        self.entries.push((key.to_string(), v.serialize(Ser)?));
+        self.entries.push((Cow::Borrowed(key), v.serialize(Ser)?));
         Ok(())
     }
     fn end(self) -> Result<Node, Error> {
@@ -338,7 +347,8 @@ impl<'de> serde::Deserializer<'de> for Node {
             Node::Int(i) => visitor.visit_i64(i),
             Node::UInt(u) => visitor.visit_u64(u),
             Node::Float(f) => visitor.visit_f64(f),
-            Node::Str(s) | Node::Flags(s) => visitor.visit_string(s),
+            Node::Str(Cow::Borrowed(s)) => visitor.visit_str(s),
+            Node::Str(Cow::Owned(s)) | Node::Flags(s) => visitor.visit_string(s),
             Node::Seq(items) => {
                 let mut seq = SeqDeserializer::new(items.into_iter());
                 let out = visitor.visit_seq(&mut seq)?;
@@ -379,7 +389,7 @@ fn rust_name(name: &str) -> &str {
 }
 
 /// An enum's value as serde writes it for the crate's enums (tagged: `{"type": NAME}`): its name.
-fn enum_name(entries: &[(String, Node)]) -> Option<&str> {
+fn enum_name(entries: &[(Text, Node)]) -> Option<&str> {
     match entries {
         [(tag, Node::Str(name))] if tag == "type" => Some(name),
         _ => None,
@@ -393,25 +403,28 @@ fn value(node: Node) -> Value {
         Node::Int(i) => Value::Int(i),
         Node::UInt(u) => Value::from(u.to_string()),
         Node::Float(f) => Value::Float(f),
-        Node::Str(s) | Node::Flags(s) => Value::from(s),
+        Node::Str(s) => Value::Str(s),
+        Node::Flags(s) => Value::from(s),
         Node::Seq(items) => Value::List(items.into_iter().map(value).collect()),
-        Node::Map(entries) => match enum_name(&entries) {
-            Some(name) => Value::from(name),
-            None => Value::Map(DataMap::from_entries(
-                entries
-                    .into_iter()
-                    .map(|(k, v)| (k.into(), value(v)))
-                    .collect(),
-            )),
-        },
+        Node::Map(mut entries) => {
+            // an enum's value: its name, moved rather than copied
+            if enum_name(&entries).is_some()
+                && let Some((_, Node::Str(name))) = entries.pop()
+            {
+                return Value::Str(name);
+            }
+            Value::Map(DataMap::from_entries(
+                entries.into_iter().map(|(k, v)| (k, value(v))).collect(),
+            ))
+        }
     }
 }
 
 /// The fields of `msg` as serde gives them, without the message's own tag.
-fn fields<M: Serialize>(msg: &M) -> Result<Vec<(String, Node)>, String> {
+fn fields<M: Serialize>(msg: &M) -> Result<Vec<(Text, Node)>, String> {
     match msg.serialize(Ser) {
         Ok(Node::Map(mut entries)) => {
-            if entries.first().is_some_and(|(k, _)| k == "type") {
+            if entries.first().is_some_and(|(k, _)| k.as_ref() == "type") {
                 entries.remove(0);
             }
             Ok(entries)
@@ -426,8 +439,8 @@ pub fn to_map<M: Message + Serialize>(msg: &M) -> Result<DataMap, String> {
     let entries = fields(msg)?;
     let mut map = DataMap::with_capacity(entries.len() + HEADER_FIELDS.len());
     for (k, v) in entries {
-        let key = if k == "mavtype" {
-            "type".to_string()
+        let key = if k.as_ref() == "mavtype" {
+            Cow::Borrowed("type")
         } else {
             k
         };
@@ -447,9 +460,12 @@ pub fn from_map<M: Message + Serialize + DeserializeOwned>(
         .ok_or_else(|| format!("there is no MAVLink message `{name}` in this dialect"))?;
     let fields = fields(&template)?;
     for (key, _) in map.iter() {
-        let known = fields.iter().any(|(k, _)| k == rust_name(key));
+        let known = fields.iter().any(|(k, _)| k.as_ref() == rust_name(key));
         if !known && !HEADER_FIELDS.contains(&key) {
-            let names: Vec<&str> = fields.iter().map(|(k, _)| mavlink_name(k)).collect();
+            let names: Vec<&str> = fields
+                .iter()
+                .map(|(k, _)| mavlink_name(k.as_ref()))
+                .collect();
             return Err(format!(
                 "{name} has no field `{key}`; its fields are {}",
                 names.join(", ")
@@ -457,11 +473,14 @@ pub fn from_map<M: Message + Serialize + DeserializeOwned>(
         }
     }
     let mut input = Vec::with_capacity(fields.len() + 1);
-    input.push(("type".to_string(), Node::Str(name.to_string())));
+    input.push((
+        Cow::Borrowed("type"),
+        Node::Str(Cow::Owned(name.to_string())),
+    ));
     for (rust, template) in fields {
-        if let Some(v) = map.get(mavlink_name(&rust)) {
+        if let Some(v) = map.get(mavlink_name(rust.as_ref())) {
             let node = fit(v, &template)
-                .map_err(|e| format!("{name}: field `{}`: {e}", mavlink_name(&rust)))?;
+                .map_err(|e| format!("{name}: field `{}`: {e}", mavlink_name(rust.as_ref())))?;
             input.push((rust, node));
         }
     }
@@ -498,8 +517,8 @@ fn fit(v: &Value, template: &Node) -> Result<Node, String> {
     match template {
         Node::Map(entries) => match (enum_name(entries), v) {
             (Some(_), Value::Str(s)) => Ok(Node::Map(vec![(
-                "type".to_string(),
-                Node::Str(s.to_string()),
+                Cow::Borrowed("type"),
+                Node::Str(Cow::Owned(s.to_string())),
             )])),
             (Some(example), other) => Err(format!(
                 "expected a name such as {example}, not the {} {other}",
@@ -516,8 +535,10 @@ fn fit(v: &Value, template: &Node) -> Result<Node, String> {
             )),
         },
         Node::Str(_) => match v {
-            Value::Str(s) => Ok(Node::Str(s.to_string())),
-            Value::Int(_) | Value::Float(_) | Value::Bool(_) => Ok(Node::Str(v.to_string())),
+            Value::Str(s) => Ok(Node::Str(Cow::Owned(s.to_string()))),
+            Value::Int(_) | Value::Float(_) | Value::Bool(_) => {
+                Ok(Node::Str(Cow::Owned(v.to_string())))
+            }
             other => Err(format!("expected text, not a {}", other.type_name())),
         },
         Node::Int(_) | Node::UInt(_) => match v {

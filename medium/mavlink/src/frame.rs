@@ -20,7 +20,8 @@
 //! goes on from the next byte, so a good frame inside or just behind it is still found. On a byte
 //! stream that means waiting for the byte after a bad candidate before judging it; a good frame is
 //! delivered at once. A frame cut off on a stream cannot be told from garbage and is counted as
-//! that. MAVLink 2 signatures are carried over, not checked.
+//! that. MAVLink 2 signatures are carried over, not checked; a MAVLink 2 header with a 32-bit
+//! system id (incompatibility flag `0x02`) is three bytes longer.
 
 use crate::dialect::{Dialect, raw};
 use mavlink::consts::{self, v1, v2};
@@ -115,18 +116,28 @@ pub fn read(dialect: Dialect, buf: &[u8], at: usize, end: End) -> Read {
     let Some(&start) = rest.first() else {
         return Read::Incomplete;
     };
-    let (version, header) = match start {
-        MAV_STX_V2 => (MavlinkVersion::V2, consts::STX_SIZE + v2::HEADER_SIZE),
-        MAV_STX => (MavlinkVersion::V1, consts::STX_SIZE + v1::HEADER_SIZE),
+    let version = match start {
+        MAV_STX_V2 => MavlinkVersion::V2,
+        MAV_STX => MavlinkVersion::V1,
         _ => return garbage(rest, at, 0),
     };
-    let signed = match version {
+    // a MAVLink 2 header is longer when its system id takes 32 bits
+    let (header, signed) = match version {
         MavlinkVersion::V2 => match rest.get(v2::INCOMPAT_FLAGS_OFFSET) {
-            None => return short(rest, at, end, header),
+            None => return short(rest, at, end, consts::STX_SIZE + v2::MIN_HEADER_SIZE),
             Some(flags) if flags & !v2::SUPPORTED_IFLAGS != 0 => return garbage(rest, at, 1),
-            Some(flags) => flags & v2::IFLAG_SIGNED != 0,
+            Some(flags) => (
+                consts::STX_SIZE
+                    + v2::MIN_HEADER_SIZE
+                    + if flags & v2::IFLAG_SYSID32 != 0 {
+                        v2::SYSID32_EXTRA_HEADER_SIZE
+                    } else {
+                        0
+                    },
+                flags & v2::IFLAG_SIGNED != 0,
+            ),
         },
-        MavlinkVersion::V1 => false,
+        MavlinkVersion::V1 => (consts::STX_SIZE + v1::HEADER_SIZE, false),
     };
     let Some(&payload) = rest.get(consts::PAYLOAD_LEN_OFFSET) else {
         return short(rest, at, end, header);
@@ -369,6 +380,34 @@ mod tests {
         let mut flagged = attitude(6, MavlinkVersion::V2);
         flagged[2] = 0x80;
         assert_eq!(walk(&flagged, None).0, Vec::<u8>::new());
+    }
+
+    #[test]
+    fn a_frame_with_a_32_bit_system_id_reads_whole() {
+        let map = DataMap::new()
+            .with("time_boot_ms", 1i64)
+            .with("roll", 0.1)
+            .with("pitch", 0.2)
+            .with("yaw", 0.3)
+            .with("rollspeed", 0.0)
+            .with("pitchspeed", 0.0)
+            .with("yawspeed", 0.0);
+        let header = MavHeader {
+            system_id: 70_000,
+            component_id: 1,
+            sequence: 4,
+        };
+        let mut bytes = Dialect::ArduPilotMega
+            .encode(MavlinkVersion::V2, header, "ATTITUDE", &map)
+            .unwrap();
+        assert_eq!(bytes[2] & v2::IFLAG_SYSID32, v2::IFLAG_SYSID32);
+        bytes.extend(attitude(5, MavlinkVersion::V2));
+        let mut ids = Vec::new();
+        datagram(Dialect::ArduPilotMega, &bytes, |i| match i {
+            Item::Frame(f) => ids.push((f.raw.system_id(), f.raw.sequence())),
+            Item::Rejected(e, _, _) => panic!("{e}"),
+        });
+        assert_eq!(ids, [(70_000, 4), (1, 5)]);
     }
 
     #[test]

@@ -129,7 +129,7 @@ impl Transport for MavlinkTransport {
             source: e,
         })?;
         let header = MavHeader {
-            system_id: self.cfg.sysid,
+            system_id: u32::from(self.cfg.sysid),
             component_id: self.cfg.compid,
             sequence: self.seq.fetch_add(1, Ordering::Relaxed),
         };
@@ -192,9 +192,9 @@ struct Session {
     seq: Arc<AtomicU8>,
     vehicles: Vehicles,
     /// topics by sender and message
-    topics: HashMap<(u8, &'static str), Topic>,
+    topics: HashMap<(u32, &'static str), Topic>,
     /// the last sequence number heard from each sender
-    last_seq: HashMap<(u8, u8), u8>,
+    last_seq: HashMap<(u32, u8), u8>,
     /// this medium's own heartbeat's fields
     own_heartbeat: DataMap,
     /// errors of the wire's reading and writing that are not a lost connection
@@ -227,7 +227,7 @@ impl Session {
     /// This medium's heartbeat, framed.
     fn heartbeat(&self) -> Option<Bytes> {
         let header = MavHeader {
-            system_id: self.cfg.sysid,
+            system_id: u32::from(self.cfg.sysid),
             component_id: self.cfg.compid,
             sequence: self.seq.fetch_add(1, Ordering::Relaxed),
         };
@@ -288,7 +288,7 @@ impl Session {
     }
 
     /// Counts the messages a sender's sequence numbers say were lost on the way.
-    fn sequence(&mut self, sysid: u8, compid: u8, seq: u8) {
+    fn sequence(&mut self, sysid: u32, compid: u8, seq: u8) {
         if self.last_seq.len() > 4096 {
             self.last_seq.clear();
         }
@@ -307,7 +307,7 @@ impl Session {
         let raw = &f.raw;
         let (sysid, compid) = (raw.system_id(), raw.component_id());
         // this medium's own frames, come back through a router
-        if (sysid, compid) == (self.cfg.sysid, self.cfg.compid) {
+        if (sysid, compid) == (u32::from(self.cfg.sysid), self.cfg.compid) {
             return;
         }
         self.sequence(sysid, compid, raw.sequence());
@@ -332,7 +332,7 @@ impl Session {
                 .heartbeat(sysid, compid, &map, Instant::now(), SystemTime::now());
             self.apply(c);
         }
-        for (field, id) in HEADER_FIELDS.into_iter().zip([sysid, compid]) {
+        for (field, id) in HEADER_FIELDS.into_iter().zip([sysid, u32::from(compid)]) {
             if map.get(field).is_none() {
                 map.push(field, Value::Int(id.into()));
             }

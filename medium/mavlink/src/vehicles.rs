@@ -50,7 +50,7 @@ struct Vehicle {
 #[derive(Debug)]
 pub struct Vehicles {
     timeout: Duration,
-    known: BTreeMap<(u8, u8), Vehicle>,
+    known: BTreeMap<(u32, u8), Vehicle>,
     up: bool,
     /// why the link is down when no vehicle was lost (nothing heard yet, the wire lost)
     down: String,
@@ -86,7 +86,7 @@ impl Vehicles {
     /// [`crate::convert`] reads them), heard at `now` (`wall`: the same instant on the clock).
     pub fn heartbeat(
         &mut self,
-        sysid: u8,
+        sysid: u32,
         compid: u8,
         hb: &DataMap,
         now: Instant,
@@ -190,7 +190,7 @@ impl Vehicles {
         let new_reason = self.down != why;
         self.down = why;
         let mut out = Changes::default();
-        let silenced: Vec<(u8, u8)> = self
+        let silenced: Vec<(u32, u8)> = self
             .known
             .iter_mut()
             .filter(|(_, v)| v.alive)
@@ -230,7 +230,7 @@ impl Vehicles {
         self.known.keys().map(|k| self.map_of(*k)).collect()
     }
 
-    fn map_of(&self, key: (u8, u8)) -> DataMap {
+    fn map_of(&self, key: (u32, u8)) -> DataMap {
         let Some(v) = self.known.get(&key) else {
             return DataMap::new();
         };
@@ -403,7 +403,7 @@ mod tests {
         let wall = SystemTime::now();
         let mut v = Vehicles::new(Duration::from_secs(3), t0, "none");
         for i in 0..=MAX_VEHICLES {
-            let (s, c) = ((i % 256) as u8, (i / 256) as u8 + 1);
+            let (s, c) = ((i % 256) as u32, (i / 256) as u8 + 1);
             v.heartbeat(
                 s,
                 c,

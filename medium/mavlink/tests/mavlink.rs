@@ -20,7 +20,7 @@ fn open(url: &str) -> Medium {
 
 fn encode(name: &str, map: &DataMap, sysid: u8, seq: u8) -> Vec<u8> {
     let header = MavHeader {
-        system_id: sysid,
+        system_id: u32::from(sysid),
         component_id: 1,
         sequence: seq,
     };
@@ -115,7 +115,7 @@ async fn link(medium: &Medium, limit: Duration, pred: impl Fn(&LinkState) -> boo
 }
 
 /// A decoded frame: sender, message name and fields.
-type Heard = (u8, u8, &'static str, DataMap);
+type Heard = (u32, u8, &'static str, DataMap);
 
 fn decode(f: frame::Frame) -> Heard {
     let (name, map) = DIALECT.decode(&f.raw).unwrap();

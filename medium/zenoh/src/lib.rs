@@ -704,7 +704,7 @@ async fn watch_link(session: &Session, ingress: &Ingress, router: bool, members:
     let mut ticks = 0u32;
     loop {
         ticks = ticks.wrapping_add(1);
-        if ticks % fleet::EVERY_TICKS == 0 {
+        if ticks.is_multiple_of(fleet::EVERY_TICKS) {
             members.announce_all();
         }
         let connected = router

@@ -345,14 +345,14 @@ impl Hub {
     /// Shows an entry's new state to everyone and appends it to the command log.
     pub(super) fn changed(&self, e: &Entry) {
         self.broadcast(&e.json());
-        if let Some(path) = &self.settings.log {
-            if let Err(err) = append(path, e) {
-                tracing::warn!(
-                    component = "console",
-                    "command log {}: {err}",
-                    path.display()
-                );
-            }
+        if let Some(path) = &self.settings.log
+            && let Err(err) = append(path, e)
+        {
+            tracing::warn!(
+                component = "console",
+                "command log {}: {err}",
+                path.display()
+            );
         }
     }
 }

@@ -65,10 +65,10 @@ fn item_number(s: &str) -> Option<f64> {
 fn min_max(el: &Element) -> Result<(Option<f64>, Option<f64>), FileError> {
     let min = el.attr("min").map(finite).transpose()?;
     let max = el.attr("max").map(finite).transpose()?;
-    if let (Some(lo), Some(hi), Some(a)) = (min, max, el.attr("max")) {
-        if lo >= hi {
-            return Err(a.error(format!("the maximum {hi} is not above the minimum {lo}")));
-        }
+    if let (Some(lo), Some(hi), Some(a)) = (min, max, el.attr("max"))
+        && lo >= hi
+    {
+        return Err(a.error(format!("the maximum {hi} is not above the minimum {lo}")));
     }
     Ok((min, max))
 }
@@ -279,13 +279,13 @@ impl Reader {
         let (name, field) = self.command_ref(a, Some(true))?;
         self.numeric_field(a, &name, field.as_deref().unwrap_or_default())?;
         min_max(el)?;
-        if let Some(a) = el.attr("step") {
-            if !finite(a).is_ok_and(|s| s > 0.0) {
-                return Err(a.error(format!(
-                    "`{}` is not a step (a number above 0)",
-                    a.value.trim()
-                )));
-            }
+        if let Some(a) = el.attr("step")
+            && !finite(a).is_ok_and(|s| s > 0.0)
+        {
+            return Err(a.error(format!(
+                "`{}` is not a step (a number above 0)",
+                a.value.trim()
+            )));
         }
         Ok(())
     }
