@@ -219,7 +219,11 @@ fn init_logs(verbose: u8) {
         1 => "debug",
         _ => "trace",
     };
-    let default: Vec<String> = std::iter::once("warn".to_string())
+    // the Foxglove server logs every malformed client message; each one is answered to its
+    // client, and the live view's own refusals are counted and logged without flooding
+    let default: Vec<String> = ["warn", "foxglove=off"]
+        .into_iter()
+        .map(str::to_string)
         .chain(ours.iter().map(|c| format!("{c}={level}")))
         .collect();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()

@@ -197,3 +197,114 @@ fn foxglove_s_own_client_sees_the_demo_s_channels_values_and_command_rules() {
         "a refused command never reaches the bus"
     );
 }
+
+#[test]
+fn a_quiet_topic_is_unadvertised_and_junk_from_one_client_leaves_the_others_served() {
+    let modules = node_modules();
+    let bus = format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port());
+    let text = format!(
+        r#"<seabus node="view">
+  <medium name="bus" url="{}"/>
+  <foxglove listen="127.0.0.1:0" medium="bus" unadvertise="1s"/>
+</seabus>"#,
+        bus.replace('&', "&amp;")
+    );
+    let (_dir, path) = system_file("view.xml", &text);
+    let mut run = spawn_run(&path, &["--for", "30"]);
+    let err = run.0.stderr.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(err).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                return;
+            }
+        }
+    });
+    let url = loop {
+        let line = rx
+            .recv_timeout(Duration::from_secs(20))
+            .expect("seabus run prints its Foxglove URL within 20 s");
+        if let Some(rest) = line.trim().strip_prefix("Foxglove: ") {
+            break rest.split_whitespace().next().unwrap().to_string();
+        }
+    };
+    let watcher = Command::new("node")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/foxglove_watch.js"))
+        .args([&url, "6"])
+        .env("NODE_PATH", &modules)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("node runs");
+    std::thread::sleep(Duration::from_millis(800));
+    // a burst on one topic, the other topic steady for the whole watch
+    let burst = seabus()
+        .args([
+            "pub",
+            &bus,
+            "lab.burst",
+            "n=1",
+            "--count",
+            "10",
+            "--rate",
+            "20",
+        ])
+        .output()
+        .unwrap();
+    assert!(burst.status.success(), "{}", stderr(&burst));
+    let steady = seabus()
+        .args([
+            "pub",
+            &bus,
+            "lab.steady",
+            "n=2",
+            "--count",
+            "40",
+            "--rate",
+            "10",
+        ])
+        .output()
+        .unwrap();
+    assert!(steady.status.success(), "{}", stderr(&steady));
+    let out = watcher.wait_with_output().unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let got: Json = serde_json::from_slice(&out.stdout).unwrap();
+    let events = got["events"].as_array().unwrap();
+    let of = |topic: &str, event: &str| -> Vec<u64> {
+        events
+            .iter()
+            .filter(|e| e["topic"] == topic && e["event"] == event)
+            .map(|e| e["t"].as_u64().unwrap())
+            .collect()
+    };
+    let burst_messages: Vec<u64> = got["messages"]["lab.burst"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t.as_u64().unwrap())
+        .collect();
+    // the message that makes a topic appear is served before any client can have subscribed to
+    // its new channel: every other one arrives
+    assert_eq!(burst_messages.len(), 9, "{got}");
+    assert_eq!(of("lab.burst", "advertise").len(), 1, "{events:?}");
+    let gone = of("lab.burst", "unadvertise");
+    assert_eq!(
+        gone.len(),
+        1,
+        "the quiet topic is unadvertised once: {events:?}"
+    );
+    let quiet_for = gone[0] - burst_messages.last().unwrap();
+    assert!(
+        (900..=2_600).contains(&quiet_for),
+        "unadvertised {quiet_for} ms after its last message (unadvertise=1s, swept each second)"
+    );
+    // the steady topic kept its channel and its messages throughout the junk
+    assert!(of("lab.steady", "unadvertise").is_empty(), "{events:?}");
+    assert_eq!(got["messages"]["lab.steady"].as_array().unwrap().len(), 39);
+    let junk = &got["junk"];
+    assert!(junk["sent"].as_u64().unwrap() >= 20, "{junk}");
+    assert_eq!(
+        junk["statuses"], junk["sent"],
+        "every malformed message answered with an error status on its own connection"
+    );
+}

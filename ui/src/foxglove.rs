@@ -19,21 +19,23 @@
 //! - Clients may publish only when `commands` names command topics, and then only those: each
 //!   message must be a JSON object in the datamap's JSON form, it must satisfy the topic's standard
 //!   dataset (required fields, types, ranges) when the catalogue has one, and it goes on the medium
-//!   as a command. Anything else is refused with a status message to that client, and counted; a
-//!   client sending what the protocol does not allow is disconnected by the server, the others
-//!   unaffected.
+//!   as a command. Anything else is refused with a status message to that client, counted, and
+//!   logged at most once a reason every 10 s. What the protocol does not allow (text that is not
+//!   JSON, an unknown binary opcode) is answered by the server with an error status on that
+//!   connection alone, which stays open, the others unaffected.
 //! - `listen` defaults to 127.0.0.1:8765: the live view stays on the machine unless an address is
 //!   given.
 
 use foxglove::schemas::{FrameTransform, LocationFix, Quaternion, Timestamp, Vector3};
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Status};
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema};
+use seabus_medium::tally::Tally;
 use seabus_medium::xml::{Element, FileError};
 use seabus_medium::{DataMap, Interface, Kind, Medium, Message, Pattern, Payload, Stamp, Topic};
 use seabus_modules::{Catalogue, SystemSpec, schema};
 use std::collections::HashMap;
 use std::net::SocketAddr;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
@@ -168,24 +170,27 @@ struct Shared {
     catalogue: Arc<Catalogue>,
     commands: Vec<Topic>,
     to_bus: mpsc::Sender<(Topic, DataMap)>,
-    refused: Mutex<u64>,
+    /// Refused client messages by reason, logged without flooding.
+    refused: Tally,
 }
 
 impl ServerListener for Shared {
     fn on_message_data(&self, client: Client, channel: &ClientChannel, payload: &[u8]) {
-        let refused = match refusal(&self.catalogue, &self.commands, &channel.topic, payload) {
-            Ok(command) => match self.to_bus.try_send(command) {
-                Ok(()) => return,
-                Err(_) => format!("`{}`: too many commands waiting; not sent", channel.topic),
-            },
-            Err(reason) => reason,
-        };
-        if let Ok(mut n) = self.refused.lock() {
-            *n += 1;
-        }
-        tracing::warn!(
-            client = client.id().to_string(),
-            "foxglove: refused: {refused}"
+        let (reason, refused) =
+            match refusal(&self.catalogue, &self.commands, &channel.topic, payload) {
+                Ok(command) => match self.to_bus.try_send(command) {
+                    Ok(()) => return,
+                    Err(_) => (
+                        "busy",
+                        format!("`{}`: too many commands waiting; not sent", channel.topic),
+                    ),
+                },
+                Err(reason) => ("refused", reason),
+            };
+        self.refused.record(
+            "foxglove",
+            reason,
+            format_args!("client {}: {refused}", client.id()),
         );
         client.send_status(Status::error(format!("refused: {refused}")));
     }
@@ -396,7 +401,7 @@ impl Foxglove {
             catalogue: catalogue.clone(),
             commands: spec.commands.clone(),
             to_bus,
-            refused: Mutex::new(0),
+            refused: Tally::new(),
         });
         let mut server = foxglove::WebSocketServer::new()
             .name("seabus")
@@ -472,7 +477,7 @@ impl Foxglove {
 
     /// Client messages refused so far.
     pub fn refused(&self) -> u64 {
-        self.shared.refused.lock().map_or(0, |n| *n)
+        self.shared.refused.counts().values().sum()
     }
 }
 
