@@ -19,7 +19,7 @@ use common::*;
 use seabus_drivers::n2k::frame::Header;
 use seabus_medium::{DataMap, Node, Value as V};
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex, mpsc};
