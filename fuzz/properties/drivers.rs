@@ -472,7 +472,22 @@ pub fn n2k_send(data: &[u8]) -> bool {
     };
     let mut now = tokio::time::Instant::now();
     let mut c = Claimer::new(name, pick % 252, now);
-    let mut out = c.start(now);
+    // what a claimer sends must come from where it is when it sends it
+    let check = |c: &Claimer, out: Vec<(Header, Vec<u8>)>| {
+        for (h, d) in out {
+            match h.pgn {
+                claim::ADDRESS_CLAIM => {
+                    assert_eq!(h.source, c.address(), "a claim from another address");
+                    assert_eq!(d, c.name().to_le_bytes());
+                }
+                claim::REQUEST => assert_eq!(h.source, claim::NULL),
+                other => panic!("the claimer sent PGN {other}"),
+            }
+        }
+    };
+    let started = c.start(now);
+    assert_eq!(started.len(), 2);
+    check(&c, started);
     for chunk in rest.chunks(11) {
         if chunk.len() < 3 {
             break;
@@ -494,7 +509,8 @@ pub fn n2k_send(data: &[u8]) -> bool {
             data: body[..len].to_vec(),
         };
         now += std::time::Duration::from_millis(u64::from(chunk[1]));
-        out.extend(c.take(&msg, now));
+        let answer = c.take(&msg, now);
+        check(&c, answer);
         c.take_events();
         let a = c.address();
         assert!(a <= claim::MAX_ADDRESS || a == claim::NULL, "address {a}");
@@ -502,16 +518,6 @@ pub fn n2k_send(data: &[u8]) -> bool {
         assert!(c.devices().len() <= 252);
         if let Some(s) = c.source(now) {
             assert_eq!(s, a);
-        }
-        for (h, d) in out.drain(..) {
-            match h.pgn {
-                claim::ADDRESS_CLAIM => {
-                    assert_eq!(h.source, a, "a claim from another address");
-                    assert_eq!(d, c.name().to_le_bytes());
-                }
-                claim::REQUEST => assert_eq!(h.source, claim::NULL),
-                other => panic!("the claimer sent PGN {other}"),
-            }
         }
     }
     encoded

@@ -548,22 +548,31 @@ impl Nmea2000 {
         };
         let out = c.take(msg, now);
         let events = c.take_events();
+        // logged at most once a kind every 10 s: a device that keeps claiming our address
+        // cannot flood the log
         for e in events {
-            let text = match e {
-                claim::Event::Defended { address, other } => {
+            let (reason, text) = match e {
+                claim::Event::Defended { address, other } => (
+                    "n2k-address-defended",
                     format!(
                         "address {address}: claimed by NAME {other:016x} too; ours is lower, kept"
-                    )
-                }
-                claim::Event::Moved { from, to, other } => format!(
-                    "address {from} lost to NAME {other:016x} (lower than ours): claiming {to}"
+                    ),
                 ),
-                claim::Event::Lost { from, other } => format!(
-                    "address {from} lost to NAME {other:016x} (lower than ours), and no other \
-                     can be claimed: sending nothing"
+                claim::Event::Moved { from, to, other } => (
+                    "n2k-address-moved",
+                    format!(
+                        "address {from} lost to NAME {other:016x} (lower than ours): claiming {to}"
+                    ),
+                ),
+                claim::Event::Lost { from, other } => (
+                    "n2k-address-lost",
+                    format!(
+                        "address {from} lost to NAME {other:016x} (lower than ours), and no other \
+                         can be claimed: sending nothing"
+                    ),
                 ),
             };
-            tracing::warn!(target: "nmea2000", "{text}");
+            self.tally.record("nmea2000", reason, text);
         }
         out.into_iter()
             .filter_map(|(h, d)| CanFrame::data(h.id(), true, &d).ok())

@@ -179,11 +179,25 @@ impl PgnDef {
     /// The data of this PGN holding the fields of `map` (see the module's documentation).
     pub fn encode(&self, map: &DataMap) -> Result<Vec<u8>, EncodeError> {
         for (key, _) in map.iter() {
+            let in_set = |i: usize| {
+                self.repeating
+                    .iter()
+                    .any(|s| (s.start..s.start + s.size).contains(&i))
+            };
             let known = key == "header"
-                || self.fields.iter().any(|f| f.id == key)
+                || self
+                    .fields
+                    .iter()
+                    .enumerate()
+                    .any(|(i, f)| f.id == key && !in_set(i))
                 || (0..self.repeating.len()).any(|k| list_key(k) == key);
             if !known {
-                return Err(self.error("n2k-send-unknown-field", key, "the PGN has no such field"));
+                let what = if self.fields.iter().any(|f| f.id == key) {
+                    "a field of a repeating set: give it in `list` (or `list2`), one map per set"
+                } else {
+                    "the PGN has no such field"
+                };
+                return Err(self.error("n2k-send-unknown-field", key, what));
             }
         }
         let mut w = Writer {
@@ -723,6 +737,10 @@ mod tests {
             .encode(&DataMap::new().and("headng", Value::Float(1.0)))
             .unwrap_err();
         assert_eq!(e.reason, "n2k-send-unknown-field");
+        let e = def(129029)
+            .encode(&DataMap::new().and("referenceStationId", Value::Int(5)))
+            .unwrap_err();
+        assert!(e.detail.contains("give it in `list`"), "{e}");
         let e = d
             .encode(&DataMap::new().and("heading", Value::from("north")))
             .unwrap_err();
