@@ -13,6 +13,11 @@
 //! The devices join one after another: canboatjs (NAME highest) takes 40; node B (middle NAME)
 //! claims 40 and wins it, canboatjs moves to 41; node A (lowest NAME) claims 40 and wins it, B
 //! moves to the next address nobody holds, 42. Each then sends vessel headings from its address.
+//! Then node C, not arbitrary-address capable, claims 40: that is the NAME's top bit, so C's NAME
+//! is the lowest; A moves to 41, which it never heard claimed, and canboatjs, whose NAME is higher
+//! than A's, moves on to 43; last, node D, not capable either and with a higher unique
+//! number than C, claims 40: C defends it, D says it cannot claim (a claim from 254) and sends
+//! nothing.
 
 mod common;
 use common::*;
@@ -137,8 +142,9 @@ impl Relay {
     }
 }
 
-/// A node's system: its own UDP bus, an slcan pseudo-terminal, the driver claiming 40.
-fn node(dir: &Path, name: &str, unique: u32) -> (PathBuf, PathBuf, String) {
+/// A node's system: its own UDP bus, an slcan pseudo-terminal, the driver claiming 40 (with
+/// `extra` attributes).
+fn node(dir: &Path, name: &str, unique: u32, extra: &str) -> (PathBuf, PathBuf, String) {
     let pty = dir.join(format!("{name}.can"));
     let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
     let text = format!(
@@ -146,7 +152,7 @@ fn node(dir: &Path, name: &str, unique: u32) -> (PathBuf, PathBuf, String) {
   <medium name="bus" url="{}"/>
   <medium name="n2k" url="slcan+pty://{}"/>
   <module name="nmea2000" type="nmea2000" media="n2k bus" address="40"
-          unique_number="{unique}" manufacturer_code="999"/>
+          unique_number="{unique}" manufacturer_code="999" {extra}/>
 </seabus>"#,
         bus.replace('&', "&amp;"),
         pty.display()
@@ -238,7 +244,7 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
     device_at(&drx, 40, Duration::from_secs(10));
 
     // node B, the middle NAME, claims 40 and keeps it; canboatjs moves to 41
-    let (b_path, b_pty, b_bus) = node(dir.path(), "b", 200000);
+    let (b_path, b_pty, b_bus) = node(dir.path(), "b", 200000, "");
     let b_watch = schemes()
         .open("bus", &b_bus, &Node::new("watch-b"))
         .unwrap();
@@ -257,7 +263,7 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
     .await;
 
     // node A, the lowest NAME, claims 40 and keeps it; B moves to 42 (41 is canboatjs's)
-    let (a_path, a_pty, a_bus) = node(dir.path(), "a", 100000);
+    let (a_path, a_pty, a_bus) = node(dir.path(), "a", 100000, "");
     let a_watch = schemes()
         .open("bus", &a_bus, &Node::new("watch-a"))
         .unwrap();
@@ -313,4 +319,78 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
     // and their claims came from there
     assert_eq!(relay.sources(b_port, 60928, 0), [40, 42]);
     assert_eq!(relay.sources(a_port, 60928, 0), [40]);
+
+    // node C, not arbitrary-address capable, claims 40: that bit is the NAME's top one, so C's
+    // NAME is lower than every capable device's whatever its unique number. A moves to 41: it
+    // joined after canboatjs's claim of 41 and never heard it; canboatjs, whose NAME is higher
+    // than A's, moves on to 43 (42 is B's)
+    let (c_path, c_pty, c_bus) = node(dir.path(), "c", 400000, r#"arbitrary_address="false""#);
+    let c_watch = schemes()
+        .open("bus", &c_bus, &Node::new("watch-c"))
+        .unwrap();
+    let mut c_rx = c_watch.attach("watch");
+    c_rx.subscribe("n2k.status").unwrap();
+    let c_tx = c_watch.attach("send");
+    let _c = spawn_run(&c_path, &[]);
+    let c_port = relay.add_pty(&c_pty);
+    status_until(
+        &mut a_rx,
+        Duration::from_secs(10),
+        "A at 41",
+        claimed_at(41),
+    )
+    .await;
+    device_at(&drx, 43, Duration::from_secs(10));
+    status_until(
+        &mut c_rx,
+        Duration::from_secs(10),
+        "C at 40",
+        claimed_at(40),
+    )
+    .await;
+
+    // node D, not capable either and with a higher unique number, claims 40: C defends it, and D
+    // says it cannot claim (a claim from 254) and sends nothing
+    let (d_path, d_pty, d_bus) = node(dir.path(), "d", 500000, r#"arbitrary_address="false""#);
+    let d_watch = schemes()
+        .open("bus", &d_bus, &Node::new("watch-d"))
+        .unwrap();
+    let mut d_rx = d_watch.attach("watch");
+    d_rx.subscribe("n2k.status").unwrap();
+    let d_tx = d_watch.attach("send");
+    let _d = spawn_run(&d_path, &[]);
+    let d_port = relay.add_pty(&d_pty);
+    let d = status_until(&mut d_rx, Duration::from_secs(10), "D cannot claim", |m| {
+        m.get_str("state") == Some("cannot-claim")
+    })
+    .await;
+    assert_eq!(d.get_i64("address"), Some(254), "{d}");
+    let mark = relay.log.lock().unwrap().len();
+    for _ in 0..5 {
+        for tx in [&a_tx, &b_tx, &c_tx, &d_tx] {
+            tx.publish(
+                seabus_medium::Kind::Data,
+                "n2k.out.vesselHeading",
+                DataMap::new().and("heading", V::Float(45.0)),
+            )
+            .await
+            .unwrap();
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert_eq!(relay.sources(a_port, 127250, mark), [41]);
+    assert_eq!(relay.sources(b_port, 127250, mark), [42]);
+    assert_eq!(relay.sources(c_port, 127250, mark), [40]);
+    assert_eq!(relay.sources(dev_port, 127250, mark), [43]);
+    assert_eq!(relay.sources(d_port, 127250, mark), Vec::<u8>::new());
+    assert_eq!(relay.sources(d_port, 60928, 0), [40, 254]);
+    let d = status_until(&mut d_rx, Duration::from_secs(8), "D's refusals", |m| {
+        m.get("refused")
+            .and_then(V::as_map)
+            .and_then(|r| r.get_i64("n2k-send-no-address"))
+            .is_some_and(|n| n >= 5)
+    })
+    .await;
+    assert_eq!(d.get_i64("sent"), Some(0), "{d}");
 }
