@@ -76,6 +76,13 @@ enum Command {
         /// .lcm files or directories whose types are shown decoded (besides the built-in ones).
         #[arg(long = "lcm-types", value_name = "PATH")]
         lcm_types: Vec<PathBuf>,
+        /// Show the CAN frames of an NMEA 2000 network as PGNs: reassembled (fast packets, ISO
+        /// transport), decoded, with the names and units of their fields.
+        #[arg(long)]
+        n2k: bool,
+        /// canboat's canboat.json, for the PGNs --n2k shows (besides the built-in ones).
+        #[arg(long = "n2k-database", value_name = "FILE", requires = "n2k")]
+        n2k_database: Option<PathBuf>,
     },
     /// Publish a datamap on a medium.
     Pub(PubArgs),
@@ -301,8 +308,13 @@ fn main() -> ExitCode {
                 stats,
                 topics,
                 lcm_types,
+                n2k,
+                n2k_database,
             } => match seconds(duration) {
-                Ok(d) => spy::spy(&url, d, json, stats, &topics, &lcm_types).await,
+                Ok(d) => {
+                    let n2k = n2k.then_some(n2k_database);
+                    spy::spy(&url, d, json, stats, &topics, &lcm_types, n2k).await
+                }
                 Err(code) => code,
             },
             Command::Pub(args) => publish(args).await,

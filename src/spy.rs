@@ -1,5 +1,6 @@
 //! `seabus spy`: a live table of the topics on a medium, or one JSON object per message; with
-//! `--stats`, the medium's counters (what it read, rejected, dropped and lost) as well.
+//! `--stats`, the medium's counters (what it read, rejected, dropped and lost) as well; with
+//! `--n2k`, the CAN frames of an NMEA 2000 network as PGNs with named fields and units.
 
 use crate::lcmtypes::Types;
 use seabus_medium::{Interface, Medium, MediumStats, Message, Node, Payload, Topic};
@@ -146,10 +147,72 @@ fn count(rows: &mut BTreeMap<Topic, Row>, m: Message) {
     }
 }
 
+/// `--n2k`: CAN frames shown as the NMEA 2000 PGNs they make.
+struct N2k {
+    #[cfg(feature = "can")]
+    listener: seabus_drivers::n2k::describe::Listener,
+    /// frames that made no PGN, by reason
+    refused: BTreeMap<&'static str, u64>,
+}
+
+impl N2k {
+    #[cfg(feature = "can")]
+    fn new(database: Option<&std::path::Path>) -> Result<N2k, String> {
+        Ok(N2k {
+            listener: seabus_drivers::n2k::describe::Listener::new(database)
+                .map_err(|e| e.to_string())?,
+            refused: BTreeMap::new(),
+        })
+    }
+
+    #[cfg(not(feature = "can"))]
+    fn new(_: Option<&std::path::Path>) -> Result<N2k, String> {
+        Err("--n2k: this seabus was built without CAN (the `can` feature)".into())
+    }
+
+    /// What a message gives: `None` when it is no CAN frame (shown as it is); else the PGN it
+    /// completes, as a message on `n2k.SOURCE.ID` (its fields by name, with units, for the
+    /// table) and as the JSON object `--json` prints.
+    #[cfg(feature = "can")]
+    fn take(&mut self, m: &Message) -> Option<Option<(Message, String)>> {
+        use seabus_medium_can::frame::CanFrame;
+        let frame = CanFrame::from_message(m.topic.as_str(), &m.payload).ok()?;
+        let got = self.listener.push(&frame, Instant::now());
+        for r in self.listener.take_rejections() {
+            *self.refused.entry(r.reason).or_default() += 1;
+        }
+        let d = got?;
+        let topic = Topic::new(&d.topic()).ok()?;
+        let mut map = d.to_map();
+        map.insert("topic", seabus_medium::Value::from(d.topic()));
+        let json = seabus_medium::json::to_json(&map).unwrap_or_else(|e| {
+            format!(
+                "{{\"error\":{}}}",
+                serde_json::to_string(&e.to_string()).unwrap_or_default()
+            )
+        });
+        Some(Some((
+            Message {
+                topic,
+                payload: Payload::from(d.named()),
+                ..m.clone()
+            },
+            json,
+        )))
+    }
+
+    #[cfg(not(feature = "can"))]
+    fn take(&mut self, _: &Message) -> Option<Option<(Message, String)>> {
+        None
+    }
+}
+
 /// Runs the spy until `duration` passes (or Ctrl-C). LCM messages of the built-in types or those
 /// of `lcm_types` are shown decoded. With `stats`, the medium's counters are printed to stderr
 /// ([`stats_line`]) every [`STATS_EVERY`] (under the table at each refresh when it is drawn live)
-/// and when the spy ends.
+/// and when the spy ends. With `n2k` (and canboat's database file, when given), CAN frames are
+/// shown as the NMEA 2000 PGNs they make ([`N2k`]); the frames that make none are counted and
+/// said when the spy ends.
 pub async fn spy(
     url: &str,
     duration: Option<Duration>,
@@ -157,7 +220,15 @@ pub async fn spy(
     stats: bool,
     topics: &str,
     lcm_types: &[std::path::PathBuf],
+    n2k: Option<Option<std::path::PathBuf>>,
 ) -> ExitCode {
+    let mut n2k = match n2k.map(|db| N2k::new(db.as_deref())).transpose() {
+        Ok(n) => n,
+        Err(e) => {
+            eprintln!("seabus spy: {e}");
+            return ExitCode::from(2);
+        }
+    };
     let types = match crate::lcmtypes::load(lcm_types) {
         Ok(t) => t,
         Err(e) => {
@@ -207,6 +278,21 @@ pub async fn spy(
             }
             m = port.recv() => {
                 let Some(m) = m else { break };
+                let m = match n2k.as_mut().and_then(|n| n.take(&m)) {
+                    None => m,
+                    Some(None) => continue,
+                    Some(Some((pgn, line))) => {
+                        if json {
+                            let mut out = stdout.lock();
+                            if writeln!(out, "{line}").is_err() {
+                                break;
+                            }
+                        } else {
+                            count(&mut rows, pgn);
+                        }
+                        continue;
+                    }
+                };
                 if json {
                     let mut out = stdout.lock();
                     if writeln!(out, "{}", message_json(&m, &types)).is_err() {
@@ -220,6 +306,12 @@ pub async fn spy(
     }
     if !json {
         print_table(&rows, &types, &mut stdout.lock(), false);
+    }
+    if let Some(n) = n2k.as_ref().filter(|n| !n.refused.is_empty()) {
+        eprintln!(
+            "seabus spy: NMEA 2000 frames that made no PGN: {:?}",
+            n.refused
+        );
     }
     let st = medium.stats();
     if stats {

@@ -24,4 +24,7 @@ seed_tests! {
     /// NMEA 2000 frames go through the driver without a panic, to bounded messages, finite values
     /// and valid datasets; reassembled fast packets frame again to themselves.
     n2k_frames_seeds => n2k_frames,
+    /// Datamaps encode into PGNs or are refused without a panic, and what encodes decodes back;
+    /// an address claimer keeps to the addresses a device may hold.
+    n2k_send_seeds => n2k_send,
 }

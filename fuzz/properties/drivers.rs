@@ -350,3 +350,175 @@ pub fn n2k_frames(data: &[u8]) -> bool {
     }
     whole
 }
+
+/// What the NMEA 2000 driver sends: the input's first byte picks a built-in PGN, the second says
+/// how many entries (modulo 16) follow, and entries of 10 bytes each make its datamap — a byte
+/// picking the field (past the fields: `list`, or a key the PGN has not), a byte picking the
+/// value's type (integer, float from the 8 bytes' bits, a string, a bool, a list of strings,
+/// bytes, a list of maps) and 8 value bytes. The encoder takes or refuses any map without a
+/// panic; what it takes fits its framing (8 bytes for a single frame, 223 for a fast packet) and
+/// decodes back to every number given, within one raw step (a bearing just below a full turn
+/// may come back as 0). Then the rest of the input, as messages heard in chunks of 11 bytes (a
+/// byte of source, one of destination, one choosing a claim, a request or another PGN, and 8
+/// data bytes, the first of which gives the length modulo 10), goes to an address claimer: the
+/// address it gives is always one a device may hold (0–251) or the null address (254), and every
+/// frame it answers with is a claim from that address or a request from 254. True when the map
+/// encoded.
+pub fn n2k_send(data: &[u8]) -> bool {
+    use seabus_drivers::n2k::builtin;
+    use seabus_drivers::n2k::claim::{self, Claimer, Name, State};
+    use seabus_drivers::n2k::frame::{GLOBAL, Header, Message};
+    use seabus_drivers::n2k::pgn::{Kind, Packet};
+    use seabus_medium::{DataMap, Value};
+    let db = builtin::database();
+    let defs: Vec<_> = db.iter().cloned().collect();
+    let Some((&pick, mut rest)) = data.split_first() else {
+        return false;
+    };
+    let def = &defs[usize::from(pick) % defs.len()];
+    let Some((&entries, tail)) = rest.split_first() else {
+        return false;
+    };
+    rest = tail;
+    let mut map = DataMap::new();
+    for _ in 0..entries % 16 {
+        if rest.len() < 10 {
+            break;
+        }
+        let (entry, tail) = rest.split_at(10);
+        rest = tail;
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&entry[2..]);
+        let n = u64::from_le_bytes(b);
+        let key = match usize::from(entry[0]) {
+            i if i < def.fields.len() => def.fields[i].id.to_string(),
+            i if i == def.fields.len() => "list".to_string(),
+            _ => "nonsense".to_string(),
+        };
+        let text =
+            || String::from_utf8_lossy(&entry[2..2 + usize::from(entry[2] % 7)]).into_owned();
+        let value = match entry[1] % 8 {
+            0 => Value::Int(n as i64 >> (entry[1] >> 3)),
+            1 => Value::Float(f64::from_bits(n)),
+            2 => Value::Float((n as i64 >> 40) as f64 / 1000.0),
+            3 => Value::from(text()),
+            4 => Value::Bool(n & 1 == 1),
+            5 => Value::List(vec![Value::from(text())]),
+            6 => Value::Bytes(entry[2..].to_vec()),
+            _ => Value::List(vec![Value::Map(
+                DataMap::new().and(
+                    def.fields
+                        .get(usize::from(entry[2]) % def.fields.len().max(1))
+                        .map_or("x".to_string(), |f| f.id.to_string()),
+                    Value::Int(i64::from(entry[3])),
+                ),
+            )]),
+        };
+        map.insert(key, value);
+    }
+    let encoded = match def.encode(&map) {
+        Ok(bytes) => {
+            let most = match def.packet {
+                Packet::Single => 8,
+                Packet::Fast => 223,
+                Packet::Iso => 1785,
+            };
+            assert!(
+                bytes.len() <= most,
+                "{} bytes of PGN {}",
+                bytes.len(),
+                def.pgn
+            );
+            let back = def.decode(&bytes).map;
+            for f in &def.fields {
+                let (Kind::Number, Some(given)) = (&f.kind, map.get(&f.id).and_then(Value::as_f64))
+                else {
+                    continue;
+                };
+                let got = back.get(&f.id).and_then(Value::as_f64).unwrap_or_else(|| {
+                    panic!(
+                        "PGN {} {}: {given} was sent, nothing came back",
+                        def.pgn, f.id
+                    )
+                });
+                let step = (f.to_seabus(f.resolution) - f.to_seabus(0.0)).abs();
+                let near = (got - given).abs() <= step * 0.5001 + 1e-9 * given.abs().max(1.0);
+                let wrapped = got == 0.0 && (given - 360.0).abs() <= step;
+                assert!(
+                    near || wrapped,
+                    "PGN {} {}: {given} sent, {got} back",
+                    def.pgn,
+                    f.id
+                );
+            }
+            true
+        }
+        Err(e) => {
+            assert!(e.reason.starts_with("n2k-send-"), "{e:?}");
+            assert!(!e.detail.is_empty());
+            false
+        }
+    };
+    // the claimer, on what the rest of the input says was heard
+    let name = Name {
+        unique_number: u32::from(pick) * 1000,
+        manufacturer_code: 2046,
+        device_instance: 0,
+        device_function: 130,
+        device_class: 25,
+        system_instance: 0,
+        industry_group: 4,
+        arbitrary_address_capable: pick & 1 == 0,
+    };
+    let mut now = tokio::time::Instant::now();
+    let mut c = Claimer::new(name, pick % 252, now);
+    // what a claimer sends must come from where it is when it sends it
+    let check = |c: &Claimer, out: Vec<(Header, Vec<u8>)>| {
+        for (h, d) in out {
+            match h.pgn {
+                claim::ADDRESS_CLAIM => {
+                    assert_eq!(h.source, c.address(), "a claim from another address");
+                    assert_eq!(d, c.name().to_le_bytes());
+                }
+                claim::REQUEST => assert_eq!(h.source, claim::NULL),
+                other => panic!("the claimer sent PGN {other}"),
+            }
+        }
+    };
+    let started = c.start(now);
+    assert_eq!(started.len(), 2);
+    check(&c, started);
+    for chunk in rest.chunks(11) {
+        if chunk.len() < 3 {
+            break;
+        }
+        let pgn = match chunk[2] % 3 {
+            0 => claim::ADDRESS_CLAIM,
+            1 => claim::REQUEST,
+            _ => 127250,
+        };
+        let body = &chunk[3..];
+        let len = usize::from(body.first().copied().unwrap_or(0) % 10).min(body.len());
+        let msg = Message {
+            header: Header {
+                priority: 6,
+                pgn,
+                source: chunk[0],
+                destination: if chunk[1] & 1 == 0 { GLOBAL } else { chunk[1] },
+            },
+            data: body[..len].to_vec(),
+        };
+        now += std::time::Duration::from_millis(u64::from(chunk[1]));
+        let answer = c.take(&msg, now);
+        check(&c, answer);
+        c.take_events();
+        let a = c.address();
+        assert!(a <= claim::MAX_ADDRESS || a == claim::NULL, "address {a}");
+        assert_eq!(c.state() == State::CannotClaim, a == claim::NULL);
+        assert!(c.devices().len() <= 252);
+        if let Some(s) = c.source(now) {
+            assert_eq!(s, a);
+        }
+    }
+    encoded
+}

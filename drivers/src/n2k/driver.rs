@@ -34,9 +34,11 @@
 //! are left out) and `n2k-out-of-range` (a dataset value outside the dataset's range: the dataset
 //! is not published).
 
-use super::frame::{Assembler, Limits, Message};
+use super::claim::{self, Claimer, Name};
+use super::encode::EncodeError;
+use super::frame::{Assembler, GLOBAL, Header, Limits, Message, fast_frames};
 use super::nav::{self, Navigator};
-use super::pgn::{Database, PgnDef};
+use super::pgn::{Database, Packet, PgnDef};
 use super::{builtin, json};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
@@ -48,7 +50,7 @@ use seabus_modules::module::{
     Context, Declaration, Module, ModuleError, ModuleKind, TimerId, TopicDecl,
 };
 use seabus_modules::registry::{Built, ModuleConfig, ModuleType};
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -65,6 +67,10 @@ pub const TYPE: ModuleType = ModuleType {
 const SWEEP: TimerId = 1;
 /// Its period.
 const SWEEP_EVERY: Duration = Duration::from_millis(250);
+/// The timer that publishes the address claim's status.
+const STATUS: TimerId = 2;
+/// Its period.
+const STATUS_EVERY: Duration = Duration::from_secs(5);
 
 /// The `nmea2000` driver.
 pub struct Nmea2000 {
@@ -80,6 +86,67 @@ pub struct Nmea2000 {
     catalogue: Arc<Catalogue>,
     ingress: Option<Ingress>,
     tally: Tally,
+    /// sending: the address claim, when an address is configured
+    sender: Option<Sender>,
+}
+
+/// What sending needs: the address claim, the topics sent as PGNs, the fast-packet sequences.
+struct Sender {
+    name: Name,
+    preferred: u8,
+    claimer: Option<Claimer>,
+    /// `PREFIX.out.`
+    out_prefix: String,
+    /// topic → the PGN its data is sent as (`send`)
+    sends: Vec<(String, Arc<PgnDef>)>,
+    /// the next fast-packet sequence number of each PGN
+    seq: HashMap<u32, u8>,
+    status_topic: Topic,
+    /// messages sent
+    sent: u64,
+    /// messages refused, by reason
+    refused: BTreeMap<&'static str, u64>,
+    /// the state last published
+    shown: Option<(&'static str, u8)>,
+}
+
+/// The PGN a `send` entry or an `out` topic names: its number or canboat's identifier.
+fn named_pgn(db: &Database, word: &str) -> Option<Arc<PgnDef>> {
+    match word.parse::<u32>() {
+        Ok(n) => db.definitions(n).first().cloned(),
+        Err(_) => db.iter().find(|d| d.id == word).cloned(),
+    }
+}
+
+/// A standard dataset's fields as the fields of the PGN it is sent as (keys the PGN does not
+/// have are left out: a dataset carries more than a PGN holds).
+fn from_dataset(def: &PgnDef, map: &DataMap) -> DataMap {
+    let mut out = DataMap::with_capacity(map.len());
+    for (k, v) in map.iter() {
+        let (key, value) = match (def.pgn, k) {
+            (127250, "magnetic") => (
+                "reference",
+                Value::from(if v.as_bool() == Some(true) {
+                    "Magnetic"
+                } else {
+                    "True"
+                }),
+            ),
+            (129025, "lat") => ("latitude", v.clone()),
+            (129025, "lon") => ("longitude", v.clone()),
+            (129026, "speed") => ("sog", v.clone()),
+            (129026, "course") => ("cog", v.clone()),
+            (128267, "altitude") => ("depth", v.clone()),
+            _ => (k, v.clone()),
+        };
+        if key == "header" || def.fields.iter().any(|f| f.id == key) {
+            out.insert(key.to_string(), value);
+        }
+    }
+    if def.pgn == 129026 && out.get("cog").is_some() && out.get("cogReference").is_none() {
+        out.insert("cogReference", Value::from("True"));
+    }
+    out
 }
 
 fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
@@ -160,6 +227,24 @@ impl Nmea2000 {
         for (dataset, topic) in &outputs {
             decl = decl.produces(TopicDecl::dataset(topic, dataset).on_port(1));
         }
+        let sender = Self::sender(p, &db, &prefix, &outputs)?;
+        if let Some(s) = &sender {
+            decl = decl
+                .consumes(TopicDecl::topic(format!("{}*", s.out_prefix)).on_port(1))
+                .produces(
+                    TopicDecl::topic(s.status_topic.as_str())
+                        .field("address", "")
+                        .field("state", "")
+                        .field("name", "")
+                        .on_port(1),
+                )
+                .produces(TopicDecl::topic("can.*"));
+            for (topic, _) in &s.sends {
+                decl = decl.consumes(TopicDecl::topic(topic).on_port(1));
+            }
+        } else if let Some(param) = p.get("send") {
+            return Err(param.error("sending needs an `address` to claim"));
+        }
         let mut declared = std::collections::HashSet::new();
         for d in db.iter() {
             if !declared.insert(d.id.clone()) {
@@ -187,9 +272,311 @@ impl Nmea2000 {
                 catalogue: Arc::new(cat.clone()),
                 ingress: None,
                 tally: Tally::new(),
+                sender,
             },
             decl,
         ))
+    }
+
+    /// The sending side, when `address` is given: the NAME, the `send` topics.
+    fn sender(
+        p: &seabus_modules::Params,
+        db: &Database,
+        prefix: &str,
+        outputs: &[(&'static str, Topic)],
+    ) -> Result<Option<Sender>, FileError> {
+        let Some(address) = p.get("address") else {
+            return Ok(None);
+        };
+        let preferred = address
+            .value
+            .trim()
+            .parse::<u8>()
+            .ok()
+            .filter(|a| *a <= claim::MAX_ADDRESS)
+            .ok_or_else(|| {
+                address.error(format!("`{}` is not an address (0 to 251)", address.value))
+            })?;
+        let ranged = |name: &str, max: u32, default: u32, what: &str| -> Result<u32, FileError> {
+            match p.get(name) {
+                None => Ok(default),
+                Some(a) => a
+                    .value
+                    .trim()
+                    .parse::<u32>()
+                    .ok()
+                    .filter(|v| *v <= max)
+                    .ok_or_else(|| a.error(format!("`{}` is not {what} (0 to {max})", a.value))),
+            }
+        };
+        let name = Name {
+            unique_number: ranged("unique_number", 0x1F_FFFF, 0, "a unique number")?,
+            manufacturer_code: ranged("manufacturer_code", 2047, 2046, "a manufacturer code")?
+                as u16,
+            device_instance: ranged("device_instance", 255, 0, "a device instance")? as u8,
+            device_function: ranged("device_function", 255, 130, "a device function")? as u8,
+            device_class: ranged("device_class", 127, 25, "a device class")? as u8,
+            system_instance: ranged("system_instance", 15, 0, "a system instance")? as u8,
+            industry_group: ranged("industry_group", 7, 4, "an industry group")? as u8,
+            arbitrary_address_capable: p.flag_or("arbitrary_address", true)?,
+        };
+        if p.get("unique_number").is_none() {
+            return Err(address.error(
+                "a device that claims an address needs its `unique_number` (0 to 2097151), \
+                 different from every other device of its manufacturer code on the network",
+            ));
+        }
+        let mut sends = Vec::new();
+        if let Some(param) = p.get("send") {
+            for word in param.value.split([' ', ',']).filter(|w| !w.is_empty()) {
+                let Some((topic, pgn)) = word.split_once('=') else {
+                    return Err(param.error(format!(
+                        "`{word}` is not TOPIC=PGN (`nav.heading=vesselHeading`)"
+                    )));
+                };
+                Topic::new(topic).map_err(|e| param.error(format!("`{topic}`: {e}")))?;
+                let def = named_pgn(db, pgn).ok_or_else(|| {
+                    param.error(format!(
+                        "`{pgn}` is no PGN of the database ({}): a number or canboat's identifier",
+                        db.source
+                    ))
+                })?;
+                if let Some((dataset, _)) = outputs.iter().find(|(_, t)| t.as_str() == topic) {
+                    return Err(param.error(format!(
+                        "`{topic}` is where this driver publishes the {dataset} dataset it reads \
+                         from the network: sending it back would loop (publish it on another topic)"
+                    )));
+                }
+                if topic.starts_with(&format!("{prefix}.")) {
+                    return Err(param.error(format!(
+                        "`{topic}` is under `{prefix}.`, where this driver publishes the PGNs it \
+                         reads: publish on `{prefix}.out.ID` to send a PGN"
+                    )));
+                }
+                if def.packet == Packet::Iso {
+                    return Err(param.error(format!(
+                        "PGN {} travels by the ISO transport protocol, which this driver does \
+                         not send",
+                        def.pgn
+                    )));
+                }
+                sends.push((topic.to_string(), def));
+            }
+        }
+        let status_topic = Topic::new(&format!("{prefix}.status"))
+            .map_err(|e| p.get("prefix").map_or_else(|| p.error(&e), |a| a.error(&e)))?;
+        Ok(Some(Sender {
+            name,
+            preferred,
+            claimer: None,
+            out_prefix: format!("{prefix}.out."),
+            sends,
+            seq: HashMap::new(),
+            status_topic,
+            sent: 0,
+            refused: BTreeMap::new(),
+            shown: None,
+        }))
+    }
+
+    /// The address this driver sends from, once claimed and its wait is over.
+    pub fn source(&mut self, now: Instant) -> Option<u8> {
+        self.sender
+            .as_mut()?
+            .claimer
+            .as_mut()
+            .and_then(|c| c.source(now))
+    }
+
+    /// Starts the address claim: the frames to send.
+    pub fn start_claim(&mut self, now: Instant) -> Vec<CanFrame> {
+        let Some(s) = self.sender.as_mut() else {
+            return Vec::new();
+        };
+        let mut c = Claimer::new(s.name, s.preferred, now);
+        let out = c.start(now);
+        s.claimer = Some(c);
+        out.into_iter()
+            .filter_map(|(h, d)| CanFrame::data(h.id(), true, &d).ok())
+            .collect()
+    }
+
+    /// Counts (and logs, rate-limited) a message that was not sent.
+    fn refuse_send(&mut self, reason: &'static str, detail: impl std::fmt::Display) {
+        if let Some(s) = self.sender.as_mut() {
+            *s.refused.entry(reason).or_default() += 1;
+        }
+        self.tally.record("nmea2000", reason, detail);
+    }
+
+    /// The frames of bus message `topic`/`map` sent as a PGN: for `PREFIX.out.ID` topics the
+    /// datamap is the PGN's fields (a key that is not one is refused); for the `send` topics a
+    /// standard dataset or the PGN's fields. Nothing (counted) before an address is held, and
+    /// for a datamap the PGN cannot hold.
+    pub fn outgoing(&mut self, topic: &str, map: &DataMap, now: Instant) -> Vec<CanFrame> {
+        let Some(s) = self.sender.as_ref() else {
+            return Vec::new();
+        };
+        let (def, map) = if let Some(id) = topic.strip_prefix(&s.out_prefix) {
+            match named_pgn(&self.db, id) {
+                Some(d) => (d, map.clone()),
+                None => {
+                    self.refuse_send(
+                        "n2k-send-unknown-pgn",
+                        format_args!("topic `{topic}`: `{id}` is no PGN of the database"),
+                    );
+                    return Vec::new();
+                }
+            }
+        } else if let Some((_, d)) = s.sends.iter().find(|(t, _)| t == topic) {
+            let d = d.clone();
+            let m = from_dataset(&d, map);
+            (d, m)
+        } else {
+            return Vec::new();
+        };
+        let Some(source) = self.source(now) else {
+            self.refuse_send(
+                "n2k-send-no-address",
+                format_args!(
+                    "topic `{topic}`: PGN {} not sent: no address claimed yet",
+                    def.pgn
+                ),
+            );
+            return Vec::new();
+        };
+        match self.frames(&def, &map, source) {
+            Ok(frames) => {
+                if let Some(s) = self.sender.as_mut() {
+                    s.sent += 1;
+                }
+                frames
+            }
+            Err(e) => {
+                self.refuse_send(e.reason, format_args!("topic `{topic}`: {e}"));
+                Vec::new()
+            }
+        }
+    }
+
+    /// The frames of `map` as `def` from `source`.
+    fn frames(
+        &mut self,
+        def: &PgnDef,
+        map: &DataMap,
+        source: u8,
+    ) -> Result<Vec<CanFrame>, EncodeError> {
+        let data = def.encode(map)?;
+        let header = map.get("header").and_then(Value::as_map);
+        let number = |key: &str, max: i64| {
+            header
+                .and_then(|h| h.get_i64(key))
+                .filter(|v| (0..=max).contains(v))
+        };
+        let h = Header {
+            priority: number("prio", 7).map_or(def.priority.unwrap_or(6), |v| v as u8),
+            pgn: def.pgn,
+            source,
+            destination: number("dst", 255).map_or(GLOBAL, |v| v as u8),
+        };
+        let chunks = match def.packet {
+            Packet::Single => vec![data],
+            Packet::Fast => {
+                let s = self
+                    .sender
+                    .as_mut()
+                    .map(|s| s.seq.entry(def.pgn).or_insert(0));
+                let seq = s.map_or(0, |n| {
+                    let v = *n;
+                    *n = (v + 1) & 7;
+                    v
+                });
+                fast_frames(seq, &data)
+            }
+            Packet::Iso => {
+                return Err(EncodeError {
+                    reason: "n2k-send-iso",
+                    detail: format!(
+                        "PGN {} travels by the ISO transport protocol, which this driver does not send",
+                        def.pgn
+                    ),
+                });
+            }
+        };
+        Ok(chunks
+            .iter()
+            .filter_map(|c| CanFrame::data(h.id(), true, c).ok())
+            .collect())
+    }
+
+    /// The status of the address claim (`PREFIX.status`), when it changed or `always`.
+    fn status(&mut self, now: Instant, always: bool) -> Option<(Topic, DataMap)> {
+        let s = self.sender.as_mut()?;
+        let c = s.claimer.as_mut()?;
+        c.poll(now);
+        let key = (c.state().name(), c.address());
+        if !always && s.shown == Some(key) {
+            return None;
+        }
+        s.shown = Some(key);
+        let devices: DataMap = c
+            .devices()
+            .iter()
+            .map(|(a, n)| (Key::Owned(a.to_string()), Value::from(format!("{n:016x}"))))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(DataMap::new(), |m, (k, v)| m.and(k, v));
+        let refused = s
+            .refused
+            .iter()
+            .fold(DataMap::new(), |m, (k, v)| m.and(*k, Value::Int(*v as i64)));
+        let map = DataMap::new()
+            .and("address", Value::Int(i64::from(c.address())))
+            .and("preferred", Value::Int(i64::from(s.preferred)))
+            .and("state", Value::label(c.state().name()))
+            .and("name", Value::from(format!("{:016x}", c.name())))
+            .and("devices", Value::Map(devices))
+            .and("sent", Value::Int(s.sent as i64))
+            .and("refused", Value::Map(refused));
+        Some((s.status_topic.clone(), map))
+    }
+
+    /// Takes a whole message for the address claim: the frames to answer with.
+    fn claim_take(&mut self, msg: &Message, now: Instant) -> Vec<CanFrame> {
+        let Some(c) = self.sender.as_mut().and_then(|s| s.claimer.as_mut()) else {
+            return Vec::new();
+        };
+        let out = c.take(msg, now);
+        let events = c.take_events();
+        // logged at most once a kind every 10 s: a device that keeps claiming our address
+        // cannot flood the log
+        for e in events {
+            let (reason, text) = match e {
+                claim::Event::Defended { address, other } => (
+                    "n2k-address-defended",
+                    format!(
+                        "address {address}: claimed by NAME {other:016x} too; ours is lower, kept"
+                    ),
+                ),
+                claim::Event::Moved { from, to, other } => (
+                    "n2k-address-moved",
+                    format!(
+                        "address {from} lost to NAME {other:016x} (lower than ours): claiming {to}"
+                    ),
+                ),
+                claim::Event::Lost { from, other } => (
+                    "n2k-address-lost",
+                    format!(
+                        "address {from} lost to NAME {other:016x} (lower than ours), and no other \
+                         can be claimed: sending nothing"
+                    ),
+                ),
+            };
+            self.tally.record("nmea2000", reason, text);
+        }
+        out.into_iter()
+            .filter_map(|(h, d)| CanFrame::data(h.id(), true, &d).ok())
+            .collect()
     }
 
     /// The assembler's counts of what it refused, by reason.
@@ -288,8 +675,16 @@ impl Nmea2000 {
     /// What one CAN frame gives: nothing until it completes a message, then its PGN topic (with
     /// an empty dataset name) and datamap, and the datasets it makes.
     pub fn take(&mut self, frame: &CanFrame, now: Instant) -> Vec<(Topic, &'static str, DataMap)> {
+        match self.assemble(frame, now) {
+            Some(m) => self.read(&m, now),
+            None => Vec::new(),
+        }
+    }
+
+    /// The whole message one CAN frame completes, if any.
+    pub fn assemble(&mut self, frame: &CanFrame, now: Instant) -> Option<Message> {
         if frame.kind() == FrameKind::Error {
-            return Vec::new();
+            return None;
         }
         let db = self.db.clone();
         let whole = self.assembler.push(
@@ -301,9 +696,28 @@ impl Nmea2000 {
             now,
         );
         self.report();
-        match whole {
-            Some(m) => self.read(&m, now),
-            None => Vec::new(),
+        whole
+    }
+
+    /// Sends CAN frames on the CAN medium.
+    async fn transmit(&mut self, ctx: &mut Context, frames: Vec<CanFrame>) {
+        for f in frames {
+            let map = DataMap::new().and("data", Value::Bytes(f.payload().to_vec()));
+            if let Err(e) = ctx
+                .publish_on(0, Kind::Data, format!("can.{:08x}", f.id()), map)
+                .await
+            {
+                self.refuse_send("n2k-send-failed", &e);
+            }
+        }
+    }
+
+    /// Publishes the claim's status when it changed (or `always`).
+    async fn show_status(&mut self, ctx: &mut Context, always: bool) {
+        if let Some((topic, map)) = self.status(Instant::now(), always)
+            && let Err(e) = ctx.publish_on(1, Kind::Data, topic, map).await
+        {
+            self.tally.record(ctx.name(), "not-published", &e);
         }
     }
 
@@ -311,7 +725,16 @@ impl Nmea2000 {
         let Ok(frame) = CanFrame::from_message(msg.topic.as_str(), &msg.payload) else {
             return Ok(());
         };
-        for (topic, dataset, map) in self.take(&frame, Instant::now()) {
+        let now = Instant::now();
+        let Some(whole) = self.assemble(&frame, now) else {
+            return Ok(());
+        };
+        if matches!(whole.header.pgn, claim::ADDRESS_CLAIM | claim::REQUEST) {
+            let answer = self.claim_take(&whole, now);
+            self.transmit(ctx, answer).await;
+            self.show_status(ctx, false).await;
+        }
+        for (topic, dataset, map) in self.read(&whole, now) {
             let sent = if dataset.is_empty() {
                 ctx.publish_on(1, Kind::Data, topic, map).await
             } else {
@@ -330,6 +753,12 @@ impl Module for Nmea2000 {
     async fn start(&mut self, ctx: &mut Context) -> Result<(), ModuleError> {
         self.ingress = ctx.port(0).map(|p| p.medium().ingress());
         ctx.every(SWEEP, SWEEP_EVERY);
+        if self.sender.is_some() {
+            let frames = self.start_claim(Instant::now());
+            self.transmit(ctx, frames).await;
+            self.show_status(ctx, true).await;
+            ctx.every(STATUS, STATUS_EVERY);
+        }
         Ok(())
     }
 
@@ -342,6 +771,16 @@ impl Module for Nmea2000 {
         if port == 0 {
             self.on_frame(ctx, &msg).await
         } else {
+            let Some(map) = msg.payload.as_map() else {
+                self.refuse_send(
+                    "n2k-send-bad-value",
+                    format_args!("topic `{}`: not a datamap", msg.topic),
+                );
+                return Ok(());
+            };
+            let frames = self.outgoing(msg.topic.as_str(), map, Instant::now());
+            self.transmit(ctx, frames).await;
+            self.show_status(ctx, false).await;
             Ok(())
         }
     }
@@ -350,6 +789,9 @@ impl Module for Nmea2000 {
         if timer == SWEEP {
             self.assembler.expire(Instant::now());
             self.report();
+            self.show_status(_ctx, false).await;
+        } else if timer == STATUS {
+            self.show_status(_ctx, true).await;
         }
         Ok(())
     }
@@ -623,5 +1065,85 @@ mod tests {
         assert!(bad(&[("prefix", "a..b")]).contains("empty segment"));
         assert!(bad(&[("timeout", "soon")]).contains("not a duration"));
         assert!(bad(&[("max_partial", "0")]).contains("must be 1 or more"));
+    }
+    #[test]
+    fn it_sends_only_from_a_claimed_address_and_refuses_what_a_pgn_cannot_hold() {
+        let mut d = driver(&[
+            ("address", "40"),
+            ("unique_number", "1234"),
+            ("send", "compass.heading=vesselHeading gnss.fix=129029"),
+        ]);
+        let t = Instant::now();
+        let claim = d.start_claim(t);
+        assert_eq!(claim.len(), 2);
+        assert_eq!(claim[1].id(), 0x18EEFF28, "ISO address claim from 40");
+        let heading = DataMap::new()
+            .and("heading", Value::Float(90.0))
+            .and("magnetic", Value::Bool(false))
+            .and("sources", Value::from("HDT"));
+        assert!(d.outgoing("compass.heading", &heading, t).is_empty());
+        let later = t + claim::CLAIM_WAIT;
+        let frames = d.outgoing("compass.heading", &heading, later);
+        assert_eq!(frames.len(), 1);
+        assert_eq!(frames[0].id(), 0x09F11228);
+        assert_eq!(&frames[0].payload()[..3], &[0xFF, 0x5C, 0x3D]);
+        assert_eq!(frames[0].payload()[7] & 3, 0, "reference True");
+        // a fast packet: its sequence counts up per PGN
+        let fix = DataMap::new().and("latitude", Value::Float(43.5));
+        let a = d.outgoing("n2k.out.gnssPositionData", &fix, later);
+        let b = d.outgoing(
+            "gnss.fix",
+            &DataMap::new().and("lat", Value::Float(43.5)),
+            later,
+        );
+        assert_eq!(a.len(), 7);
+        assert_eq!(a[0].payload()[..2], [0x00, 43]);
+        assert_eq!(b[0].payload()[..2], [0x20, 43]);
+        // refused, counted
+        let bad = DataMap::new().and("heading", Value::Float(400.0));
+        assert!(d.outgoing("compass.heading", &bad, later).is_empty());
+        assert!(
+            d.outgoing(
+                "n2k.out.vesselHeading",
+                &DataMap::new().and("headng", Value::Int(1)),
+                later
+            )
+            .is_empty()
+        );
+        assert!(
+            d.outgoing("n2k.out.nothing", &DataMap::new(), later)
+                .is_empty()
+        );
+        let s = d.sender.as_ref().unwrap();
+        assert_eq!(s.sent, 3);
+        let refused: Vec<(&str, u64)> = s.refused.iter().map(|(k, v)| (*k, *v)).collect();
+        assert_eq!(
+            refused,
+            [
+                ("n2k-send-no-address", 1),
+                ("n2k-send-out-of-range", 1),
+                ("n2k-send-unknown-field", 1),
+                ("n2k-send-unknown-pgn", 1)
+            ]
+        );
+    }
+
+    #[test]
+    fn sending_parameters_are_checked() {
+        let bad = |pairs: &[(&str, &str)]| match Nmea2000::new(
+            &Params::from_pairs(pairs),
+            &Catalogue::built_in(),
+        ) {
+            Ok(_) => panic!("{pairs:?} was taken"),
+            Err(e) => e.to_string(),
+        };
+        assert!(bad(&[("send", "a.b=127250")]).contains("needs an `address`"));
+        assert!(bad(&[("address", "252"), ("unique_number", "1")]).contains("not an address"));
+        assert!(bad(&[("address", "40")]).contains("needs its `unique_number`"));
+        let with = |send: &str| bad(&[("address", "40"), ("unique_number", "1"), ("send", send)]);
+        assert!(with("nav.heading=vesselHeading").contains("would loop"));
+        assert!(with("n2k.x=vesselHeading").contains("publish on `n2k.out.ID`"));
+        assert!(with("a.b=nothing").contains("`nothing` is no PGN"));
+        assert!(with("a.b").contains("is not TOPIC=PGN"));
     }
 }
