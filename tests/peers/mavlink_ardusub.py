@@ -7,7 +7,8 @@ with --to and to every address that sent it something:
   armed flag, MAV_STATE_STANDBY disarmed, MAV_STATE_ACTIVE armed);
   five times a second ATTITUDE (roll 0.1, pitch -0.05, yaw -1.57 rad; rates 0.01, 0, -0.02 rad/s),
   GLOBAL_POSITION_INT (43.5081, 16.4402; alt and relative_alt -12500 mm; vx 30, vy -40, vz 2
-  cm/s; hdg UINT16_MAX, unknown), SCALED_PRESSURE (2250.5 hPa, 18.5 degC) and SYS_STATUS
+  cm/s; hdg UINT16_MAX, unknown), SCALED_PRESSURE (2250.5 hPa, 18.5 degC), SCALED_PRESSURE2 (the
+  external depth sensor: 1515.0 hPa, 16.25 degC) and SYS_STATUS
   (15800 mV, current -1 unknown, 76 %).
 
 Commands (COMMAND_LONG), answered with a COMMAND_ACK as ArduSub would:
@@ -86,6 +87,8 @@ def telemetry():
     send(mav.global_position_int_encode(t, 435081000, 164402000, -12500, -12500, 30, -40, 2,
                                         65535).pack(mav))
     send(mav.scaled_pressure_encode(t, 2250.5, 0.0, 1850).pack(mav))
+    # a BlueROV2's external depth sensor (Bar30) reports on the second pressure message
+    send(mav.scaled_pressure2_encode(t, 1515.0, 0.0, 1625).pack(mav))
     sensors = mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
     send(mav.sys_status_encode(sensors, sensors, sensors, 250, 15800, -1, 76, 0, 0, 0, 0, 0,
                                0).pack(mav))
