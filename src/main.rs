@@ -104,6 +104,12 @@ enum Command {
     /// Exit 0; 1 when a log is damaged (the events before the damage are exported) or the output
     /// cannot be written; 2 when the arguments or files cannot be used.
     Export(export::ExportArgs),
+    /// A log of one kind to the other: an LCM event log to MCAP (its LCM messages decoded by
+    /// their types, with schemas) or MCAP to an LCM event log.
+    ///
+    /// Exit 0; 1 when the input is damaged (the events before the damage are converted); 2 when
+    /// the arguments or files cannot be used.
+    Convert(record::ConvertArgs),
     /// The DSAAV central log.
     Log {
         #[command(subcommand)]
@@ -321,6 +327,7 @@ fn main() -> ExitCode {
             Command::Record(args) => record::record(args).await,
             Command::Replay(args) => record::replay(args).await,
             Command::Export(args) => export::export(args),
+            Command::Convert(args) => record::convert(args),
             Command::Log {
                 command:
                     LogCommand::Tail {

@@ -603,6 +603,124 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     }
 }
 
+/// What `seabus convert` was asked to do.
+#[derive(clap::Args)]
+pub struct ConvertArgs {
+    /// The log to read: an LCM event log or an MCAP file (told apart by its first bytes).
+    pub input: PathBuf,
+    /// The log to write: MCAP when it is named `.mcap`, else an LCM event log.
+    pub output: PathBuf,
+    /// `lcm` or `mcap`, whatever the output is named.
+    #[arg(long, value_name = "FORMAT")]
+    pub format: Option<String>,
+    /// .lcm files or directories whose types decode the LCM messages of the input (besides the
+    /// built-in ones): a message of a known type is written as its fields, with a schema.
+    #[arg(long = "lcm-types", value_name = "PATH")]
+    pub lcm_types: Vec<PathBuf>,
+    /// Replace the output if it exists.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// Converts a log to the other kind (or the same): every event, its time kept, its payload
+/// decoded by the LCM types when it is an LCM message of a known type.
+pub fn convert(args: ConvertArgs) -> ExitCode {
+    let usage = |msg: String| {
+        eprintln!("seabus convert: {msg}");
+        ExitCode::from(USAGE)
+    };
+    let kind = match args.format.as_deref() {
+        None => LogKind::of_name(&args.output),
+        Some(f) => match LogKind::parse(f) {
+            Some(k) => k,
+            None => return usage(format!("--format {f}: expected lcm or mcap")),
+        },
+    };
+    let types = match crate::lcmtypes::load(&args.lcm_types) {
+        Ok(t) => t,
+        Err(e) => return usage(e),
+    };
+    let (input, output) = (args.input.display(), args.output.display());
+    let mut reader = match Reader::open(&args.input) {
+        Ok(r) => r,
+        Err(e) => return usage(format!("{input}: cannot open: {e}")),
+    };
+    let mut writer = match Writer::create(&args.output, kind, args.force, Catalogue::built_in()) {
+        Ok(w) => w,
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {
+            return usage(format!("{output}: the file exists (--force replaces it)"));
+        }
+        Err(e) => return usage(format!("{output}: cannot create: {e}")),
+    };
+    let node = Node::new("convert");
+    let origin = seabus_medium::Origin::new(&node.name, "log", 0);
+    let (mut written, mut decoded, mut skipped) = (0u64, 0u64, 0u64);
+    let mut damage = None;
+    loop {
+        let event = match reader.next_event() {
+            Ok(Some(e)) => e,
+            Ok(None) => break,
+            Err(d) => {
+                damage = Some(d);
+                break;
+            }
+        };
+        let Ok(topic) = Topic::new(&event.channel) else {
+            skipped += 1;
+            continue;
+        };
+        let payload = match types.recognise(&event.payload) {
+            Some((_, map)) => {
+                decoded += 1;
+                seabus_medium::Payload::from(map)
+            }
+            None => event.payload,
+        };
+        let stamp = Stamp(event.micros.saturating_mul(1000));
+        let message = Message {
+            topic,
+            kind: Kind::Data,
+            provenance: seabus_medium::Provenance {
+                origin: origin.clone(),
+                seq: written + 1,
+                hops: 0,
+            },
+            stamp,
+            payload,
+        };
+        match writer.write(&message, stamp) {
+            Ok(()) => written += 1,
+            Err(WriteError::Unwritable(e)) => {
+                skipped += 1;
+                tracing::warn!("not converted: {e}");
+            }
+            Err(WriteError::File(e)) => return usage(format!("{output}: cannot write: {e}")),
+        }
+    }
+    if let Err(e) = writer.finish() {
+        return usage(format!("{output}: cannot write: {e}"));
+    }
+    eprintln!(
+        "seabus convert: {} from {input} to {output} ({} decoded by their LCM type{})",
+        count(written, "event"),
+        decoded,
+        if skipped > 0 {
+            format!("; {skipped} skipped: not seabus topics or no form the output holds")
+        } else {
+            String::new()
+        }
+    );
+    match damage {
+        Some(d) => {
+            eprintln!(
+                "seabus convert: {input}: damaged at {d}; the events before it were converted"
+            );
+            ExitCode::from(DAMAGED)
+        }
+        None => ExitCode::SUCCESS,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -410,3 +410,94 @@ fn corrupt_mcap_files_are_refused_with_the_byte_where_reading_stopped() {
         "{said}"
     );
 }
+
+#[test]
+fn an_lcm_log_converts_to_mcap_with_its_messages_decoded_by_their_lcm_types() {
+    require_python_mcap();
+    let dir = tempfile::tempdir().unwrap();
+    let types = dir.path().join("lab.lcm");
+    std::fs::write(
+        &types,
+        "package lab;\nstruct probe_t {\n  int64_t utime;\n  double depth;\n  string label;\n}\n",
+    )
+    .unwrap();
+    let status = Command::new("lcm-gen")
+        .arg("-p")
+        .arg("--ppath")
+        .arg(dir.path())
+        .arg(&types)
+        .status()
+        .expect("lcm-gen runs (install it with ./scripts/test: pip install lcm)");
+    assert!(status.success());
+    let log = dir.path().join("dive.lcm");
+    let write = r#"
+import sys, lcm
+from lab import probe_t
+log = lcm.EventLog(sys.argv[1], "w", overwrite=True)
+for i in range(5):
+    m = probe_t()
+    m.utime = 1_700_000_000_000_000 + i * 100_000
+    m.depth = 10.0 + i * 0.5
+    m.label = "probe %d" % i
+    log.write_event(m.utime, "PROBE", m.encode())
+log.write_event(1_700_000_001_000_000, "RAW", bytes([1, 2, 3]))
+log.close()
+"#;
+    python(
+        write,
+        &[log.to_str().unwrap()],
+        &[("PYTHONPATH", dir.path().to_str().unwrap())],
+    );
+    let out_file = dir.path().join("dive.mcap");
+    let out = seabus()
+        .arg("convert")
+        .arg(&log)
+        .arg(&out_file)
+        .arg("--lcm-types")
+        .arg(&types)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains("6 events from")
+            && stderr(&out).contains("(5 decoded by their LCM type)"),
+        "{}",
+        stderr(&out)
+    );
+    let py: Json =
+        serde_json::from_str(&python(PY_READ, &[out_file.to_str().unwrap()], &[])).unwrap();
+    assert_eq!(py["statistics"], 6);
+    let probe = &py["channels"]["PROBE"];
+    assert_eq!(probe["encoding"], "json");
+    assert_eq!(
+        probe["schema_data"]["properties"]["depth"]["type"],
+        "number"
+    );
+    assert_eq!(
+        probe["schema_data"]["properties"]["label"]["type"],
+        "string"
+    );
+    let messages = probe["messages"].as_array().unwrap();
+    assert_eq!(messages.len(), 5);
+    for (i, m) in messages.iter().enumerate() {
+        assert_eq!(m["data"]["depth"], 10.0 + i as f64 * 0.5, "{m}");
+        assert_eq!(m["data"]["label"], format!("probe {i}"));
+        // the event's time, kept
+        assert_eq!(
+            m["log_time"].as_u64().unwrap(),
+            (1_700_000_000_000_000 + i as u64 * 100_000) * 1000
+        );
+    }
+    let raw = &py["channels"]["RAW"];
+    assert_eq!(raw["encoding"], "application/octet-stream");
+    assert_eq!(raw["messages"][0]["data"], "010203");
+    // an existing output is kept unless told
+    let again = seabus()
+        .arg("convert")
+        .arg(&log)
+        .arg(&out_file)
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(2));
+    assert!(stderr(&again).contains("the file exists (--force replaces it)"));
+}
