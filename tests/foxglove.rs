@@ -308,3 +308,55 @@ fn a_quiet_topic_is_unadvertised_and_junk_from_one_client_leaves_the_others_serv
         "every malformed message answered with an error status on its own connection"
     );
 }
+
+#[test]
+fn seabus_check_reads_the_foxglove_element_and_warns_of_commands_nothing_accepts() {
+    let system = |foxglove: &str| {
+        format!(
+            r#"<seabus node="v">
+  <medium name="bus" url="inproc://"/>
+  <module name="sim" type="vehicle-sim" medium="bus"/>
+  {foxglove}
+</seabus>"#
+        )
+    };
+    let (_d, path) = system_file(
+        "ok.xml",
+        &system(r#"<foxglove medium="bus" commands="cmd.course"/>"#),
+    );
+    let out = check(&path);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+
+    let (_d, path) = system_file(
+        "warn.xml",
+        &system(r#"<foxglove medium="bus" commands="cmd.course cmd.winch"/>"#),
+    );
+    let out = check(&path);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    let said = String::from_utf8_lossy(&out.stdout).into_owned() + &stderr(&out);
+    assert!(
+        said.contains(&format!(
+            "{}:4:26: warning: no module of {} accepts command `cmd.winch` on `bus`, which \
+             Foxglove clients may send",
+            path.display(),
+            path.display()
+        )),
+        "{said}"
+    );
+    assert!(!said.contains("`cmd.course`"), "{said}");
+
+    let (_d, path) = system_file(
+        "bad.xml",
+        &system(r#"<foxglove listen="everywhere" unadvertise="never"/>"#),
+    );
+    let out = check(&path);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr(&out).contains(&format!(
+            "{}:4:13: attribute `listen`: `everywhere` is not an address and port (such as 127.0.0.1:8765)",
+            path.display()
+        )),
+        "{}",
+        stderr(&out)
+    );
+}

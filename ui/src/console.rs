@@ -194,7 +194,7 @@ pub fn check(
     given: Option<&Users>,
 ) -> Result<Checked, FileError> {
     let report = system::check(spec, registry, catalogue)?;
-    crate::foxglove::specs(spec)?;
+    let foxgloves = crate::foxglove::specs(spec)?;
     let specs = specs(spec)?;
     distinct_addresses(&specs)?;
     distinct_sessions(&specs)?;
@@ -218,6 +218,27 @@ pub fn check(
             users,
             layouts,
         });
+    }
+    for fs in &foxgloves {
+        for topic in &fs.commands {
+            if !crate::layout::command_accepted(
+                spec,
+                registry,
+                catalogue,
+                &fs.medium,
+                topic.as_str(),
+            ) {
+                let at = fs
+                    .element
+                    .attr("commands")
+                    .map_or(&fs.element.pos, |a| &a.pos);
+                warnings.push(at.error(format!(
+                    "warning: no module of {} accepts command `{topic}` on `{}`, which Foxglove \
+                     clients may send",
+                    spec.file, fs.medium
+                )));
+            }
+        }
     }
     Ok(Checked {
         report,

@@ -33,5 +33,5 @@ pub use model::{
     DEFAULT_LOG_TOPICS, FLEET_COLUMNS, Horizon, KeyBinding, Layout, Node, Offers, Offset,
     PadButton, Plotted,
 };
-pub use system::{Producer, producers};
+pub use system::{Producer, command_accepted, producers};
 pub use values::{COLOURS, is_name};

@@ -93,8 +93,10 @@ impl Layout {
             .collect();
         let mut ranges = Vec::new();
         for c in self.commands.values() {
-            let acceptors = acceptors(c, &accepted, spec, medium);
-            if acceptors.is_empty() && sent_beyond(c, spec, registry, medium).is_none() {
+            let acceptors = acceptors(c.topic.as_str(), &accepted, spec, medium);
+            if acceptors.is_empty()
+                && sent_beyond(c.topic.as_str(), spec, registry, medium).is_none()
+            {
                 warnings.push(c.pos.error(format!(
                     "warning: no module of {} accepts command `{}` on `{}`",
                     spec.file,
@@ -188,7 +190,7 @@ fn binding_warning(
 /// The modules that accept command `c` sent on `console`: there, or through a bridge route that
 /// carries commands from `console` to the module's medium.
 fn acceptors<'a>(
-    c: &CommandDecl,
+    topic: &str,
     accepted: &[Accepting<'a>],
     spec: &'a SystemSpec,
     console: &str,
@@ -204,7 +206,6 @@ fn acceptors<'a>(
             })
             .collect()
     };
-    let topic = c.topic.as_str();
     let mut out = on(console, topic, None);
     for (from, to, r) in route_legs(spec) {
         if from != console || r.kind == Some(Kind::Data) || !r.topics.matches(topic) {
@@ -226,12 +227,11 @@ fn acceptors<'a>(
 /// are not the in-process medium's): a fleet console's `auv2.cmd.course` goes out to the vehicle,
 /// whose own system accepts it.
 fn sent_beyond<'a>(
-    c: &CommandDecl,
+    topic: &str,
     spec: &'a SystemSpec,
     registry: &Registry,
     console: &str,
 ) -> Option<&'a str> {
-    let topic = c.topic.as_str();
     route_legs(spec)
         .filter(|(from, _, r)| {
             *from == console && r.kind != Some(Kind::Data) && r.topics.matches(topic)
@@ -244,6 +244,20 @@ fn sent_beyond<'a>(
                     .is_ok_and(|caps| caps != Capabilities::IN_PROCESS)
             })
         })
+}
+
+/// Whether a command on `topic` sent on `medium` reaches a module of the system that accepts it:
+/// there, one bridge route away, or carried by a route onto a medium that reaches other systems.
+pub fn command_accepted(
+    spec: &SystemSpec,
+    registry: &Registry,
+    catalogue: &Catalogue,
+    medium: &str,
+    topic: &str,
+) -> bool {
+    let accepted = accepted(spec, registry, catalogue);
+    !acceptors(topic, &accepted, spec, medium).is_empty()
+        || sent_beyond(topic, spec, registry, medium).is_some()
 }
 
 /// A widget or input that sends a command: what it is called in a warning, and where it is.
