@@ -3,8 +3,12 @@
 //! the bytes per second each client receives; then the same for the floor — every bus message
 //! written raw (JSON lines) to 10 plain TCP sockets, no coalescing, no WebSocket.
 //!
+//! Then the Foxglove live view (`seabus_ui::foxglove`): 50 topics of 5 fields at 20 Hz served to 5
+//! Foxglove WebSocket clients subscribed to every channel, the server's CPU share beside the
+//! console's.
+//!
 //! The clients run in a child process (this binary again), so the CPU figure is the server's
-//! alone (with the publisher, which both runs share).
+//! alone (with the publisher, which every run has).
 //!
 //! ```text
 //! cargo bench -p seabus-ui --bench console
@@ -14,6 +18,7 @@ use futures_util::StreamExt;
 use seabus_medium::{DataMap, Medium, Node};
 use seabus_modules::system::SystemSpec;
 use seabus_ui::console::{self, Console};
+use seabus_ui::foxglove;
 use seabus_ui::users::Users;
 use std::time::{Duration, Instant};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
@@ -24,6 +29,9 @@ const FIELDS: usize = 5;
 const RATE_HZ: f64 = 20.0;
 const CLIENTS: usize = 10;
 const SECONDS: u64 = 10;
+/// The Foxglove run's topics and clients.
+const FOXGLOVE_TOPICS: usize = 50;
+const FOXGLOVE_CLIENTS: usize = 5;
 
 fn cpu_seconds() -> f64 {
     // SAFETY: getrusage fills the struct we own
@@ -49,8 +57,13 @@ fn layout() -> String {
     )
 }
 
-/// Publishes every topic at [`RATE_HZ`] until dropped.
+/// Publishes [`TOPICS`] topics at [`RATE_HZ`] until dropped.
 fn publish(bus: &Medium) -> tokio::task::JoinHandle<()> {
+    publish_topics(bus, TOPICS)
+}
+
+/// Publishes `topics` topics of [`FIELDS`] fields at [`RATE_HZ`] until dropped.
+fn publish_topics(bus: &Medium, topics: usize) -> tokio::task::JoinHandle<()> {
     let tx = bus.attach("sensors");
     tokio::spawn(async move {
         let mut tick = tokio::time::interval(Duration::from_secs_f64(1.0 / RATE_HZ));
@@ -58,7 +71,7 @@ fn publish(bus: &Medium) -> tokio::task::JoinHandle<()> {
         loop {
             tick.tick().await;
             n += 1;
-            for t in 0..TOPICS {
+            for t in 0..topics {
                 let mut m = DataMap::new();
                 for f in 0..FIELDS {
                     m.insert(format!("f{f}"), (n as f64) * 0.001 + f as f64);
@@ -72,12 +85,19 @@ fn publish(bus: &Medium) -> tokio::task::JoinHandle<()> {
 /// Runs the clients (in the child process); prints the bytes each received.
 async fn clients(mode: &str, addr: &str, cookie: &str) {
     let mut tasks = Vec::new();
-    for _ in 0..CLIENTS {
+    let count = if mode == "foxglove" {
+        FOXGLOVE_CLIENTS
+    } else {
+        CLIENTS
+    };
+    for _ in 0..count {
         let (mode, addr, cookie) = (mode.to_string(), addr.to_string(), cookie.to_string());
         tasks.push(tokio::spawn(async move {
             let deadline = Instant::now() + Duration::from_secs(SECONDS);
             let mut bytes = 0usize;
-            if mode == "raw" {
+            if mode == "foxglove" {
+                bytes = foxglove_client(&addr, deadline).await;
+            } else if mode == "raw" {
                 let mut s = TcpStream::connect(&addr).await.expect("raw server");
                 let mut buf = vec![0u8; 65536];
                 while let Ok(Ok(n)) =
@@ -117,6 +137,71 @@ async fn clients(mode: &str, addr: &str, cookie: &str) {
     for t in tasks {
         println!("{}", t.await.expect("client"));
     }
+}
+
+/// A Foxglove WebSocket client subscribing to every channel advertised; the bytes it received
+/// until `deadline`.
+async fn foxglove_client(addr: &str, deadline: Instant) -> usize {
+    use futures_util::SinkExt;
+    use tokio_tungstenite::tungstenite::Message as Ws;
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+    let mut req = format!("ws://{addr}")
+        .into_client_request()
+        .expect("request");
+    req.headers_mut().insert(
+        "sec-websocket-protocol",
+        "foxglove.sdk.v1".parse().expect("header"),
+    );
+    let tcp = TcpStream::connect(addr).await.expect("foxglove server");
+    let (mut ws, _) = tokio_tungstenite::client_async(req, tcp)
+        .await
+        .expect("websocket");
+    let (mut bytes, mut next_id) = (0usize, 0u32);
+    while let Ok(Some(Ok(m))) = tokio::time::timeout_at(deadline.into(), ws.next()).await {
+        bytes += m.len();
+        let Ws::Text(text) = m else { continue };
+        let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) else {
+            continue;
+        };
+        if v["op"] != "advertise" {
+            continue;
+        }
+        let subscriptions: Vec<serde_json::Value> = v["channels"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|c| {
+                next_id += 1;
+                serde_json::json!({"id": next_id, "channelId": c["id"]})
+            })
+            .collect();
+        let subscribe = serde_json::json!({"op": "subscribe", "subscriptions": subscriptions});
+        ws.send(Ws::Text(subscribe.to_string().into()))
+            .await
+            .expect("subscribe");
+    }
+    bytes
+}
+
+async fn foxglove_run() -> (f64, f64) {
+    let dir = tempfile::tempdir().expect("dir");
+    let system = dir.path().join("system.xml");
+    std::fs::write(
+        &system,
+        r#"<seabus node="b"><medium name="bus" url="inproc://"/>
+  <foxglove medium="bus" listen="127.0.0.1:0"/></seabus>"#,
+    )
+    .expect("system");
+    let spec = SystemSpec::load(&system).expect("system reads");
+    let fs = foxglove::specs(&spec).expect("the element reads").remove(0);
+    let bus = Medium::in_process("bus", &Node::new("b"));
+    let server = foxglove::Foxglove::start(&fs, &bus, seabus_modules::Catalogue::built_in())
+        .await
+        .expect("the server starts");
+    let publisher = publish_topics(&bus, FOXGLOVE_TOPICS);
+    let r = measure("foxglove", server.addr().to_string(), String::new()).await;
+    publisher.abort();
+    r
 }
 
 async fn login(addr: std::net::SocketAddr) -> String {
@@ -251,6 +336,7 @@ fn main() {
     if args.iter().any(|a| a == "--bench") || args.len() == 1 {
         let (c_cpu, c_bytes) = rt.block_on(console_run());
         let (r_cpu, r_bytes) = rt.block_on(raw_run());
+        let (f_cpu, f_bytes) = rt.block_on(foxglove_run());
         println!(
             "console: {} variables ({TOPICS} topics x {FIELDS} fields) at {RATE_HZ} Hz to {CLIENTS} clients, {SECONDS} s:",
             TOPICS * FIELDS
@@ -262,6 +348,14 @@ fn main() {
         println!(
             "  raw (every message as a JSON line on TCP)          server CPU {r_cpu:.1} % of a core, {:.1} kB/s per client",
             r_bytes / 1e3
+        );
+        println!(
+            "foxglove: {FOXGLOVE_TOPICS} topics x {FIELDS} fields at {RATE_HZ} Hz to {FOXGLOVE_CLIENTS} clients subscribed to every channel, {SECONDS} s:"
+        );
+        println!(
+            "  Foxglove live view (every message, JSON)           server CPU {f_cpu:.1} % of a core, {:.1} kB/s per client; {:.2}x the console's CPU",
+            f_bytes / 1e3,
+            f_cpu / c_cpu
         );
     }
 }
