@@ -108,6 +108,9 @@ fn bare(path: &std::path::Path, messages: &[Message]) {
     w.finish().unwrap();
 }
 
+/// A case: its name, how many messages, and the payload of message `i`.
+type Case = (&'static str, u64, fn(u64) -> Payload);
+
 fn seabus(path: &std::path::Path, messages: &[Message]) {
     let mut w = seabus_record::Writer::create(path, true, Catalogue::built_in()).unwrap();
     for m in messages {
@@ -121,7 +124,7 @@ fn main() {
     let path = dir.path().join("bench.mcap");
     let topic = Topic::new("nav.attitude").unwrap();
     println!("MCAP writing through a file (best of 5), seabus against the mcap crate directly:");
-    let cases: [(&str, u64, fn(u64) -> Payload); 4] = [
+    let cases: [Case; 4] = [
         ("bytes 64 B", 200_000, |i| {
             Payload::from(vec![(i % 251) as u8; 64])
         }),
