@@ -335,6 +335,8 @@ pub struct Reader<R: Read = io::BufReader<File>> {
     size: Option<u64>,
     schemas: HashMap<u16, (String, String, Vec<u8>)>,
     channels: HashMap<u16, Arc<ChannelInfo>>,
+    /// The damage met: said again by every later call.
+    damaged: Option<Damage>,
 }
 
 impl Reader<io::BufReader<File>> {
@@ -392,6 +394,7 @@ impl<R: Read> Reader<R> {
             size: None,
             schemas: HashMap::new(),
             channels: HashMap::new(),
+            damaged: None,
         }
     }
 
@@ -544,8 +547,20 @@ impl<R: Read> Reader<R> {
         Ok(true)
     }
 
-    /// The next message, `Ok(None)` at the file's proper end.
+    /// The next message, `Ok(None)` at the file's proper end. After damage, the same damage
+    /// again: nothing past it is read.
     pub fn next_message(&mut self) -> Result<Option<ReadMessage>, Damage> {
+        if let Some(d) = &self.damaged {
+            return Err(d.clone());
+        }
+        let read = self.read_message();
+        if let Err(d) = &read {
+            self.damaged = Some(d.clone());
+        }
+        read
+    }
+
+    fn read_message(&mut self) -> Result<Option<ReadMessage>, Damage> {
         loop {
             let event = match self.reader.next_event() {
                 None => return Ok(None),
