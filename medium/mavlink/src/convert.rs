@@ -396,30 +396,6 @@ fn enum_name(entries: &[(Text, Node)]) -> Option<&str> {
     }
 }
 
-fn value(node: Node) -> Value {
-    match node {
-        Node::Null => Value::List(Vec::new()),
-        Node::Bool(b) => Value::Bool(b),
-        Node::Int(i) => Value::Int(i),
-        Node::UInt(u) => Value::from(u.to_string()),
-        Node::Float(f) => Value::Float(f),
-        Node::Str(s) => Value::Str(s),
-        Node::Flags(s) => Value::from(s),
-        Node::Seq(items) => Value::List(items.into_iter().map(value).collect()),
-        Node::Map(mut entries) => {
-            // an enum's value: its name, moved rather than copied
-            if enum_name(&entries).is_some()
-                && let Some((_, Node::Str(name))) = entries.pop()
-            {
-                return Value::Str(name);
-            }
-            Value::Map(DataMap::from_entries(
-                entries.into_iter().map(|(k, v)| (k, value(v))).collect(),
-            ))
-        }
-    }
-}
-
 /// The fields of `msg` as serde gives them, without the message's own tag.
 fn fields<M: Serialize>(msg: &M) -> Result<Vec<(Text, Node)>, String> {
     match msg.serialize(Ser) {
@@ -436,17 +412,11 @@ fn fields<M: Serialize>(msg: &M) -> Result<Vec<(Text, Node)>, String> {
 
 /// A message's fields as a datamap (see the [module](self) for the forms).
 pub fn to_map<M: Message + Serialize>(msg: &M) -> Result<DataMap, String> {
-    let entries = fields(msg)?;
-    let mut map = DataMap::with_capacity(entries.len() + HEADER_FIELDS.len());
-    for (k, v) in entries {
-        let key = if k.as_ref() == "mavtype" {
-            Cow::Borrowed("type")
-        } else {
-            k
-        };
-        map.push(key, value(v));
+    match msg.serialize(ValueSer { top: true }) {
+        Ok(Value::Map(map)) => Ok(map),
+        Ok(other) => Err(format!("a message that is no set of fields: {other:?}")),
+        Err(e) => Err(e.0),
     }
-    Ok(map)
 }
 
 /// Message `name` of dialect `M` from the fields of `map` (see the [module](self) for the forms);
@@ -609,6 +579,322 @@ fn fit(v: &Value, template: &Node) -> Result<Node, String> {
             )),
         },
         Node::Null => Ok(Node::Null),
+    }
+}
+
+/// Serializes a received message's value straight into a datamap [`Value`] (no [`Node`] tree in
+/// between, field names borrowed from the crate). With `top`, the value is the message itself:
+/// its fields without the message's own tag, room left for [`HEADER_FIELDS`].
+#[derive(Clone, Copy)]
+struct ValueSer {
+    top: bool,
+}
+
+const INNER: ValueSer = ValueSer { top: false };
+
+/// The items of a list as they are serialized.
+struct ListSer(Vec<Value>);
+
+/// The fields of a struct as they are serialized; an enum of the crate (tagged: `{"type": NAME}`)
+/// has only the tag, and is its name.
+struct FieldsSer {
+    entries: Vec<(Text, Value)>,
+    tag: Option<Value>,
+    top: bool,
+}
+
+/// The entries of a map as they are serialized.
+struct EntriesSer {
+    entries: Vec<(Text, Value)>,
+    key: Option<Text>,
+}
+
+/// Text a value writes of itself ([`fmt::Display`]), in a string made at its first piece with
+/// room for a bitmask's `A | B` (grown a byte at a time it would be reallocated several times);
+/// no text, no string.
+struct TextBuf(Option<String>);
+
+impl fmt::Write for TextBuf {
+    fn write_str(&mut self, s: &str) -> fmt::Result {
+        if !s.is_empty() {
+            self.0
+                .get_or_insert_with(|| String::with_capacity(s.len().max(64)))
+                .push_str(s);
+        }
+        Ok(())
+    }
+}
+
+impl TextBuf {
+    /// The text of `v` as a datamap string (the empty text without an allocation).
+    fn text<T: ?Sized + fmt::Display>(v: &T) -> Result<Value, Error> {
+        let mut buf = TextBuf(None);
+        fmt::write(&mut buf, format_args!("{v}")).map_err(|e| Error(e.to_string()))?;
+        Ok(Value::Str(buf.0.map_or(Cow::Borrowed(""), Cow::Owned)))
+    }
+}
+
+impl Serializer for ValueSer {
+    type Ok = Value;
+    type Error = Error;
+    type SerializeSeq = ListSer;
+    type SerializeTuple = ListSer;
+    type SerializeTupleStruct = ListSer;
+    type SerializeTupleVariant = ListSer;
+    type SerializeMap = EntriesSer;
+    type SerializeStruct = FieldsSer;
+    type SerializeStructVariant = FieldsSer;
+
+    fn serialize_bool(self, v: bool) -> Result<Value, Error> {
+        Ok(Value::Bool(v))
+    }
+    fn serialize_i8(self, v: i8) -> Result<Value, Error> {
+        Ok(Value::Int(v.into()))
+    }
+    fn serialize_i16(self, v: i16) -> Result<Value, Error> {
+        Ok(Value::Int(v.into()))
+    }
+    fn serialize_i32(self, v: i32) -> Result<Value, Error> {
+        Ok(Value::Int(v.into()))
+    }
+    fn serialize_i64(self, v: i64) -> Result<Value, Error> {
+        Ok(Value::Int(v))
+    }
+    fn serialize_u8(self, v: u8) -> Result<Value, Error> {
+        Ok(Value::Int(v.into()))
+    }
+    fn serialize_u16(self, v: u16) -> Result<Value, Error> {
+        Ok(Value::Int(v.into()))
+    }
+    fn serialize_u32(self, v: u32) -> Result<Value, Error> {
+        Ok(Value::Int(v.into()))
+    }
+    fn serialize_u64(self, v: u64) -> Result<Value, Error> {
+        Ok(i64::try_from(v).map_or_else(|_| Value::from(v.to_string()), Value::Int))
+    }
+    fn serialize_f32(self, v: f32) -> Result<Value, Error> {
+        Ok(Value::Float(widen(v)))
+    }
+    fn serialize_f64(self, v: f64) -> Result<Value, Error> {
+        Ok(Value::Float(v))
+    }
+    fn serialize_char(self, v: char) -> Result<Value, Error> {
+        Ok(Value::from(v.to_string()))
+    }
+    fn serialize_str(self, v: &str) -> Result<Value, Error> {
+        Ok(Value::from(v))
+    }
+    fn serialize_bytes(self, v: &[u8]) -> Result<Value, Error> {
+        Ok(Value::List(
+            v.iter().map(|b| Value::Int((*b).into())).collect(),
+        ))
+    }
+    fn serialize_none(self) -> Result<Value, Error> {
+        Ok(Value::List(Vec::new()))
+    }
+    fn serialize_some<T: ?Sized + Serialize>(self, v: &T) -> Result<Value, Error> {
+        v.serialize(INNER)
+    }
+    fn serialize_unit(self) -> Result<Value, Error> {
+        Ok(Value::List(Vec::new()))
+    }
+    fn serialize_unit_struct(self, _: &'static str) -> Result<Value, Error> {
+        Ok(Value::List(Vec::new()))
+    }
+    fn serialize_unit_variant(
+        self,
+        _: &'static str,
+        _: u32,
+        variant: &'static str,
+    ) -> Result<Value, Error> {
+        Ok(Value::label(variant))
+    }
+    fn serialize_newtype_struct<T: ?Sized + Serialize>(
+        self,
+        _: &'static str,
+        v: &T,
+    ) -> Result<Value, Error> {
+        v.serialize(INNER)
+    }
+    fn serialize_newtype_variant<T: ?Sized + Serialize>(
+        self,
+        _: &'static str,
+        _: u32,
+        variant: &'static str,
+        v: &T,
+    ) -> Result<Value, Error> {
+        Ok(Value::Map(DataMap::from_entries(vec![(
+            Cow::Borrowed(variant),
+            v.serialize(INNER)?,
+        )])))
+    }
+    fn serialize_seq(self, len: Option<usize>) -> Result<ListSer, Error> {
+        Ok(ListSer(Vec::with_capacity(len.unwrap_or(0))))
+    }
+    fn serialize_tuple(self, len: usize) -> Result<ListSer, Error> {
+        Ok(ListSer(Vec::with_capacity(len)))
+    }
+    fn serialize_tuple_struct(self, _: &'static str, len: usize) -> Result<ListSer, Error> {
+        Ok(ListSer(Vec::with_capacity(len)))
+    }
+    fn serialize_tuple_variant(
+        self,
+        _: &'static str,
+        _: u32,
+        _: &'static str,
+        len: usize,
+    ) -> Result<ListSer, Error> {
+        Ok(ListSer(Vec::with_capacity(len)))
+    }
+    fn serialize_map(self, len: Option<usize>) -> Result<EntriesSer, Error> {
+        Ok(EntriesSer {
+            entries: Vec::with_capacity(len.unwrap_or(0)),
+            key: None,
+        })
+    }
+    fn serialize_struct(self, _: &'static str, len: usize) -> Result<FieldsSer, Error> {
+        // a message's `len` counts its tag, which it leaves out, and the header fields are to come;
+        // an enum (one field, its tag) needs no list at all
+        let room = match (self.top, len) {
+            (true, _) => len + HEADER_FIELDS.len(),
+            (false, 1) => 0,
+            (false, _) => len,
+        };
+        Ok(FieldsSer {
+            entries: Vec::with_capacity(room),
+            tag: None,
+            top: self.top,
+        })
+    }
+    fn serialize_struct_variant(
+        self,
+        _: &'static str,
+        _: u32,
+        _: &'static str,
+        len: usize,
+    ) -> Result<FieldsSer, Error> {
+        self.serialize_struct("", len)
+    }
+    // bitmasks write themselves with this (`A | B`), `char[N]` fields with `serialize_str`
+    fn collect_str<T: ?Sized + fmt::Display>(self, v: &T) -> Result<Value, Error> {
+        TextBuf::text(v)
+    }
+}
+
+impl SerializeSeq for ListSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_element<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), Error> {
+        self.0.push(v.serialize(INNER)?);
+        Ok(())
+    }
+    fn end(self) -> Result<Value, Error> {
+        Ok(Value::List(self.0))
+    }
+}
+
+impl SerializeTuple for ListSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_element<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), Error> {
+        SerializeSeq::serialize_element(self, v)
+    }
+    fn end(self) -> Result<Value, Error> {
+        SerializeSeq::end(self)
+    }
+}
+
+impl SerializeTupleStruct for ListSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_field<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), Error> {
+        SerializeSeq::serialize_element(self, v)
+    }
+    fn end(self) -> Result<Value, Error> {
+        SerializeSeq::end(self)
+    }
+}
+
+impl SerializeTupleVariant for ListSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_field<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), Error> {
+        SerializeSeq::serialize_element(self, v)
+    }
+    fn end(self) -> Result<Value, Error> {
+        SerializeSeq::end(self)
+    }
+}
+
+impl SerializeMap for EntriesSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_key<T: ?Sized + Serialize>(&mut self, key: &T) -> Result<(), Error> {
+        match key.serialize(INNER)? {
+            Value::Str(k) => {
+                self.key = Some(k);
+                Ok(())
+            }
+            other => Err(Error(format!("a map key that is not text: {other:?}"))),
+        }
+    }
+    fn serialize_value<T: ?Sized + Serialize>(&mut self, v: &T) -> Result<(), Error> {
+        let key = self
+            .key
+            .take()
+            .ok_or_else(|| Error("a map value without its key".into()))?;
+        self.entries.push((key, v.serialize(INNER)?));
+        Ok(())
+    }
+    fn end(self) -> Result<Value, Error> {
+        Ok(Value::Map(DataMap::from_entries(self.entries)))
+    }
+}
+
+impl SerializeStruct for FieldsSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_field<T: ?Sized + Serialize>(
+        &mut self,
+        key: &'static str,
+        v: &T,
+    ) -> Result<(), Error> {
+        // no field of the crate's is called `type` (Rust's `mavtype` is): this is a tag, the
+        // message's own (left out) or an enum's (its name)
+        if key == "type" {
+            if !self.top {
+                self.tag = Some(v.serialize(INNER)?);
+            }
+        } else {
+            self.entries
+                .push((Cow::Borrowed(mavlink_name(key)), v.serialize(INNER)?));
+        }
+        Ok(())
+    }
+    fn end(mut self) -> Result<Value, Error> {
+        match self.tag {
+            Some(name @ Value::Str(_)) if self.entries.is_empty() => Ok(name),
+            Some(tag) => {
+                self.entries.insert(0, (Cow::Borrowed("type"), tag));
+                Ok(Value::Map(DataMap::from_entries(self.entries)))
+            }
+            None => Ok(Value::Map(DataMap::from_entries(self.entries))),
+        }
+    }
+}
+
+impl SerializeStructVariant for FieldsSer {
+    type Ok = Value;
+    type Error = Error;
+    fn serialize_field<T: ?Sized + Serialize>(
+        &mut self,
+        key: &'static str,
+        v: &T,
+    ) -> Result<(), Error> {
+        SerializeStruct::serialize_field(self, key, v)
+    }
+    fn end(self) -> Result<Value, Error> {
+        SerializeStruct::end(self)
     }
 }
 

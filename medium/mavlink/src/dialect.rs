@@ -2,6 +2,7 @@
 //! checksums, and their encoding, all from the `mavlink` crate's generated message sets.
 
 use crate::convert;
+use mavlink::consts;
 use mavlink::error::MessageWriteError;
 use mavlink::{
     MAVLinkMessageRaw, MAVLinkV1MessageRaw, MAVLinkV2MessageRaw, MavHeader, MavlinkVersion, Message,
@@ -55,7 +56,7 @@ impl Dialect {
 
     /// Whether message `id` is in the dialect.
     pub fn knows(self, id: u32) -> bool {
-        with_messages!(self, M => M::default_message_from_id(id).is_some())
+        with_messages!(self, M => M::all_ids().binary_search(&id).is_ok())
     }
 
     /// The name of message `id`, when the dialect has it.
@@ -70,10 +71,22 @@ impl Dialect {
 
     /// Whether a frame's checksum holds (with its message's CRC_EXTRA in this dialect).
     pub fn checksum_holds(self, raw: &MAVLinkMessageRaw) -> bool {
-        with_messages!(self, M => match raw {
-            MAVLinkMessageRaw::V1(r) => r.has_valid_crc::<M>(),
-            MAVLinkMessageRaw::V2(r) => r.has_valid_crc::<M>(),
-        })
+        let extra = with_messages!(self, M => M::extra_crc(raw.message_id()));
+        let (bytes, trailer, sum) = match raw {
+            MAVLinkMessageRaw::V1(r) => (r.raw_bytes(), consts::CHECKSUM_SIZE, r.checksum()),
+            MAVLinkMessageRaw::V2(r) => (
+                r.raw_bytes(),
+                consts::CHECKSUM_SIZE
+                    + if r.incompatibility_flags() & consts::v2::IFLAG_SIGNED != 0 {
+                        consts::v2::SIGNATURE_SIZE
+                    } else {
+                        0
+                    },
+                r.checksum(),
+            ),
+        };
+        bytes.len() >= consts::STX_SIZE + trailer
+            && crc(&bytes[consts::STX_SIZE..bytes.len() - trailer], extra) == sum
     }
 
     /// The message a frame carries: its name and its fields as a datamap ([`convert`]); the error
@@ -94,6 +107,34 @@ impl Dialect {
         with_messages!(self, M => encode_as::<M>(version, header, name, map))
     }
 }
+
+/// MAVLink's checksum (CRC-16/MCRF4XX, as `mavlink::calculate_crc`) of `data` and then `extra`,
+/// a byte at a time from a table.
+fn crc(data: &[u8], extra: u8) -> u16 {
+    let step = |crc: u16, b: u8| (crc >> 8) ^ CRC_TABLE[usize::from(crc as u8 ^ b)];
+    step(data.iter().fold(0xFFFF, |c, &b| step(c, b)), extra)
+}
+
+/// The checksum's remainder of each byte (polynomial 0x1021, reflected).
+static CRC_TABLE: [u16; 256] = {
+    let mut table = [0u16; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut c = i as u16;
+        let mut k = 0;
+        while k < 8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0x8408
+            } else {
+                c >> 1
+            };
+            k += 1;
+        }
+        table[i] = c;
+        i += 1;
+    }
+    table
+};
 
 impl fmt::Display for Dialect {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
@@ -148,6 +189,20 @@ fn encode_as<M: Message + Serialize + DeserializeOwned>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_checksum_is_the_crates() {
+        let data: Vec<u8> = (0..300u32).map(|i| (i * 7919 % 251) as u8).collect();
+        for len in [0, 1, 2, 9, 17, 40, 255, 300] {
+            for extra in [0, 50, 39, 255] {
+                assert_eq!(
+                    crc(&data[..len], extra),
+                    mavlink::calculate_crc(&data[..len], extra),
+                    "{len} bytes, extra {extra}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn dialects_know_their_messages() {
