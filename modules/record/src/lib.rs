@@ -580,6 +580,16 @@ impl<R: Read> Reader<R> {
                 }
                 LinearReadEvent::Record { opcode, data } => (opcode, data),
             };
+            use mcap::records::op;
+            // only the records that give messages are read; the others (indexes, statistics,
+            // attachments, metadata) are passed over
+            if ![op::SCHEMA, op::CHANNEL, op::MESSAGE].contains(&opcode) {
+                continue;
+            }
+            if let Err(problem) = lengths_fit(opcode, data) {
+                let problem = format!("a {} record: {problem}", record_name(opcode));
+                return Err(self.damage(problem));
+            }
             let record = match mcap::parse_record(opcode, data) {
                 Ok(r) => r,
                 Err(e) => {
@@ -635,6 +645,73 @@ impl<R: Read> Reader<R> {
                 _ => {}
             }
         }
+    }
+}
+
+/// Checks that every length a schema or channel record gives for its strings, bytes and metadata
+/// fits inside the record, before the `mcap` crate reads it: the crate sets aside room for a
+/// string by its stated length, so a damaged length of gigabytes must not reach it.
+fn lengths_fit(opcode: u8, data: &[u8]) -> Result<(), String> {
+    use mcap::records::op;
+    struct Fields<'a>(&'a [u8]);
+    impl Fields<'_> {
+        fn skip(&mut self, n: usize, what: &str) -> Result<(), String> {
+            match self.0.get(n..) {
+                Some(rest) => {
+                    self.0 = rest;
+                    Ok(())
+                }
+                None => Err(format!("it ends inside its {what}")),
+            }
+        }
+        /// A u32 length and that many bytes.
+        fn sized(&mut self, what: &str) -> Result<(), String> {
+            let Some(head) = self.0.get(..4) else {
+                return Err(format!("it ends inside its {what}'s length"));
+            };
+            let len = u32::from_le_bytes(head.try_into().expect("4 bytes")) as usize;
+            self.0 = &self.0[4..];
+            if len > self.0.len() {
+                return Err(format!(
+                    "its {what} of {len} bytes is longer than the {} bytes left in it",
+                    self.0.len()
+                ));
+            }
+            self.0 = &self.0[len..];
+            Ok(())
+        }
+    }
+    let mut f = Fields(data);
+    match opcode {
+        op::SCHEMA => {
+            f.skip(2, "schema id")?;
+            f.sized("name")?;
+            f.sized("encoding")?;
+            f.sized("data")
+        }
+        op::CHANNEL => {
+            f.skip(4, "channel and schema ids")?;
+            f.sized("topic")?;
+            f.sized("message encoding")?;
+            let Some(head) = f.0.get(..4) else {
+                return Err("it ends inside its metadata's length".into());
+            };
+            let len = u32::from_le_bytes(head.try_into().expect("4 bytes")) as usize;
+            let rest = &f.0[4..];
+            let Some(map) = rest.get(..len) else {
+                return Err(format!(
+                    "its metadata of {len} bytes is longer than the {} bytes left in it",
+                    rest.len()
+                ));
+            };
+            let mut m = Fields(map);
+            while !m.0.is_empty() {
+                m.sized("metadata key")?;
+                m.sized("metadata value")?;
+            }
+            Ok(())
+        }
+        _ => Ok(()),
     }
 }
 

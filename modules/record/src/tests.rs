@@ -215,3 +215,31 @@ fn a_chunk_the_writer_never_closed_is_reported_as_unfinished() {
     assert_eq!(d.offset, flushed, "{d}");
     assert!(d.problem.starts_with("an unfinished chunk"), "{d}");
 }
+
+#[test]
+fn a_channel_whose_topic_claims_gigabytes_is_damage_not_an_allocation() {
+    // a channel record: id 1, schema 0, a topic said to be 0xFFFFFFF0 bytes long
+    let mut record = vec![1u8, 0, 0, 0];
+    record.extend_from_slice(&0xFFFF_FFF0u32.to_le_bytes());
+    record.extend_from_slice(b"nav");
+    let e = lengths_fit(mcap::records::op::CHANNEL, &record).unwrap_err();
+    assert_eq!(
+        e,
+        "its topic of 4294967280 bytes is longer than the 3 bytes left in it"
+    );
+    // a well-formed channel record passes
+    let mut good = vec![1u8, 0, 0, 0];
+    for text in [&b"nav.depth"[..], b"json"] {
+        good.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        good.extend_from_slice(text);
+    }
+    let mut meta = Vec::new();
+    for text in [&b"seabus.kind"[..], b"command"] {
+        meta.extend_from_slice(&(text.len() as u32).to_le_bytes());
+        meta.extend_from_slice(text);
+    }
+    good.extend_from_slice(&(meta.len() as u32).to_le_bytes());
+    good.extend_from_slice(&meta);
+    assert_eq!(lengths_fit(mcap::records::op::CHANNEL, &good), Ok(()));
+    assert!(lengths_fit(mcap::records::op::CHANNEL, &good[..good.len() - 1]).is_err());
+}
