@@ -232,8 +232,8 @@ fn init_logs(verbose: u8) {
         1 => "debug",
         _ => "trace",
     };
-    // the Foxglove server logs every malformed client message; each one is answered to its
-    // client, and the live view's own refusals are counted and logged without flooding
+    // the Foxglove server logs every malformed client message: the live view takes those reports,
+    // counts them and logs them without flooding
     let default: Vec<String> = ["warn", "foxglove=off"]
         .into_iter()
         .map(str::to_string)
@@ -247,11 +247,12 @@ fn init_logs(verbose: u8) {
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_target(false)
         .with_filter(filter);
-    let logs = tracing_subscriber::registry().with(terminal);
-    // a system with a <log> element also sends every record to the DSAAV central log
-    #[cfg(feature = "dsaav")]
-    let logs = logs.with(seabus_dsaav::central::layer());
-    logs.init();
+    // services that send this program's log elsewhere (a system's <log>, the Foxglove view's Log
+    // panel) take their records through this layer
+    tracing_subscriber::registry()
+        .with(terminal)
+        .with(seabus_modules::logs::layer())
+        .init();
 }
 
 fn main() -> ExitCode {

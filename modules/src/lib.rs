@@ -17,6 +17,8 @@
 //! - [`schema`] — JSON Schemas of topics (from their dataset, or read off a message) for MCAP files
 //!   and live views.
 //! - [`params`] — module parameters with their places in the file.
+//! - [`logs`] — this program's own log as records, for the services that send it elsewhere (the
+//!   DSAAV central log, the Foxglove live view).
 //! - [`geo`] — flat-earth distances and angles for helms, simulators and navigation.
 //!
 //! The products built on it live in crates of their own: `seabus-dsaav` (the DSAAV services),
@@ -28,6 +30,7 @@
 
 pub mod datasets;
 pub mod geo;
+pub mod logs;
 pub mod module;
 pub mod params;
 pub mod registry;

@@ -1,16 +1,22 @@
 // Watches a Foxglove WebSocket server for SECONDS with the official protocol client
 // (@foxglove/ws-protocol over `ws`), subscribed to every channel, while a second connection sends
-// what the protocol does not allow (text that is not JSON, an unknown binary opcode) every 200 ms.
+// what the protocol does not allow (text that is not JSON, an unknown binary opcode) every 200 ms
+// for the first half of the watch, then bytes that are no WebSocket frame at all.
+// `foxglove.Log` messages (protobuf, as Foxglove's Log panel reads them) are decoded with
+// protobufjs from the schema the channel advertises.
 //
 //   node foxglove_watch.js URL SECONDS
 //
 // Prints one JSON object: {"events": [{"t": ms, "event": "advertise"|"unadvertise", "topic": …}],
-// "messages": {topic: [ms, …]}, "junk": {"statuses": N, "closed": bool, "sent": N}}
+// "messages": {topic: [ms, …]}, "logs": [{level, name, message, file, line}],
+// "junk": {"statuses": N, "sent": N, "garbage_at": ms, "closed_at": ms|null}}
 
 "use strict";
 
 const WebSocket = require("ws");
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
+const protobuf = require("protobufjs");
+const descriptor = require("protobufjs/ext/descriptor");
 
 const [url, secondsText] = process.argv.slice(2);
 const seconds = Number(secondsText);
@@ -20,9 +26,15 @@ if (!url || !(seconds > 0)) {
 }
 const started = Date.now();
 const now = () => Date.now() - started;
-const out = { events: [], messages: {}, junk: { statuses: 0, closed: false, sent: 0 } };
+const out = {
+  events: [],
+  messages: {},
+  logs: [],
+  junk: { statuses: 0, sent: 0, garbage_at: null, closed_at: null },
+};
 const topics = new Map();
 const subscriptions = new Map();
+const logTypes = new Map();
 
 const client = new FoxgloveClient({
   ws: new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, "foxglove.sdk.v1"]),
@@ -31,7 +43,12 @@ client.on("advertise", (channels) => {
   for (const c of channels) {
     topics.set(c.id, c.topic);
     out.events.push({ t: now(), event: "advertise", topic: c.topic });
-    subscriptions.set(client.subscribe(c.id), c.topic);
+    const sub = client.subscribe(c.id);
+    subscriptions.set(sub, c.topic);
+    if (c.schemaName === "foxglove.Log" && c.encoding === "protobuf") {
+      const set = descriptor.FileDescriptorSet.decode(Buffer.from(c.schema, "base64"));
+      logTypes.set(sub, protobuf.Root.fromDescriptor(set).lookupType(c.schemaName));
+    }
   }
 });
 client.on("unadvertise", (ids) => {
@@ -42,6 +59,12 @@ client.on("unadvertise", (ids) => {
 client.on("message", (m) => {
   const topic = subscriptions.get(m.subscriptionId);
   (out.messages[topic] = out.messages[topic] || []).push(now());
+  const type = logTypes.get(m.subscriptionId);
+  if (type) {
+    const bytes = new Uint8Array(m.data.buffer, m.data.byteOffset, m.data.byteLength);
+    const log = type.toObject(type.decode(bytes), { enums: String, defaults: true });
+    out.logs.push({ level: log.level, name: log.name, message: log.message, file: log.file, line: log.line });
+  }
 });
 client.on("error", (e) => {
   console.error(String(e));
@@ -52,15 +75,23 @@ const junk = new WebSocket(url, ["foxglove.sdk.v1"]);
 junk.on("open", () => {
   const timer = setInterval(() => {
     if (junk.readyState !== WebSocket.OPEN) return clearInterval(timer);
-    junk.send(out.junk.sent % 2 === 0 ? "{not json" : Buffer.from([0xff, 1, 2, 3]));
-    out.junk.sent += 1;
+    if (now() < (seconds * 1000) / 2) {
+      junk.send(out.junk.sent % 2 === 0 ? "{not json" : Buffer.from([0xff, 1, 2, 3]));
+      out.junk.sent += 1;
+    } else {
+      // past the WebSocket layer: a line of text where a frame belongs
+      junk._socket.write("GET / HTTP/1.1\r\n\r\n");
+      out.junk.garbage_at = now();
+      clearInterval(timer);
+    }
   }, 200);
 });
 junk.on("message", (data, binary) => {
   if (!binary && JSON.parse(data.toString()).op === "status") out.junk.statuses += 1;
 });
+junk.on("error", () => {});
 junk.on("close", () => {
-  out.junk.closed = true;
+  out.junk.closed_at = now();
 });
 
 setTimeout(() => {

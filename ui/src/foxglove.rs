@@ -16,22 +16,28 @@
 //!   heading of `nav.attitude` or `nav.heading` when known; `nav.attitude` is also
 //!   `foxglove/tf` as a `foxglove.FrameTransform` from `world` to `vehicle` (3D panel), its
 //!   translation the `nav.local` position (metres north, east, down) when there is one.
+//!   This program's own log is `foxglove/log` as `foxglove.Log` (Log panel): every record of the
+//!   seabus crates at `log` (default `info`; `warn`, `error`, `debug` or `off`) or above, named
+//!   after its module or the node, with the source file and line.
 //! - Clients may publish only when `commands` names command topics, and then only those: each
 //!   message must be a JSON object in the datamap's JSON form, it must satisfy the topic's standard
 //!   dataset (required fields, types, ranges) when the catalogue has one, and it goes on the medium
 //!   as a command. Anything else is refused with a status message to that client, counted, and
-//!   logged at most once a reason every 10 s. What the protocol does not allow (text that is not
-//!   JSON, an unknown binary opcode) is answered by the server with an error status on that
-//!   connection alone, which stays open, the others unaffected.
+//!   logged at most once a reason every 10 s. A message the protocol does not allow (text that is
+//!   not JSON, an unknown binary opcode) is answered by the server with an error status on that
+//!   connection alone; what is not WebSocket at all (a frame a client may not send, bytes that are
+//!   no frame) closes that connection. Either way the others are unaffected, and the server's
+//!   report of it is counted and logged the same way ([`Foxglove::client_faults`]).
 //! - `listen` defaults to 127.0.0.1:8765: the live view stays on the machine unless an address is
 //!   given.
 
-use foxglove::schemas::{FrameTransform, LocationFix, Quaternion, Timestamp, Vector3};
+use foxglove::schemas::{FrameTransform, LocationFix, Log, Quaternion, Timestamp, Vector3};
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Status};
 use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::{Element, FileError};
 use seabus_medium::{DataMap, Interface, Kind, Medium, Message, Pattern, Payload, Stamp, Topic};
+use seabus_modules::logs::{self, Capture, Record, Wants};
 use seabus_modules::{Catalogue, SystemSpec, schema};
 use std::collections::HashMap;
 use std::net::SocketAddr;
@@ -49,6 +55,10 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:8765";
 pub const DEFAULT_UNADVERTISE: Duration = Duration::from_secs(10);
 /// Client commands waiting to go on the medium; more are refused.
 const COMMAND_QUEUE: usize = 64;
+/// Log records waiting to be served; more are dropped and counted.
+const LOG_QUEUE: usize = 1024;
+/// The foxglove crate's own targets: its reports of what clients did wrong.
+const SERVER_TARGETS: &[&str] = &["foxglove"];
 
 /// A `<foxglove>` element, read and checked.
 #[derive(Debug, Clone)]
@@ -63,6 +73,10 @@ pub struct FoxgloveSpec {
     pub commands: Vec<Topic>,
     /// How long a quiet topic stays advertised.
     pub unadvertise: Duration,
+    /// The most detailed level of this program's log served, if it is served.
+    pub log: Option<tracing::Level>,
+    /// The node, naming log records that belong to no module.
+    pub node: String,
     /// The element, for errors.
     pub element: Element,
 }
@@ -71,7 +85,14 @@ pub struct FoxgloveSpec {
 pub fn specs(spec: &SystemSpec) -> Result<Vec<FoxgloveSpec>, FileError> {
     let mut out = Vec::new();
     for el in spec.sections(SECTION) {
-        el.only_attrs(&["listen", "medium", "topics", "commands", "unadvertise"])?;
+        el.only_attrs(&[
+            "listen",
+            "medium",
+            "topics",
+            "commands",
+            "unadvertise",
+            "log",
+        ])?;
         el.only_children(&[])?;
         let medium = el
             .get("medium")
@@ -120,12 +141,34 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<FoxgloveSpec>, FileError> {
                     ))
                 })?,
         };
+        let log = match el.attr("log") {
+            None => Some(tracing::Level::INFO),
+            Some(a) if a.value.trim() == "off" => None,
+            Some(a) => Some(
+                a.value
+                    .trim()
+                    .parse::<tracing::Level>()
+                    .ok()
+                    .filter(|l| *l != tracing::Level::TRACE)
+                    .ok_or_else(|| {
+                        a.error(format!(
+                            "`{}` is not a log level: error, warn, info, debug or off",
+                            a.value
+                        ))
+                    })?,
+            ),
+        };
         out.push(FoxgloveSpec {
             listen,
             medium,
             topics,
             commands,
             unadvertise,
+            log,
+            node: spec
+                .node
+                .clone()
+                .unwrap_or_else(|| seabus_medium::Node::local().name.to_string()),
             element: el.clone(),
         });
     }
@@ -172,6 +215,8 @@ struct Shared {
     to_bus: mpsc::Sender<(Topic, DataMap)>,
     /// Refused client messages by reason, logged without flooding.
     refused: Tally,
+    /// The server's reports of clients' faults by kind, logged without flooding.
+    faults: Tally,
 }
 
 impl ServerListener for Shared {
@@ -215,6 +260,8 @@ struct Feed {
     heading: Option<f64>,
     /// The latest local position, metres north, east, down.
     local: Option<[f64; 3]>,
+    log: Option<Channel<Log>>,
+    node: String,
     scratch: Vec<u8>,
 }
 
@@ -366,6 +413,35 @@ impl Feed {
         }
     }
 
+    /// Serves a record of this program's log.
+    fn log(&mut self, rec: Record) {
+        use foxglove::schemas::log::Level as L;
+        let level = match rec.level {
+            tracing::Level::ERROR => L::Error,
+            tracing::Level::WARN => L::Warning,
+            tracing::Level::INFO => L::Info,
+            _ => L::Debug,
+        };
+        let ctx = self.ctx.clone();
+        let channel = self
+            .log
+            .get_or_insert_with(|| ChannelBuilder::new("foxglove/log").context(&ctx).build());
+        let (file, line) = rec.file.unwrap_or(("", 0));
+        channel.log_with_meta(
+            &Log {
+                timestamp: Some(timestamp(rec.time)),
+                level: level as i32,
+                message: rec.text,
+                name: rec.component.unwrap_or_else(|| self.node.clone()),
+                file: file.to_string(),
+                line,
+            },
+            PartialMetadata {
+                log_time: u64::try_from(rec.time.0).ok(),
+            },
+        );
+    }
+
     /// Unadvertises the topics quiet for longer than `unadvertise`.
     fn sweep(&mut self) {
         let quiet = self.unadvertise;
@@ -376,6 +452,14 @@ impl Feed {
             }
             keep
         });
+    }
+}
+
+/// The next record of the log served, if one is.
+async fn next_record(log: &mut Option<Capture>) -> Option<Record> {
+    match log {
+        Some(c) => c.recv().await,
+        None => std::future::pending().await,
     }
 }
 
@@ -402,6 +486,7 @@ impl Foxglove {
             commands: spec.commands.clone(),
             to_bus,
             refused: Tally::new(),
+            faults: Tally::new(),
         });
         let mut server = foxglove::WebSocketServer::new()
             .name("seabus")
@@ -431,8 +516,23 @@ impl Foxglove {
             tf: None,
             heading: None,
             local: None,
+            log: None,
+            node: spec.node.clone(),
             scratch: Vec::new(),
         };
+        let mut log = spec.log.map(|level| {
+            logs::attach(Wants {
+                level,
+                targets: Wants::SEABUS,
+                queue: LOG_QUEUE,
+            })
+        });
+        let mut server_log = logs::attach(Wants {
+            level: tracing::Level::WARN,
+            targets: SERVER_TARGETS,
+            queue: LOG_QUEUE,
+        });
+        let faults = shared.clone();
         let task = tokio::spawn(async move {
             let mut port = port;
             if let Err(e) = port.subscribe_kind("**", Some(Kind::Data)) {
@@ -454,6 +554,17 @@ impl Foxglove {
                         }
                     }
                     _ = sweep.tick(), if !feed.served.is_empty() => feed.sweep(),
+                    Some(r) = next_record(&mut log) => feed.log(r),
+                    Some(r) = server_log.recv() => {
+                        let kind = if r.text.starts_with("Invalid message") {
+                            "malformed message"
+                        } else if r.text.starts_with("Error receiving") {
+                            "broken connection"
+                        } else {
+                            "server"
+                        };
+                        faults.faults.record("foxglove", kind, format_args!("{}", r.text));
+                    }
                 }
             }
         });
@@ -478,6 +589,12 @@ impl Foxglove {
     /// Client messages refused so far.
     pub fn refused(&self) -> u64 {
         self.shared.refused.counts().values().sum()
+    }
+
+    /// What the server reported of its clients so far (malformed messages, broken connections),
+    /// by kind.
+    pub fn client_faults(&self) -> std::collections::BTreeMap<String, u64> {
+        self.shared.faults.counts()
     }
 }
 

@@ -45,7 +45,7 @@ async fn lines(path: &std::path::Path, n: usize) -> Vec<(String, String, String)
 #[tokio::test(flavor = "current_thread")]
 async fn events_reach_the_central_log_named_and_filtered() {
     let _guard = tracing_subscriber::registry()
-        .with(central::layer())
+        .with(seabus_modules::logs::layer())
         .set_default();
     let dir = tempfile::tempdir().unwrap();
     let bus = format!("dsaav+inproc://central{}", fastrand::u32(..));
@@ -99,7 +99,7 @@ async fn events_reach_the_central_log_named_and_filtered() {
     // nothing more comes (the skipped ones stay out)
     tokio::time::sleep(Duration::from_millis(300)).await;
     assert_eq!(lines(&path, 0).await.len(), 5);
-    assert_eq!((central::dropped(), central::failed()), (0, 0));
+    assert_eq!((forwarder.dropped(), central::failed()), (0, 0));
     forwarder.finish(Duration::from_secs(1)).await;
 }
 
@@ -114,22 +114,22 @@ impl<F: std::future::Future> InSpan for F {}
 #[tokio::test(flavor = "current_thread")]
 async fn without_a_logging_service_records_are_dropped_and_counted() {
     let _guard = tracing_subscriber::registry()
-        .with(central::layer())
+        .with(seabus_modules::logs::layer())
         .set_default();
     // no configuration server on this backbone: the forwarder keeps looking
     let n9 = open(&format!(
         "dsaav+inproc://nobody{}?node=9",
         fastrand::u32(..)
     ));
-    let _forwarder = Forwarder::attach(&n9, 100, "vehicle");
+    let forwarder = Forwarder::attach(&n9, 100, "vehicle");
     let events = 3 * QUEUE as u64;
     for i in 0..events {
         tracing::warn!(target: "seabus_modules::flood", "event {i}");
     }
     // the queue holds QUEUE; the rest were dropped at once, not waited for
     assert!(
-        central::dropped() >= events - QUEUE as u64,
+        forwarder.dropped() >= events - QUEUE as u64,
         "dropped {} of {events}",
-        central::dropped()
+        forwarder.dropped()
     );
 }
