@@ -54,6 +54,7 @@ pub mod payload;
 pub mod qos;
 pub mod queue;
 pub mod schemes;
+mod subindex;
 pub mod tally;
 pub mod topic;
 pub mod url;

@@ -16,6 +16,7 @@ use crate::message::{Kind, Message, Origin, Provenance, Stamp};
 use crate::payload::{ConvertError, Format, Payload};
 use crate::qos::Qos;
 use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queue};
+use crate::subindex::{Scratch, SubIndex};
 use crate::tally::Tally;
 use crate::topic::{Pattern, Topic, TopicError};
 use crate::url::{MediumUrl, UrlError};
@@ -319,6 +320,48 @@ struct Sub {
     queue: Arc<Queue>,
 }
 
+/// Up to this many subscriptions on a medium, a message tries each; beyond, they are indexed.
+const SCAN_UP_TO: usize = 8;
+
+/// A medium's interfaces, with their subscriptions indexed once there are many (the index is
+/// made when the first message needs it, so that subscribing many patterns at once costs one).
+#[derive(Default)]
+struct Subs {
+    list: Vec<Sub>,
+    index: OnceLock<Option<SubIndex>>,
+}
+
+impl Subs {
+    fn new(list: Vec<Sub>) -> Subs {
+        Subs {
+            list,
+            index: OnceLock::new(),
+        }
+    }
+
+    fn index(&self) -> Option<&SubIndex> {
+        self.index
+            .get_or_init(|| {
+                let count: usize = self.list.iter().map(|s| s.patterns.len()).sum();
+                (count > SCAN_UP_TO).then(|| {
+                    let mut index = SubIndex::default();
+                    for (at, s) in self.list.iter().enumerate() {
+                        for (p, k) in s.patterns.iter() {
+                            index.insert(at as u32, p, *k);
+                        }
+                    }
+                    index
+                })
+            })
+            .as_ref()
+    }
+}
+
+thread_local! {
+    /// What an indexed medium's match uses, kept between messages.
+    static SCRATCH: std::cell::Cell<Scratch> = std::cell::Cell::new(Scratch::default());
+}
+
 impl Sub {
     fn wants(&self, msg: &Message) -> bool {
         self.patterns
@@ -344,7 +387,7 @@ pub(crate) struct Inner {
     origin: Arc<Origin>,
     node: Node,
     seq: AtomicU64,
-    subs: RwLock<Arc<[Sub]>>,
+    subs: RwLock<Arc<Subs>>,
     next_id: AtomicU64,
     transport: OnceLock<Arc<dyn Wire>>,
     faults: Option<Faults>,
@@ -451,7 +494,7 @@ impl Builder {
             url: self.url,
             node: self.node,
             seq: AtomicU64::new(0),
-            subs: RwLock::new(Arc::from(Vec::new())),
+            subs: RwLock::new(Arc::new(Subs::default())),
             next_id: AtomicU64::new(1),
             transport: OnceLock::new(),
             faults: self.faults.map(Faults::new),
@@ -660,7 +703,7 @@ impl Medium {
         if let Some(t) = self.inner.transport.get() {
             t.close();
         }
-        for s in self.inner.snapshot().iter() {
+        for s in self.inner.snapshot().list.iter() {
             s.queue.close();
         }
     }
@@ -814,13 +857,14 @@ impl MediumStats {
 }
 
 impl Inner {
-    fn snapshot(&self) -> Arc<[Sub]> {
+    fn snapshot(&self) -> Arc<Subs> {
         self.subs.read().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
     fn update_subs(&self, f: impl FnOnce(&mut Vec<Sub>)) {
         let mut guard = self.subs.write().unwrap_or_else(|p| p.into_inner());
         let mut subs: Vec<Sub> = guard
+            .list
             .iter()
             .map(|s| Sub {
                 id: s.id,
@@ -829,7 +873,7 @@ impl Inner {
             })
             .collect();
         f(&mut subs);
-        *guard = Arc::from(subs);
+        *guard = Arc::new(Subs::new(subs));
     }
 
     /// Registers a task so that closing the medium stops it (at once when already closed).
@@ -882,6 +926,7 @@ impl Inner {
         self.subs
             .read()
             .unwrap_or_else(|p| p.into_inner())
+            .list
             .iter()
             .any(|s| s.id != from && !s.patterns.is_empty())
     }
@@ -916,12 +961,30 @@ impl Inner {
         // every matching interface but the last gets a copy (sharing the payload); the last gets
         // the message itself
         let mut previous: Option<&Sub> = None;
-        for s in subs.iter() {
-            if Some(s.id) == from || !s.wants(&msg) {
-                continue;
+        match subs.index() {
+            None => {
+                for s in subs.list.iter() {
+                    if Some(s.id) == from || !s.wants(&msg) {
+                        continue;
+                    }
+                    if let Some(p) = previous.replace(s) {
+                        put(p, msg.clone());
+                    }
+                }
             }
-            if let Some(p) = previous.replace(s) {
-                put(p, msg.clone());
+            Some(index) => {
+                let mut scratch = SCRATCH.take();
+                index.matching(&msg.topic, msg.kind, &mut scratch);
+                for &at in &scratch.found {
+                    let s = &subs.list[at as usize];
+                    if Some(s.id) == from {
+                        continue;
+                    }
+                    if let Some(p) = previous.replace(s) {
+                        put(p, msg.clone());
+                    }
+                }
+                SCRATCH.set(scratch);
             }
         }
         if let Some(last) = previous {
@@ -1458,5 +1521,68 @@ mod tests {
         assert_eq!(*a.shared::<Mutex<String>>().lock().unwrap(), "");
         let b = Medium::in_process("b", &node);
         assert_eq!(b.shared::<Count>().0.load(Ordering::Relaxed), 0);
+    }
+
+    #[tokio::test]
+    async fn many_subscriptions_are_indexed_and_deliver_as_few_do() {
+        // a message goes to the same interfaces whether the medium tries each pattern or looks
+        // the topic up in its index (more than SCAN_UP_TO subscriptions)
+        let node = Node::new("n");
+        let bus = Medium::in_process("bus", &node);
+        let sender = bus.attach("sender");
+        let mut wanted = Vec::new();
+        for (p, k) in [
+            ("nav.attitude", None),
+            ("nav.**", None),
+            ("nav.*", Some(Kind::Data)),
+            ("*.attitude", None),
+            ("cmd.**", Some(Kind::Command)),
+            ("**", Some(Kind::Command)),
+        ] {
+            let mut port = bus.attach(p);
+            port.subscribe_kind(p, k).unwrap();
+            wanted.push(port);
+        }
+        let mut idle: Vec<Interface> = (0..20)
+            .map(|i| {
+                let mut port = bus.attach(&format!("idle{i}"));
+                port.subscribe(&format!("other{i}.**")).unwrap();
+                port.subscribe(&format!("x.other{i}")).unwrap();
+                port
+            })
+            .collect();
+        assert!(bus.inner.snapshot().index().is_some(), "indexed");
+        let mut nav = bus.attach("nav-sender");
+        nav.subscribe("nav.attitude").unwrap();
+        nav.send("nav.attitude", DataMap::new().with("yaw", 1.0))
+            .await
+            .unwrap();
+        sender
+            .command("cmd.course", DataMap::new().with("heading", 2.0))
+            .await
+            .unwrap();
+        sender
+            .send("power.battery", DataMap::new().with("v", 3.0))
+            .await
+            .unwrap();
+        let got: Vec<Vec<String>> = wanted
+            .iter_mut()
+            .map(|p| {
+                std::iter::from_fn(|| p.try_recv().ok())
+                    .map(|m| m.topic.as_str().to_string())
+                    .collect()
+            })
+            .collect();
+        let want: Vec<Vec<&str>> = vec![
+            vec!["nav.attitude"],
+            vec!["nav.attitude"],
+            vec!["nav.attitude"],
+            vec!["nav.attitude"],
+            vec!["cmd.course"],
+            vec!["cmd.course"],
+        ];
+        assert_eq!(got, want);
+        assert!(nav.try_recv().is_err(), "not back to its sender");
+        assert!(idle.iter_mut().all(|p| p.try_recv().is_err()));
     }
 }

@@ -155,6 +155,16 @@ enum Shape {
     General,
 }
 
+/// A segment of a pattern as a subscription index files it.
+pub(crate) enum Step<'a> {
+    /// This very segment.
+    Lit(&'a str),
+    /// `*`: any one segment.
+    One,
+    /// `**`: any number of segments, none included.
+    Any,
+}
+
 /// A topic pattern with `*` (one segment) and `**` (any number of segments) wildcards.
 #[derive(Clone, PartialEq, Eq)]
 pub struct Pattern {
@@ -189,6 +199,15 @@ impl Pattern {
             text: Arc::from(text),
             segs: segs.into(),
             shape,
+        })
+    }
+
+    /// The pattern's segments, for a subscription index.
+    pub(crate) fn steps(&self) -> impl Iterator<Item = Step<'_>> {
+        self.segs.iter().map(|s| match s {
+            Seg::Lit(l) => Step::Lit(l),
+            Seg::One => Step::One,
+            Seg::Any => Step::Any,
         })
     }
 
