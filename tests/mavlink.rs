@@ -10,89 +10,9 @@ use common::*;
 use seabus_medium::{LinkState, Medium, Node};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{ChildStdin, Command, Stdio};
+use std::process::Stdio;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
-
-/// The Python vehicle: its process, what it reports, and where to give it orders.
-struct Vehicle {
-    _child: Running,
-    events: mpsc::Receiver<Value>,
-    stdin: ChildStdin,
-    seen: Vec<Value>,
-}
-
-impl Vehicle {
-    /// Starts the vehicle on UDP port `port`, sending to `to` as well, for at most `secs`.
-    fn start(port: u16, to: u16, secs: u32) -> Vehicle {
-        let script = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/peers/mavlink_vehicle.py"
-        );
-        let mut child = Running(
-            Command::new("python3")
-                .args([
-                    script,
-                    &port.to_string(),
-                    &secs.to_string(),
-                    "--to",
-                    &format!("127.0.0.1:{to}"),
-                ])
-                .stdin(Stdio::piped())
-                .stdout(Stdio::piped())
-                .spawn()
-                .expect("python3 runs"),
-        );
-        let stdin = child.stdin.take().expect("piped");
-        let out = child.stdout.take().expect("piped");
-        let (tx, events) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(out).lines().map_while(Result::ok) {
-                let v: Value = serde_json::from_str(&line).expect("the vehicle reports JSON");
-                if tx.send(v).is_err() {
-                    return;
-                }
-            }
-        });
-        let mut v = Vehicle {
-            _child: child,
-            events,
-            stdin,
-            seen: Vec::new(),
-        };
-        v.wait("ready", Duration::from_secs(10), |_| true);
-        v
-    }
-
-    /// Waits at most `limit` for an event `event` that `pred` accepts.
-    fn wait(&mut self, event: &str, limit: Duration, pred: impl Fn(&Value) -> bool) -> Value {
-        let deadline = Instant::now() + limit;
-        while Instant::now() < deadline {
-            if let Ok(v) = self.events.recv_timeout(Duration::from_millis(100)) {
-                self.seen.push(v.clone());
-                if v["event"] == event && pred(&v) {
-                    return v;
-                }
-            }
-        }
-        panic!(
-            "the vehicle reported no such {event} within {limit:?}; it reported {:?}",
-            self.seen
-        );
-    }
-
-    fn order(&mut self, what: &str) {
-        writeln!(self.stdin, "{what}").expect("the vehicle takes orders");
-        self.stdin.flush().expect("the vehicle takes orders");
-    }
-}
-
-impl Drop for Vehicle {
-    fn drop(&mut self) {
-        let _ = writeln!(self.stdin, "quit");
-    }
-}
 
 /// The payload of the first spy line on `topic` that `pred` accepts.
 fn spied(
@@ -129,7 +49,7 @@ fn spy_shows_an_ardusub_vehicle_and_pub_arms_it() {
     let url = format!("mavlink://udpin:127.0.0.1:{spy_port}?sysid=250&compid=191");
     let (spy, rx) = spy_json(&url, 30);
     let origin = format!("spy-{}/spy", spy.id());
-    let mut vehicle = Vehicle::start(vehicle_port, spy_port, 40);
+    let mut vehicle = PythonPeer::mavlink("mavlink_vehicle.py", vehicle_port, spy_port, 40);
     let mut seen = Vec::new();
 
     // the vehicle's messages, with its values, originating at the spy's medium
@@ -395,7 +315,7 @@ fn corrupt_frames_are_counted_and_a_silent_vehicle_takes_the_link_down() {
         .attach("vehicles")
         .subscribed("mavlink.vehicles")
         .unwrap();
-    let mut vehicle = Vehicle::start(vehicle_port, port, 40);
+    let mut vehicle = PythonPeer::mavlink("mavlink_vehicle.py", vehicle_port, port, 40);
     link(&rt, &medium, Duration::from_secs(10), |s| {
         *s == LinkState::Up
     });

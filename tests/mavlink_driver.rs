@@ -27,8 +27,7 @@ seed_tests! {
     mavlink_datasets_seeds => mavlink_datasets,
 }
 use serde_json::Value;
-use std::io::{BufRead, BufReader, Write};
-use std::process::{ChildStdin, Command, Stdio};
+use std::process::Stdio;
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
@@ -68,105 +67,6 @@ fn system(mav_port: u16, net: &str) -> (tempfile::TempDir, std::path::PathBuf) {
         String::from_utf8_lossy(&checked.stderr)
     );
     (dir, path)
-}
-
-/// The Python ROV: its process, what it reports, and where to give it orders.
-struct Rov {
-    _child: Running,
-    events: mpsc::Receiver<Value>,
-    stdin: ChildStdin,
-    seen: Vec<Value>,
-}
-
-impl Rov {
-    fn start(port: u16, to: u16, secs: u32) -> Rov {
-        let script = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/peers/mavlink_ardusub.py"
-        );
-        let mut child = Running(
-            Command::new("python3")
-                .args([
-                    script,
-                    &port.to_string(),
-                    &secs.to_string(),
-                    "--to",
-                    &format!("127.0.0.1:{to}"),
-                ])
-                .stdin(Stdio::piped())
-                .stdout(Stdio::piped())
-                .spawn()
-                .expect("python3 runs"),
-        );
-        let stdin = child.stdin.take().expect("piped");
-        let out = child.stdout.take().expect("piped");
-        let (tx, events) = mpsc::channel();
-        std::thread::spawn(move || {
-            for line in BufReader::new(out).lines().map_while(Result::ok) {
-                let v: Value = serde_json::from_str(&line).expect("the ROV reports JSON");
-                if tx.send(v).is_err() {
-                    return;
-                }
-            }
-        });
-        let mut rov = Rov {
-            _child: child,
-            events,
-            stdin,
-            seen: Vec::new(),
-        };
-        rov.wait("ready", Duration::from_secs(10), |_| true);
-        rov
-    }
-
-    /// Waits at most `limit` for an event `event` that `pred` accepts (seen before or coming).
-    fn wait(&mut self, event: &str, limit: Duration, pred: impl Fn(&Value) -> bool) -> Value {
-        if let Some(v) = self.seen.iter().find(|v| v["event"] == event && pred(v)) {
-            return v.clone();
-        }
-        let deadline = Instant::now() + limit;
-        while Instant::now() < deadline {
-            if let Ok(v) = self.events.recv_timeout(Duration::from_millis(50)) {
-                self.seen.push(v.clone());
-                if v["event"] == event && pred(&v) {
-                    return v;
-                }
-            }
-        }
-        panic!(
-            "the ROV reported no such {event} within {limit:?}; it reported {:?}",
-            self.seen
-        );
-    }
-
-    /// Everything it reports for `limit`.
-    fn drain(&mut self, limit: Duration) {
-        let deadline = Instant::now() + limit;
-        while Instant::now() < deadline {
-            if let Ok(v) = self.events.recv_timeout(Duration::from_millis(50)) {
-                self.seen.push(v);
-            }
-        }
-    }
-
-    fn all(&self, event: &str) -> Vec<Value> {
-        self.seen
-            .iter()
-            .filter(|v| v["event"] == event)
-            .cloned()
-            .collect()
-    }
-
-    fn order(&mut self, what: &str) {
-        writeln!(self.stdin, "{what}").expect("the ROV takes orders");
-        self.stdin.flush().expect("the ROV takes orders");
-    }
-}
-
-impl Drop for Rov {
-    fn drop(&mut self) {
-        let _ = writeln!(self.stdin, "quit");
-    }
 }
 
 /// What the spy shows of a running system.
@@ -249,7 +149,7 @@ fn datasets_commands_refusals_and_a_lost_vehicle() {
     let (_dir, path) = system(mav_port, &net);
     let mut spy = Spy::new(&net);
     let _run = spawn_run(&path, &[]);
-    let mut rov = Rov::start(rov_port, mav_port, 60);
+    let mut rov = PythonPeer::mavlink("mavlink_ardusub.py", rov_port, mav_port, 60);
     let second = Duration::from_secs(10);
 
     // the datasets, with the values the ROV sent
@@ -434,7 +334,7 @@ fn a_stick_stream_reaches_the_rov_at_its_rate_and_goes_neutral_once_when_it_stop
     let (_dir, path) = system(mav_port, &net);
     let mut spy = Spy::new(&net);
     let _run = spawn_run(&path, &[]);
-    let mut rov = Rov::start(rov_port, mav_port, 60);
+    let mut rov = PythonPeer::mavlink("mavlink_ardusub.py", rov_port, mav_port, 60);
     let second = Duration::from_secs(10);
     spy.health("ROV", "HEALTHY", second);
 

@@ -7,7 +7,6 @@ mod common;
 use common::*;
 use seabus_medium_moos::db::MoosDb;
 use seabus_medium_moos::wire::data;
-use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -36,23 +35,7 @@ async fn a_mavlink_rov_s_depth_and_heading_reach_moos() {
     assert_eq!(checked.status.code(), Some(0), "{}", stderr(&checked));
     let _run = spawn_run(&path, &[]);
     let rov_port = free_port();
-    let _rov = Running(
-        Command::new("python3")
-            .args([
-                concat!(
-                    env!("CARGO_MANIFEST_DIR"),
-                    "/tests/peers/mavlink_ardusub.py"
-                ),
-                &rov_port.to_string(),
-                "30",
-                "--to",
-                &format!("127.0.0.1:{mav_port}"),
-            ])
-            .stdin(Stdio::piped())
-            .stdout(Stdio::null())
-            .spawn()
-            .expect("python3 runs"),
-    );
+    let _rov = PythonPeer::mavlink("mavlink_ardusub.py", rov_port, mav_port, 30);
     let deadline = Instant::now() + Duration::from_secs(15);
     while ["NAV_DEPTH", "NAV_HEADING", "VEHICLE_STATE"]
         .iter()

@@ -168,6 +168,55 @@ fn node(dir: &Path, name: &str, unique: u32, extra: &str) -> (PathBuf, PathBuf, 
     (path, pty, bus)
 }
 
+/// A node on the network: `seabus run` of its system, and on its bus a watcher of `n2k.status`
+/// and a sender; `port` is its port on the relay.
+struct Joined {
+    _run: Running,
+    _bus: seabus_medium::Medium,
+    rx: seabus_medium::Interface,
+    tx: seabus_medium::Interface,
+    port: usize,
+}
+
+/// Starts node `name` ([`node`]) and joins it to the network through `relay`, its bus watched
+/// from before it starts.
+fn join(relay: &Relay, dir: &Path, name: &str, unique: u32, extra: &str) -> Joined {
+    let (path, pty, bus) = node(dir, name, unique, extra);
+    let watch = schemes()
+        .open("bus", &bus, &Node::new(&format!("watch-{name}")))
+        .unwrap();
+    let mut rx = watch.attach("watch");
+    rx.subscribe("n2k.status").unwrap();
+    let tx = watch.attach("send");
+    let run = spawn_run(&path, &[]);
+    let port = relay.add_pty(&pty);
+    Joined {
+        _run: run,
+        _bus: watch,
+        rx,
+        tx,
+        port,
+    }
+}
+
+/// Has each of `nodes` send a vessel heading `rounds` times, 100 ms apart, then waits 500 ms for
+/// the frames to cross the relay.
+async fn send_headings(nodes: &[&Joined], rounds: usize) {
+    for _ in 0..rounds {
+        for n in nodes {
+            n.tx.publish(
+                seabus_medium::Kind::Data,
+                "n2k.out.vesselHeading",
+                DataMap::new().and("heading", V::Float(45.0)),
+            )
+            .await
+            .unwrap();
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(500)).await;
+}
+
 /// The latest `n2k.status` of a node, waiting (at most `limit`) for one `pred` accepts.
 async fn status_until(
     rx: &mut seabus_medium::Interface,
@@ -244,18 +293,10 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
     device_at(&drx, 40, Duration::from_secs(10));
 
     // node B, the middle NAME, claims 40 and keeps it; canboatjs moves to 41
-    let (b_path, b_pty, b_bus) = node(dir.path(), "b", 200000, "");
-    let b_watch = schemes()
-        .open("bus", &b_bus, &Node::new("watch-b"))
-        .unwrap();
-    let mut b_rx = b_watch.attach("watch");
-    b_rx.subscribe("n2k.status").unwrap();
-    let b_tx = b_watch.attach("send");
-    let _b = spawn_run(&b_path, &[]);
-    let b_port = relay.add_pty(&b_pty);
+    let mut b = join(&relay, dir.path(), "b", 200000, "");
     device_at(&drx, 41, Duration::from_secs(10));
     status_until(
-        &mut b_rx,
+        &mut b.rx,
         Duration::from_secs(10),
         "B at 40",
         claimed_at(40),
@@ -263,78 +304,56 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
     .await;
 
     // node A, the lowest NAME, claims 40 and keeps it; B moves to 42 (41 is canboatjs's)
-    let (a_path, a_pty, a_bus) = node(dir.path(), "a", 100000, "");
-    let a_watch = schemes()
-        .open("bus", &a_bus, &Node::new("watch-a"))
-        .unwrap();
-    let mut a_rx = a_watch.attach("watch");
-    a_rx.subscribe("n2k.status").unwrap();
-    let a_tx = a_watch.attach("send");
-    let _a = spawn_run(&a_path, &[]);
-    let a_port = relay.add_pty(&a_pty);
-    let b = status_until(
-        &mut b_rx,
+    let mut a = join(&relay, dir.path(), "a", 100000, "");
+    let b_status = status_until(
+        &mut b.rx,
         Duration::from_secs(10),
         "B at 42",
         claimed_at(42),
     )
     .await;
-    let a = status_until(
-        &mut a_rx,
+    let a_status = status_until(
+        &mut a.rx,
         Duration::from_secs(10),
         "A at 40",
         claimed_at(40),
     )
     .await;
     // each knows who holds what
-    let devices = b.get("devices").and_then(V::as_map).unwrap();
-    assert_eq!(devices.len(), 2, "{b}");
+    let devices = b_status.get("devices").and_then(V::as_map).unwrap();
+    assert_eq!(devices.len(), 2, "{b_status}");
     assert!(
         devices.get("40").is_some() && devices.get("41").is_some(),
-        "{b}"
+        "{b_status}"
     );
     assert!(
-        a.get_str("name").unwrap() < b.get_str("name").unwrap(),
-        "{a} {b}"
+        a_status.get_str("name").unwrap() < b_status.get_str("name").unwrap(),
+        "{a_status} {b_status}"
     );
 
     // everyone sends headings from the address it ended with
     let mark = relay.log.lock().unwrap().len();
-    for _ in 0..10 {
-        for tx in [&a_tx, &b_tx] {
-            tx.publish(
-                seabus_medium::Kind::Data,
-                "n2k.out.vesselHeading",
-                DataMap::new().and("heading", V::Float(45.0)),
-            )
-            .await
-            .unwrap();
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    tokio::time::sleep(Duration::from_millis(500)).await;
-    assert_eq!(relay.sources(a_port, 127250, mark), [40]);
-    assert_eq!(relay.sources(b_port, 127250, mark), [42]);
+    send_headings(&[&a, &b], 10).await;
+    assert_eq!(relay.sources(a.port, 127250, mark), [40]);
+    assert_eq!(relay.sources(b.port, 127250, mark), [42]);
     assert_eq!(relay.sources(dev_port, 127250, mark), [41]);
     // and their claims came from there
-    assert_eq!(relay.sources(b_port, 60928, 0), [40, 42]);
-    assert_eq!(relay.sources(a_port, 60928, 0), [40]);
+    assert_eq!(relay.sources(b.port, 60928, 0), [40, 42]);
+    assert_eq!(relay.sources(a.port, 60928, 0), [40]);
 
     // node C, not arbitrary-address capable, claims 40: that bit is the NAME's top one, so C's
     // NAME is lower than every capable device's whatever its unique number. A moves to 41: it
     // joined after canboatjs's claim of 41 and never heard it; canboatjs, whose NAME is higher
     // than A's, moves on to 43 (42 is B's)
-    let (c_path, c_pty, c_bus) = node(dir.path(), "c", 400000, r#"arbitrary_address="false""#);
-    let c_watch = schemes()
-        .open("bus", &c_bus, &Node::new("watch-c"))
-        .unwrap();
-    let mut c_rx = c_watch.attach("watch");
-    c_rx.subscribe("n2k.status").unwrap();
-    let c_tx = c_watch.attach("send");
-    let _c = spawn_run(&c_path, &[]);
-    let c_port = relay.add_pty(&c_pty);
+    let mut c = join(
+        &relay,
+        dir.path(),
+        "c",
+        400000,
+        r#"arbitrary_address="false""#,
+    );
     status_until(
-        &mut a_rx,
+        &mut a.rx,
         Duration::from_secs(10),
         "A at 41",
         claimed_at(41),
@@ -342,7 +361,7 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
     .await;
     device_at(&drx, 43, Duration::from_secs(10));
     status_until(
-        &mut c_rx,
+        &mut c.rx,
         Duration::from_secs(10),
         "C at 40",
         claimed_at(40),
@@ -351,46 +370,32 @@ async fn the_lowest_name_keeps_the_address_and_the_others_move_to_free_ones() {
 
     // node D, not capable either and with a higher unique number, claims 40: C defends it, and D
     // says it cannot claim (a claim from 254) and sends nothing
-    let (d_path, d_pty, d_bus) = node(dir.path(), "d", 500000, r#"arbitrary_address="false""#);
-    let d_watch = schemes()
-        .open("bus", &d_bus, &Node::new("watch-d"))
-        .unwrap();
-    let mut d_rx = d_watch.attach("watch");
-    d_rx.subscribe("n2k.status").unwrap();
-    let d_tx = d_watch.attach("send");
-    let _d = spawn_run(&d_path, &[]);
-    let d_port = relay.add_pty(&d_pty);
-    let d = status_until(&mut d_rx, Duration::from_secs(10), "D cannot claim", |m| {
+    let mut d = join(
+        &relay,
+        dir.path(),
+        "d",
+        500000,
+        r#"arbitrary_address="false""#,
+    );
+    let d_status = status_until(&mut d.rx, Duration::from_secs(10), "D cannot claim", |m| {
         m.get_str("state") == Some("cannot-claim")
     })
     .await;
-    assert_eq!(d.get_i64("address"), Some(254), "{d}");
+    assert_eq!(d_status.get_i64("address"), Some(254), "{d_status}");
     let mark = relay.log.lock().unwrap().len();
-    for _ in 0..5 {
-        for tx in [&a_tx, &b_tx, &c_tx, &d_tx] {
-            tx.publish(
-                seabus_medium::Kind::Data,
-                "n2k.out.vesselHeading",
-                DataMap::new().and("heading", V::Float(45.0)),
-            )
-            .await
-            .unwrap();
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-    tokio::time::sleep(Duration::from_millis(500)).await;
-    assert_eq!(relay.sources(a_port, 127250, mark), [41]);
-    assert_eq!(relay.sources(b_port, 127250, mark), [42]);
-    assert_eq!(relay.sources(c_port, 127250, mark), [40]);
+    send_headings(&[&a, &b, &c, &d], 5).await;
+    assert_eq!(relay.sources(a.port, 127250, mark), [41]);
+    assert_eq!(relay.sources(b.port, 127250, mark), [42]);
+    assert_eq!(relay.sources(c.port, 127250, mark), [40]);
     assert_eq!(relay.sources(dev_port, 127250, mark), [43]);
-    assert_eq!(relay.sources(d_port, 127250, mark), Vec::<u8>::new());
-    assert_eq!(relay.sources(d_port, 60928, 0), [40, 254]);
-    let d = status_until(&mut d_rx, Duration::from_secs(8), "D's refusals", |m| {
+    assert_eq!(relay.sources(d.port, 127250, mark), Vec::<u8>::new());
+    assert_eq!(relay.sources(d.port, 60928, 0), [40, 254]);
+    let d_status = status_until(&mut d.rx, Duration::from_secs(8), "D's refusals", |m| {
         m.get("refused")
             .and_then(V::as_map)
             .and_then(|r| r.get_i64("n2k-send-no-address"))
             .is_some_and(|n| n >= 5)
     })
     .await;
-    assert_eq!(d.get_i64("sent"), Some(0), "{d}");
+    assert_eq!(d_status.get_i64("sent"), Some(0), "{d_status}");
 }

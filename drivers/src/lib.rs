@@ -22,6 +22,8 @@
     doc = "- `n2k` — NMEA 2000 on a CAN medium, the `nmea2000` module (the `can` feature, left \
            out of this build)."
 )]
+//! - [`command_status`] — the `command-status` dataset every driver and simulator answers its
+//!   commands with on `cmd.status`.
 //! - [`iver`] — the Iver2/Iver3 frontseat: Remote Helm protocol, backseat driver, simulated frontseat.
 //! - [`mavlink`] — MAVLink vehicles (ArduSub, ArduRover): the `mavlink` driver on a MAVLink medium's
 //!   topics.
@@ -40,6 +42,7 @@
 
 #[cfg(feature = "can")]
 pub mod can;
+pub mod command_status;
 pub mod iver;
 pub mod mavlink;
 #[cfg(feature = "can")]

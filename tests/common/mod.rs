@@ -329,3 +329,123 @@ pub fn finish(mut child: Child) -> Output {
 pub fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
+
+/// A Python peer of the tests (a script in `tests/peers`) that reports on stdout, one JSON object
+/// a line with its `event`, and takes orders on stdin, one a line; it is told `quit`, then killed,
+/// when dropped.
+pub struct PythonPeer {
+    child: Running,
+    script: String,
+    events: std::sync::mpsc::Receiver<serde_json::Value>,
+    /// Everything it reported so far.
+    pub seen: Vec<serde_json::Value>,
+}
+
+impl PythonPeer {
+    /// Starts `python3 tests/peers/SCRIPT ARGS` and waits (at most 10 s) for its `ready`.
+    pub fn start(script: &str, args: &[&str]) -> PythonPeer {
+        use std::io::BufRead;
+        let path = format!("{}/tests/peers/{script}", env!("CARGO_MANIFEST_DIR"));
+        let mut child = Running(
+            Command::new("python3")
+                .arg(&path)
+                .args(args)
+                .stdin(Stdio::piped())
+                .stdout(Stdio::piped())
+                .spawn()
+                .expect("python3 runs"),
+        );
+        let out = child.0.stdout.take().expect("its output is piped");
+        let (tx, events) = std::sync::mpsc::channel();
+        let who = script.to_string();
+        std::thread::spawn(move || {
+            for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
+                let v: serde_json::Value = serde_json::from_str(&line)
+                    .unwrap_or_else(|e| panic!("{who} reports JSON, not {line:?}: {e}"));
+                if tx.send(v).is_err() {
+                    return;
+                }
+            }
+        });
+        let mut peer = PythonPeer {
+            child,
+            script: script.to_string(),
+            events,
+            seen: Vec::new(),
+        };
+        peer.wait("ready", Duration::from_secs(10), |_| true);
+        peer
+    }
+
+    /// Starts a pymavlink vehicle (`mavlink_vehicle.py`, `mavlink_ardusub.py`) on UDP port `port`
+    /// of loopback, sending to 127.0.0.1:`to` as well, for at most `secs`.
+    pub fn mavlink(script: &str, port: u16, to: u16, secs: u32) -> PythonPeer {
+        let (port, secs, to) = (
+            port.to_string(),
+            secs.to_string(),
+            format!("127.0.0.1:{to}"),
+        );
+        PythonPeer::start(script, &[&port, &secs, "--to", &to])
+    }
+
+    /// Waits at most `limit` for an event `event` that `pred` accepts (seen before or coming).
+    pub fn wait(
+        &mut self,
+        event: &str,
+        limit: Duration,
+        pred: impl Fn(&serde_json::Value) -> bool,
+    ) -> serde_json::Value {
+        if let Some(v) = self.seen.iter().find(|v| v["event"] == event && pred(v)) {
+            return v.clone();
+        }
+        let deadline = Instant::now() + limit;
+        while Instant::now() < deadline {
+            if let Ok(v) = self.events.recv_timeout(Duration::from_millis(50)) {
+                self.seen.push(v.clone());
+                if v["event"] == event && pred(&v) {
+                    return v;
+                }
+            }
+        }
+        panic!(
+            "{} reported no such {event} within {limit:?}; it reported {:?}",
+            self.script, self.seen
+        );
+    }
+
+    /// Keeps everything it reports for `limit`.
+    pub fn drain(&mut self, limit: Duration) {
+        let deadline = Instant::now() + limit;
+        while Instant::now() < deadline {
+            if let Ok(v) = self.events.recv_timeout(Duration::from_millis(50)) {
+                self.seen.push(v);
+            }
+        }
+    }
+
+    /// Every event `event` it reported so far.
+    pub fn all(&self, event: &str) -> Vec<serde_json::Value> {
+        self.seen
+            .iter()
+            .filter(|v| v["event"] == event)
+            .cloned()
+            .collect()
+    }
+
+    /// Gives it the order `what`.
+    pub fn order(&mut self, what: &str) {
+        use std::io::Write;
+        let stdin = self.child.0.stdin.as_mut().expect("its input is piped");
+        writeln!(stdin, "{what}").expect("it takes orders");
+        stdin.flush().expect("it takes orders");
+    }
+}
+
+impl Drop for PythonPeer {
+    fn drop(&mut self) {
+        if let Some(stdin) = self.child.0.stdin.as_mut() {
+            use std::io::Write;
+            let _ = writeln!(stdin, "quit");
+        }
+    }
+}

@@ -26,49 +26,25 @@ started); each `target` (SET_POSITION_TARGET_GLOBAL_INT); and what it did when t
   mute            answers no more commands; reports `muted`
   quit            ends
 
+The command line, socket, stdin orders and main loop are mavlink_peer.py's.
+
 usage: mavlink_ardusub.py PORT SECONDS --to HOST:PORT"""
-import json
-import socket
+import os
 import sys
-import threading
 import time
 
-from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 
-port, seconds = int(sys.argv[1]), float(sys.argv[2])
-host, to_port = sys.argv[sys.argv.index("--to") + 1].rsplit(":", 1)
-fixed = [(host, int(to_port))]
+from mavlink_peer import Peer  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 
-sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-sock.bind(("127.0.0.1", port))
-sock.settimeout(0.02)
-mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
-mav.robust_parsing = True
-start = time.monotonic()
-clients = []
-orders_in = []
-lock = threading.Lock()
-state = {"armed": False, "mode": 19, "heartbeat": True, "muted": False, "last_heartbeat": None}
+peer = Peer(receive_timeout=0.02)
+if not peer.fixed:
+    sys.exit(__doc__)
+mav = peer.mav
+state = {"armed": False, "mode": 19, "muted": False}
 ACCEPTED_MODES = {19, 0, 2, 16, 4}
 DENIED_MODES = {3}
-
-
-def say(record):
-    with lock:
-        sys.stdout.write(json.dumps(record) + "\n")
-        sys.stdout.flush()
-
-
-def send(data):
-    for addr in fixed + clients:
-        try:
-            sock.sendto(data, addr)
-        except OSError:
-            pass
-
-
-def boot_ms():
-    return int((time.monotonic() - start) * 1000)
 
 
 def heartbeat():
@@ -76,22 +52,21 @@ def heartbeat():
     if state["armed"]:
         flags |= mavlink2.MAV_MODE_FLAG_SAFETY_ARMED
     status = mavlink2.MAV_STATE_ACTIVE if state["armed"] else mavlink2.MAV_STATE_STANDBY
-    send(mav.heartbeat_encode(mavlink2.MAV_TYPE_SUBMARINE, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
-                              flags, state["mode"], status).pack(mav))
-    state["last_heartbeat"] = time.monotonic()
+    return mav.heartbeat_encode(mavlink2.MAV_TYPE_SUBMARINE, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+                                flags, state["mode"], status).pack(mav)
 
 
 def telemetry():
-    t = boot_ms()
-    send(mav.attitude_encode(t, 0.1, -0.05, -1.57, 0.01, 0.0, -0.02).pack(mav))
-    send(mav.global_position_int_encode(t, 435081000, 164402000, -12500, -12500, 30, -40, 2,
-                                        65535).pack(mav))
-    send(mav.scaled_pressure_encode(t, 2250.5, 0.0, 1850).pack(mav))
+    t = peer.boot_ms()
+    peer.send(mav.attitude_encode(t, 0.1, -0.05, -1.57, 0.01, 0.0, -0.02).pack(mav))
+    peer.send(mav.global_position_int_encode(t, 435081000, 164402000, -12500, -12500, 30, -40, 2,
+                                             65535).pack(mav))
+    peer.send(mav.scaled_pressure_encode(t, 2250.5, 0.0, 1850).pack(mav))
     # a BlueROV2's external depth sensor (Bar30) reports on the second pressure message
-    send(mav.scaled_pressure2_encode(t, 1515.0, 0.0, 1625).pack(mav))
+    peer.send(mav.scaled_pressure2_encode(t, 1515.0, 0.0, 1625).pack(mav))
     sensors = mavlink2.MAV_SYS_STATUS_SENSOR_3D_GYRO | mavlink2.MAV_SYS_STATUS_SENSOR_3D_ACCEL
-    send(mav.sys_status_encode(sensors, sensors, sensors, 250, 15800, -1, 76, 0, 0, 0, 0, 0,
-                               0).pack(mav))
+    peer.send(mav.sys_status_encode(sensors, sensors, sensors, 250, 15800, -1, 76, 0, 0, 0, 0, 0,
+                                    0).pack(mav))
 
 
 def answer(msg):
@@ -113,61 +88,29 @@ def handle(msg):
     kind = msg.get_type()
     sender = (msg.get_srcSystem(), msg.get_srcComponent())
     if kind == "COMMAND_LONG":
-        say({"event": "command", "sysid": sender[0], "compid": sender[1],
-             "command": msg.command, "confirmation": msg.confirmation,
-             "target_system": msg.target_system, "target_component": msg.target_component,
-             "param1": msg.param1, "param2": msg.param2})
+        peer.say({"event": "command", "sysid": sender[0], "compid": sender[1],
+                  "command": msg.command, "confirmation": msg.confirmation,
+                  "target_system": msg.target_system, "target_component": msg.target_component,
+                  "param1": msg.param1, "param2": msg.param2})
         if state["muted"]:
             return
         result = answer(msg)
-        send(mav.command_ack_encode(msg.command, result, 0, 0, sender[0], sender[1]).pack(mav))
+        peer.send(mav.command_ack_encode(msg.command, result, 0, 0, sender[0],
+                                         sender[1]).pack(mav))
         # ArduPilot says its new state at once
-        if state["heartbeat"] and result == mavlink2.MAV_RESULT_ACCEPTED:
-            heartbeat()
+        if peer.heartbeat_on and result == mavlink2.MAV_RESULT_ACCEPTED:
+            peer.send_heartbeat(heartbeat())
     elif kind == "MANUAL_CONTROL":
-        say({"event": "manual", "target": msg.target, "x": msg.x, "y": msg.y, "z": msg.z,
-             "r": msg.r, "buttons": msg.buttons, "t": time.monotonic() - start})
+        peer.say({"event": "manual", "target": msg.target, "x": msg.x, "y": msg.y, "z": msg.z,
+                  "r": msg.r, "buttons": msg.buttons, "t": time.monotonic() - peer.start})
     elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
-        say({"event": "target", "frame": msg.coordinate_frame, "type_mask": msg.type_mask,
-             "alt": msg.alt, "vx": msg.vx, "vy": msg.vy, "yaw": msg.yaw})
+        peer.say({"event": "target", "frame": msg.coordinate_frame, "type_mask": msg.type_mask,
+                  "alt": msg.alt, "vx": msg.vx, "vy": msg.vy, "yaw": msg.yaw})
 
 
-def orders():
-    for line in sys.stdin:
-        with lock:
-            orders_in.append(line.strip())
+def mute():
+    state["muted"] = True
+    peer.say({"event": "muted"})
 
 
-threading.Thread(target=orders, daemon=True).start()
-say({"event": "ready", "port": port})
-next_heartbeat = next_telemetry = time.monotonic()
-deadline = time.monotonic() + seconds
-while time.monotonic() < deadline:
-    now = time.monotonic()
-    if state["heartbeat"] and now >= next_heartbeat:
-        heartbeat()
-        next_heartbeat = now + 1.0
-    if now >= next_telemetry:
-        telemetry()
-        next_telemetry = now + 0.2
-    with lock:
-        todo, orders_in[:] = list(orders_in), []
-    for order in todo:
-        if order == "stop-heartbeat":
-            state["heartbeat"] = False
-            say({"event": "heartbeat-stopped",
-                 "since_last": time.monotonic() - state["last_heartbeat"]})
-        elif order == "mute":
-            state["muted"] = True
-            say({"event": "muted"})
-        elif order == "quit":
-            deadline = 0
-    try:
-        data, addr = sock.recvfrom(65536)
-    except socket.timeout:
-        continue
-    if addr not in clients and addr not in fixed and len(clients) < 16:
-        clients.append(addr)
-    for msg in mav.parse_buffer(data) or []:
-        if msg.get_type() != "BAD_DATA":
-            handle(msg)
+peer.run(heartbeat, telemetry, handle, {"mute": mute})

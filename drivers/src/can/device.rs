@@ -19,10 +19,11 @@
 //! their message are counted and dropped.
 
 use super::dbc::{Database, MessageDef};
+use crate::command_status::{self, command_status};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
-use seabus_medium::{DataMap, Format, Kind, Message, Topic, Value};
+use seabus_medium::{Format, Kind, Message, Topic};
 use seabus_medium_can::frame::{CanFrame, FrameKind};
 use seabus_modules::datasets::Catalogue;
 use seabus_modules::module::{Context, Declaration, Module, ModuleError, ModuleKind, TopicDecl};
@@ -104,7 +105,7 @@ fn build(cfg: &ModuleConfig, _: &Catalogue) -> Result<Built, FileError> {
         .format(0, Some(Format::Map))
         .consumes(TopicDecl::topic("can.**"))
         .format(1, Some(Format::Map))
-        .produces(TopicDecl::dataset(STATUS, "command-status").on_port(1));
+        .produces(TopicDecl::dataset(STATUS, command_status::DATASET).on_port(1));
     let mut published = HashMap::new();
     let mut commands = HashMap::new();
     for (i, m) in db.messages.iter().enumerate() {
@@ -195,23 +196,19 @@ impl CanDevice {
             }
             Err(e) => Err(e.to_string()),
         };
-        let mut status = DataMap::new()
-            .with("command", def.name.as_str())
-            .with("id", id)
-            .with("origin", msg.provenance.origin.to_string())
-            .with("request_seq", msg.provenance.seq as i64);
-        match sent {
-            Ok(()) => status.insert("state", "sent"),
+        let (state, error) = match &sent {
+            Ok(()) => ("sent", None),
             Err(why) => {
                 self.tally.record(
                     ctx.name(),
                     "refused",
                     format_args!("{} refused: {why}", def.name),
                 );
-                status.insert("state", "refused");
-                status.insert("error", Value::from(why));
+                ("refused", Some(why.as_str()))
             }
-        }
+        };
+        let request = command_status::request(msg);
+        let status = command_status(&def.name, state, Some(id), error, Some(&request));
         ctx.publish_on(1, Kind::Data, STATUS, status).await?;
         Ok(())
     }

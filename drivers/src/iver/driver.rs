@@ -35,6 +35,7 @@
 //! feet.
 
 use super::protocol::{self, Command, DataRequest, DepthUnits, FromFront, MAX_TIMEOUT, Waypoint};
+use crate::command_status::{self, command_status};
 use crate::units::{FOOT, KNOT};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
@@ -300,7 +301,7 @@ fn topics(p: &Params, cat: &Catalogue) -> Result<Topics, FileError> {
         battery: topic("battery_topic", "battery", "power.battery")?,
         state: topic("state_topic", "vehicle-state", "vehicle.state")?,
         info: topic("info_topic", "vehicle-info", "vehicle.info")?,
-        status: topic("status_topic", "command-status", "cmd.status")?,
+        status: topic("status_topic", command_status::DATASET, "cmd.status")?,
         course: command("course-command", "cmd.course")?,
         actuator: command("actuator-command", "cmd.actuator")?,
         mission: command("mission-command", "cmd.mission")?,
@@ -325,7 +326,7 @@ fn declaration(p: &Params, t: &Topics) -> Declaration {
         (&t.battery, "battery"),
         (&t.state, "vehicle-state"),
         (&t.info, "vehicle-info"),
-        (&t.status, "command-status"),
+        (&t.status, command_status::DATASET),
         (&t.gps, "position"),
         (&t.dvl, "velocity"),
     ] {
@@ -462,16 +463,9 @@ impl Iver {
         error: &str,
         request: &Option<(String, u64)>,
     ) {
-        let mut m = DataMap::new()
-            .with("command", command)
-            .with("state", state)
-            .with("id", id)
-            .with("error", error);
-        if let Some((origin, seq)) = request {
-            m.insert("origin", origin.as_str());
-            m.insert("request_seq", *seq as i64);
-        }
-        self.publish(ctx, "command-status", &self.t.status, m).await;
+        let m = command_status(command, state, Some(id), Some(error), request.as_ref());
+        self.publish(ctx, command_status::DATASET, &self.t.status, m)
+            .await;
     }
 
     /// Sends a command; with `report`, it is tracked on `cmd.status`.
@@ -780,7 +774,7 @@ impl Iver {
         let Some(map) = msg.payload.as_map() else {
             return;
         };
-        let request = Some((msg.origin().to_string(), msg.seq()));
+        let request = Some(command_status::request(&msg));
         let topic = msg.topic.as_str();
         if topic == self.t.course.as_str() {
             self.on_course(ctx, map, request).await;

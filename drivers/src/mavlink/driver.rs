@@ -30,6 +30,7 @@
 //! second and at once on a change: HEALTHY while its heartbeat is heard, OFFLINE when it is lost.
 
 use super::ardupilot::{self, Firmware, short};
+use crate::command_status::{self, command_status};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
@@ -321,7 +322,7 @@ fn topics(p: &Params, cat: &Catalogue) -> Result<Topics, FileError> {
         depth: topic("depth_topic", "depth", "nav.depth")?,
         battery: topic("battery_topic", "battery", "power.battery")?,
         state: topic("state_topic", "vehicle-state", "vehicle.state")?,
-        status: topic("status_topic", "command-status", "cmd.status")?,
+        status: topic("status_topic", command_status::DATASET, "cmd.status")?,
         health,
         arm: command("arm-command", "cmd.arm")?,
         mode: command("mode-command", "cmd.mode")?,
@@ -345,7 +346,7 @@ fn declaration(t: &Topics) -> Declaration {
         (&t.depth, "depth"),
         (&t.battery, "battery"),
         (&t.state, "vehicle-state"),
-        (&t.status, "command-status"),
+        (&t.status, command_status::DATASET),
     ] {
         decl = decl.produces(TopicDecl::dataset(topic, dataset).on_port(1));
     }
@@ -465,16 +466,9 @@ impl Mav {
         error: &str,
         request: &Option<(String, u64)>,
     ) {
-        let mut m = DataMap::new()
-            .with("command", command)
-            .with("state", state)
-            .with("id", id)
-            .with("error", error);
-        if let Some((origin, seq)) = request {
-            m.insert("origin", origin.as_str());
-            m.insert("request_seq", *seq as i64);
-        }
-        self.publish(ctx, "command-status", &self.t.status, m).await;
+        let m = command_status(command, state, Some(id), Some(error), request.as_ref());
+        self.publish(ctx, command_status::DATASET, &self.t.status, m)
+            .await;
     }
 
     fn take_id(&mut self) -> i64 {
@@ -729,7 +723,7 @@ impl Mav {
         let Some(map) = msg.payload.as_map() else {
             return;
         };
-        let request = Some((msg.origin().to_string(), msg.seq()));
+        let request = Some(command_status::request(&msg));
         let topic = msg.topic.as_str();
         if topic == self.t.arm.as_str() {
             self.on_arm(ctx, map, request).await;

@@ -14,6 +14,7 @@
 //! `max_speed` (m/s, 2.5).
 
 use super::kinematics::{Limits, Setpoint, Vehicle};
+use crate::command_status::{self, DATASET, command_status};
 use async_trait::async_trait;
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
@@ -86,7 +87,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         state: topic("vehicle-state", "vehicle.state")?,
         course: topic("course-command", "cmd.course")?,
         mission: topic("mission-command", "cmd.mission")?,
-        status: topic("command-status", "cmd.status")?,
+        status: topic(DATASET, "cmd.status")?,
     };
     let decl = Declaration::new(ModuleKind::Driver)
         .produces(TopicDecl::dataset(&topics.attitude, "attitude"))
@@ -96,7 +97,7 @@ fn build(cfg: &ModuleConfig, cat: &Catalogue) -> Result<Built, FileError> {
         .produces(TopicDecl::dataset(&topics.velocity, "velocity"))
         .produces(TopicDecl::dataset(&topics.battery, "battery"))
         .produces(TopicDecl::dataset(&topics.state, "vehicle-state"))
-        .produces(TopicDecl::dataset(&topics.status, "command-status"))
+        .produces(TopicDecl::dataset(&topics.status, DATASET))
         .accepts(TopicDecl::dataset(&topics.course, "course-command"))
         .accepts(TopicDecl::dataset(&topics.mission, "mission-command"))
         .default_tick(Duration::from_millis(100));
@@ -127,14 +128,10 @@ impl Sim {
             Ok(()) => ("acknowledged", ""),
             Err(why) => ("refused", why),
         };
-        let status = DataMap::new()
-            .with("command", command)
-            .with("state", state)
-            .with("error", error)
-            .with("origin", msg.provenance.origin.to_string())
-            .with("request_seq", msg.provenance.seq as i64);
+        let request = command_status::request(msg);
+        let status = command_status(command, state, None, Some(error), Some(&request));
         if let Err(e) = ctx
-            .dataset_on(0, Kind::Data, "command-status", &self.topics.status, status)
+            .dataset_on(0, Kind::Data, DATASET, &self.topics.status, status)
             .await
         {
             self.tally.record(ctx.name(), "status", &e);
