@@ -24,7 +24,7 @@ fn time_per_op(iters: u32, mut f: impl FnMut()) -> f64 {
 
 fn main() {
     let map = common::ten_fields();
-    let iters = 200_000;
+    let iters = seabus_bench::scale(200_000, 20_000);
     let bin_bytes = binary::encode(&map).expect("a ten-field map has a binary form");
     let xml_text = xmlform::to_xml(&map).expect("an XML form");
     let json_text = json::to_json(&map).expect("a JSON form");
@@ -55,5 +55,7 @@ fn main() {
         "  json    {json:8.0} ns   {:4} bytes   (serde_json, reference)",
         json_text.len()
     );
-    println!("  xml / json = {:.2} (target: at most 3)", xml / json);
+    let mut goals = seabus_bench::Goals::new();
+    goals.at_most("xml / json round trip", xml / json, 3.0);
+    goals.finish();
 }

@@ -10,7 +10,7 @@ mod common;
 use seabus_medium::{Interface, Medium, Node, Payload, Topic};
 use std::time::Instant;
 
-const ROUNDS: usize = 5;
+use seabus_bench::{Goals, scale};
 
 /// Publishes `n` messages on `nav.attitude` to a bus where `takers` interfaces subscribe
 /// `nav.*` and idle interfaces hold `idle` patterns that never match; returns nanoseconds per
@@ -44,7 +44,7 @@ fn cost(rt: &tokio::runtime::Runtime, takers: usize, idle: usize, n: usize) -> f
     let topic = Topic::new("nav.attitude").expect("valid topic");
     let payload = Payload::from(common::ten_fields());
     let mut best = f64::INFINITY;
-    for _ in 0..ROUNDS {
+    for _ in 0..scale(5, 3) {
         let start = Instant::now();
         rt.block_on(async {
             for _ in 0..n {
@@ -72,29 +72,41 @@ fn main() {
         .enable_all()
         .build()
         .expect("runtime");
-    println!("growth: cost of handing out one message (10-field datamap), best of {ROUNDS} rounds");
+    println!(
+        "growth: cost of handing out one message (10-field datamap), best of {} rounds",
+        scale(5, 3)
+    );
+    let mut goals = Goals::new();
+    let per = scale(100_000, 20_000);
     println!("  subscribers that take it (each `nav.*`):");
     let mut first = None;
     for takers in [1, 10, 100, 1000] {
-        let n = (100_000 / takers).max(1000);
+        let n = (per / takers).max(1000);
         let ns = cost(&rt, takers, 0, n);
         let base = *first.get_or_insert(ns);
-        println!(
-            "    {takers:>5}: {ns:>7.1} ns per delivery   {:.2}× the cost with 1 (target: at most 2)",
-            ns / base
-        );
+        println!("    {takers:>5}: {ns:>7.1} ns per delivery");
+        if takers > 1 {
+            goals.at_most(
+                &format!("cost per delivery, {takers} takers / 1"),
+                ns / base,
+                2.0,
+            );
+        }
     }
     println!("  patterns that do not match it (one subscriber takes it):");
-    let few = cost(&rt, 1, 1, 100_000);
-    let hundred = cost(&rt, 1, 100, 100_000);
-    let many = cost(&rt, 1, 10_000, 100_000);
+    let few = cost(&rt, 1, 1, per);
+    let hundred = cost(&rt, 1, 100, per);
+    let many = cost(&rt, 1, 10_000, per);
     println!("         1: {few:>7.1} ns per message   (tried one by one)");
     println!(
         "       100: {hundred:>7.1} ns per message   {:.2}× the cost with 1 (the index's own cost)",
         hundred / few
     );
-    println!(
-        "     10000: {many:>7.1} ns per message   {:.2}× the cost with 100 (target: at most 1.25)",
-        many / hundred
+    println!("     10000: {many:>7.1} ns per message");
+    goals.at_most(
+        "cost per message, 10 000 idle patterns / 100",
+        many / hundred,
+        1.25,
     );
+    goals.finish();
 }

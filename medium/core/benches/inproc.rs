@@ -10,10 +10,10 @@ use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::{Medium, Node, Payload, Topic};
 use std::time::Instant;
 
-const N: usize = 200_000;
-const ROUNDS: usize = 5;
+use seabus_bench::scale;
 
 async fn seabus_run(subscribers: usize) -> f64 {
+    let n = messages();
     let bus = Medium::in_process("bus", &Node::new("bench"));
     let publisher = bus.attach("pub");
     let topic = Topic::new("nav.attitude").expect("valid topic");
@@ -21,34 +21,35 @@ async fn seabus_run(subscribers: usize) -> f64 {
     let mut tasks = Vec::new();
     for i in 0..subscribers {
         let mut port = bus
-            .attach_with(&format!("sub{i}"), N, 16)
+            .attach_with(&format!("sub{i}"), n, 16)
             .subscribed("nav.*")
             .expect("valid pattern");
         tasks.push(tokio::spawn(async move {
-            let mut n = 0;
-            while n < N {
+            let mut got = 0;
+            while got < n {
                 if port.recv().await.is_none() {
                     break;
                 }
-                n += 1;
+                got += 1;
             }
-            n
+            got
         }));
     }
     let start = Instant::now();
-    for _ in 0..N {
+    for _ in 0..n {
         publisher.send(&topic, payload.clone()).await.expect("sent");
     }
     let mut received = 0;
     for t in tasks {
         received += t.await.expect("subscriber ends");
     }
-    assert_eq!(received, N * subscribers, "no message lost");
-    N as f64 / start.elapsed().as_secs_f64()
+    assert_eq!(received, n * subscribers, "no message lost");
+    n as f64 / start.elapsed().as_secs_f64()
 }
 
 async fn broadcast_run(subscribers: usize) -> f64 {
-    let (tx, _) = tokio::sync::broadcast::channel::<Message>(N);
+    let n = messages();
+    let (tx, _) = tokio::sync::broadcast::channel::<Message>(n);
     let template = Message {
         topic: Topic::new("nav.attitude").expect("valid topic"),
         kind: Kind::Data,
@@ -64,48 +65,63 @@ async fn broadcast_run(subscribers: usize) -> f64 {
     for _ in 0..subscribers {
         let mut rx = tx.subscribe();
         tasks.push(tokio::spawn(async move {
-            let mut n = 0;
-            while n < N {
+            let mut got = 0;
+            while got < n {
                 if rx.recv().await.is_err() {
                     break;
                 }
-                n += 1;
+                got += 1;
             }
-            n
+            got
         }));
     }
     let start = Instant::now();
-    for _ in 0..N {
+    for _ in 0..n {
         tx.send(template.clone()).expect("sent");
     }
     let mut received = 0;
     for t in tasks {
         received += t.await.expect("subscriber ends");
     }
-    assert_eq!(received, N * subscribers, "no message lost");
-    N as f64 / start.elapsed().as_secs_f64()
+    assert_eq!(received, n * subscribers, "no message lost");
+    n as f64 / start.elapsed().as_secs_f64()
+}
+
+/// Messages per round.
+fn messages() -> usize {
+    scale(200_000, 50_000)
 }
 
 fn main() {
+    let rounds = scale(5, 3);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
         .build()
         .expect("runtime");
-    println!("in-process delivery, 10-field datamap, {N} messages, median of {ROUNDS} rounds:");
+    println!(
+        "in-process delivery, 10-field datamap, {} messages, median of {rounds} rounds:",
+        messages()
+    );
+    let mut goals = seabus_bench::Goals::new();
     for subs in [1, 4] {
         let mut ours = Vec::new();
         let mut bare = Vec::new();
-        for _ in 0..ROUNDS {
+        for _ in 0..rounds {
             ours.push(rt.block_on(seabus_run(subs)));
             bare.push(rt.block_on(broadcast_run(subs)));
         }
         let (ours, bare) = (common::median(ours), common::median(bare));
         println!(
-            "  1 -> {subs}: seabus {:>14}   broadcast {:>14}   ratio {:.2} (target: at least 0.5)",
+            "  1 -> {subs}: seabus {:>14}   broadcast {:>14}",
             common::rate(ours),
             common::rate(bare),
-            ours / bare
+        );
+        goals.at_least(
+            &format!("in-process 1 -> {subs} / broadcast"),
+            ours / bare,
+            0.8,
         );
     }
+    goals.finish();
 }

@@ -1,0 +1,154 @@
+//! seabus-bench: what seabus's benchmark programs share — the goals their figures are held to.
+//!
+//! Each benchmark measures seabus and its reference side by side in one run and reports every
+//! ratio through a [`Goals`]: [`Goals::at_least`] for a rate (seabus / reference, higher is
+//! better), [`Goals::at_most`] for a cost (seabus / reference, lower is better). Each prints one
+//! line, `goal NAME: RATIO (target: at least GOAL)`.
+//!
+//! A full run (`cargo bench`) is for the figures in `BENCHMARKS.md`: it never fails on a missed
+//! goal. The **smoke run** (`SEABUS_BENCH_SMOKE=1`, what `scripts/test` runs) is short
+//! ([`scale`] picks its smaller sizes) and exits with status 1 when a ratio is worse than half its
+//! goal (a rate below half, a cost above twice): a change that halves a path's speed fails the
+//! tests, while the noise of a shared machine does not.
+//!
+//! Who may depend on it: the benchmark programs of every crate (as a dev-dependency), nothing else.
+
+use std::fmt::Write as _;
+
+/// True in the smoke run (`SEABUS_BENCH_SMOKE` set to anything but `0`).
+pub fn smoke() -> bool {
+    std::env::var_os("SEABUS_BENCH_SMOKE").is_some_and(|v| v != "0")
+}
+
+/// `full` in a full run, `short` in the smoke run.
+pub fn scale<T>(full: T, short: T) -> T {
+    if smoke() { short } else { full }
+}
+
+/// Which way a ratio is good.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Way {
+    AtLeast,
+    AtMost,
+}
+
+/// One ratio and its goal.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    /// What was measured.
+    pub name: String,
+    /// seabus / the reference.
+    pub ratio: f64,
+    /// The goal it is held to.
+    pub goal: f64,
+    way: Way,
+}
+
+impl Outcome {
+    /// True when the ratio meets its goal.
+    pub fn met(&self) -> bool {
+        match self.way {
+            Way::AtLeast => self.ratio >= self.goal,
+            Way::AtMost => self.ratio <= self.goal,
+        }
+    }
+
+    /// True when the ratio is worse than half its goal: a rate below half of it, a cost above
+    /// twice it (or no figure at all).
+    pub fn collapsed(&self) -> bool {
+        !self.ratio.is_finite()
+            || match self.way {
+                Way::AtLeast => self.ratio < self.goal / 2.0,
+                Way::AtMost => self.ratio > self.goal * 2.0,
+            }
+    }
+}
+
+/// The goals of one benchmark program: reports each ratio, and in the smoke run fails the program
+/// at [`Goals::finish`] when one collapsed.
+#[derive(Debug, Default)]
+pub struct Goals {
+    outcomes: Vec<Outcome>,
+}
+
+impl Goals {
+    /// No ratio yet.
+    pub fn new() -> Goals {
+        Goals::default()
+    }
+
+    /// A rate-like ratio (seabus / reference) that should be at least `goal`.
+    pub fn at_least(&mut self, name: &str, ratio: f64, goal: f64) -> &Outcome {
+        self.add(name, ratio, goal, Way::AtLeast)
+    }
+
+    /// A cost-like ratio (seabus / reference) that should be at most `goal`.
+    pub fn at_most(&mut self, name: &str, ratio: f64, goal: f64) -> &Outcome {
+        self.add(name, ratio, goal, Way::AtMost)
+    }
+
+    fn add(&mut self, name: &str, ratio: f64, goal: f64, way: Way) -> &Outcome {
+        let o = Outcome {
+            name: name.to_string(),
+            ratio,
+            goal,
+            way,
+        };
+        println!("{}", line(&o));
+        self.outcomes.push(o);
+        self.outcomes.last().expect("just pushed")
+    }
+
+    /// The ratios reported so far.
+    pub fn outcomes(&self) -> &[Outcome] {
+        &self.outcomes
+    }
+
+    /// Ends the program's report: in the smoke run, names every collapsed ratio and exits with
+    /// status 1 when there is one.
+    pub fn finish(self) {
+        let collapsed: Vec<&Outcome> = self.outcomes.iter().filter(|o| o.collapsed()).collect();
+        if smoke() && !collapsed.is_empty() {
+            let mut said = String::from("smoke run: ratios worse than half their goal:");
+            for o in collapsed {
+                let _ = write!(said, "\n  {}", line(o));
+            }
+            eprintln!("{said}");
+            std::process::exit(1);
+        }
+    }
+}
+
+fn line(o: &Outcome) -> String {
+    let way = match o.way {
+        Way::AtLeast => "at least",
+        Way::AtMost => "at most",
+    };
+    let mark = if o.met() { "" } else { "   (missed)" };
+    format!(
+        "goal {}: {:.2} (target: {way} {}){mark}",
+        o.name, o.ratio, o.goal
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_ratio_collapses_when_worse_than_half_its_goal() {
+        let mut g = Goals::new();
+        assert!(!g.at_least("rate", 0.45, 0.8).collapsed());
+        assert!(g.at_least("rate", 0.39, 0.8).collapsed());
+        assert!(!g.at_least("rate", 0.39, 0.8).met());
+        assert!(g.at_least("rate", 0.9, 0.8).met());
+        assert!(!g.at_most("cost", 2.3, 1.2).collapsed());
+        assert!(g.at_most("cost", 2.5, 1.2).collapsed());
+        assert!(g.at_most("cost", f64::NAN, 1.2).collapsed());
+        assert_eq!(
+            line(&g.outcomes()[0]),
+            "goal rate: 0.45 (target: at least 0.8)   (missed)"
+        );
+        assert_eq!(g.outcomes().len(), 7);
+    }
+}
