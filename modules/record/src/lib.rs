@@ -330,6 +330,8 @@ pub struct Reader<R: Read = io::BufReader<File>> {
     record_len: u64,
     /// How much of it is still to feed.
     remaining: u64,
+    /// The walk through its records when it is a chunk.
+    chunk: Option<ChunkWalk>,
     /// Bytes of the input read so far.
     offset: u64,
     size: Option<u64>,
@@ -390,6 +392,7 @@ impl<R: Read> Reader<R> {
             record_op: 0,
             record_len: 0,
             remaining: 0,
+            chunk: None,
             offset: 0,
             size: None,
             schemas: HashMap::new(),
@@ -505,6 +508,7 @@ impl<R: Read> Reader<R> {
                     }
                     self.record_len = 9 + len;
                     self.remaining = len;
+                    self.chunk = (head[0] == mcap::records::op::CHUNK).then(|| ChunkWalk::new(len));
                     if head[0] == mcap::records::op::FOOTER {
                         self.phase = Phase::EndMagic;
                     }
@@ -531,6 +535,13 @@ impl<R: Read> Reader<R> {
                     });
                 }
             }
+        }
+        // a chunk's records are checked before the linear reader is given them
+        if let Some(walk) = &mut self.chunk
+            && let Err(problem) = walk.pass(&buf[..got])
+        {
+            self.offset += got as u64;
+            return Err(self.damage(format!("a chunk record: {problem}")));
         }
         self.reader.notify_read(got);
         self.offset += got as u64;
@@ -712,6 +723,154 @@ fn lengths_fit(opcode: u8, data: &[u8]) -> Result<(), String> {
             Ok(())
         }
         _ => Ok(()),
+    }
+}
+
+/// The bytes of a chunk record's body up to its records when it is uncompressed: times,
+/// uncompressed size and CRC, the compression's name (empty: 4 bytes of length 0) and the records'
+/// size.
+const CHUNK_HEAD: usize = 40;
+/// The header of a record inside a chunk: its opcode and length.
+const RECORD_HEAD: usize = 9;
+
+/// Walks the records of an uncompressed chunk as the chunk is fed to the linear reader, a piece at
+/// a time, and finds a record that does not fit in them: the `mcap` crate takes the length of a
+/// record inside an uncompressed chunk on trust, reads on past the chunk's end and miscounts what
+/// is left of it (a subtraction that overflows). A compressed chunk is not walked: the crate stops
+/// its records at the size they decompress to.
+struct ChunkWalk {
+    /// The length of the chunk's body.
+    len: u64,
+    /// The header being gathered: the chunk's own, then each record's.
+    head: [u8; CHUNK_HEAD],
+    /// How much of it is gathered.
+    have: usize,
+    /// The size of the chunk's records.
+    records: u64,
+    /// How far into them the walk is.
+    pos: u64,
+    at: Walk,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Walk {
+    /// In the chunk's header.
+    ChunkHead,
+    /// In a record's header.
+    RecordHead,
+    /// In a record's body, with this many bytes of it to come.
+    Body(u64),
+    /// Past the records (the padding after them), or in a compressed chunk: nothing to check.
+    Done,
+}
+
+impl ChunkWalk {
+    /// A walk through a chunk whose body is `len` bytes long.
+    fn new(len: u64) -> Self {
+        ChunkWalk {
+            len,
+            head: [0; CHUNK_HEAD],
+            have: 0,
+            records: 0,
+            pos: 0,
+            at: Walk::ChunkHead,
+        }
+    }
+
+    /// Walks through `piece`, the next bytes of the chunk's body.
+    fn pass(&mut self, mut piece: &[u8]) -> Result<(), String> {
+        while !piece.is_empty() {
+            match self.at {
+                Walk::Done => break,
+                Walk::ChunkHead => {
+                    if !self.gather(CHUNK_HEAD, &mut piece) {
+                        continue;
+                    }
+                    let compression =
+                        u32::from_le_bytes(self.head[28..32].try_into().expect("4 bytes"));
+                    if compression != 0 {
+                        self.at = Walk::Done;
+                        continue;
+                    }
+                    let records =
+                        u64::from_le_bytes(self.head[32..40].try_into().expect("8 bytes"));
+                    let room = self.len.saturating_sub(CHUNK_HEAD as u64);
+                    if records > room {
+                        return Err(format!(
+                            "its records of {records} bytes are longer than the {room} bytes left \
+                             in it"
+                        ));
+                    }
+                    self.records = records;
+                    self.next_record()?;
+                }
+                Walk::RecordHead => {
+                    if !self.gather(RECORD_HEAD, &mut piece) {
+                        continue;
+                    }
+                    let opcode = self.head[0];
+                    let len = u64::from_le_bytes(self.head[1..9].try_into().expect("8 bytes"));
+                    let left = self.records - self.pos - RECORD_HEAD as u64;
+                    if len > left {
+                        return Err(format!(
+                            "the {} record at byte {} of its records is {len} bytes long, longer \
+                             than the {left} bytes left in them",
+                            record_name(opcode),
+                            self.pos
+                        ));
+                    }
+                    self.pos += RECORD_HEAD as u64;
+                    self.body(len)?;
+                }
+                Walk::Body(to_come) => {
+                    let n = to_come.min(piece.len() as u64);
+                    piece = &piece[n as usize..];
+                    self.pos += n;
+                    self.body(to_come - n)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds the first bytes of `piece` to the header being gathered, up to `want` of it: whether
+    /// it is whole (in `head`).
+    fn gather(&mut self, want: usize, piece: &mut &[u8]) -> bool {
+        let n = (want - self.have).min(piece.len());
+        self.head[self.have..self.have + n].copy_from_slice(&piece[..n]);
+        self.have += n;
+        *piece = &piece[n..];
+        if self.have < want {
+            return false;
+        }
+        self.have = 0;
+        true
+    }
+
+    /// In a record's body with `to_come` bytes of it still to come.
+    fn body(&mut self, to_come: u64) -> Result<(), String> {
+        if to_come > 0 {
+            self.at = Walk::Body(to_come);
+            return Ok(());
+        }
+        self.next_record()
+    }
+
+    /// At the start of a record, or past the last.
+    fn next_record(&mut self) -> Result<(), String> {
+        let left = self.records - self.pos;
+        if left == 0 {
+            self.at = Walk::Done;
+        } else if left < RECORD_HEAD as u64 {
+            return Err(format!(
+                "its records end inside the header of the record at byte {} of them ({left} of \
+                 9 bytes)",
+                self.pos
+            ));
+        } else {
+            self.at = Walk::RecordHead;
+        }
+        Ok(())
     }
 }
 

@@ -243,3 +243,182 @@ fn a_channel_whose_topic_claims_gigabytes_is_damage_not_an_allocation() {
     assert_eq!(lengths_fit(mcap::records::op::CHANNEL, &good), Ok(()));
     assert!(lengths_fit(mcap::records::op::CHANNEL, &good[..good.len() - 1]).is_err());
 }
+
+/// An MCAP record: its opcode, its length and `body`.
+fn record(opcode: u8, body: &[u8]) -> Vec<u8> {
+    let mut r = vec![opcode];
+    r.extend_from_slice(&(body.len() as u64).to_le_bytes());
+    r.extend_from_slice(body);
+    r
+}
+
+/// An MCAP string: its length and its bytes.
+fn string(s: &str) -> Vec<u8> {
+    let mut out = (s.len() as u32).to_le_bytes().to_vec();
+    out.extend_from_slice(s.as_bytes());
+    out
+}
+
+/// The body of an uncompressed chunk record holding `records`, with no CRC.
+fn plain_chunk(records: &[u8]) -> Vec<u8> {
+    let mut body = Vec::new();
+    body.extend_from_slice(&0u64.to_le_bytes()); // start time
+    body.extend_from_slice(&0u64.to_le_bytes()); // end time
+    body.extend_from_slice(&(records.len() as u64).to_le_bytes()); // uncompressed size
+    body.extend_from_slice(&0u32.to_le_bytes()); // uncompressed CRC: none
+    body.extend_from_slice(&string("")); // compression: none
+    body.extend_from_slice(&(records.len() as u64).to_le_bytes()); // records' size
+    body.extend_from_slice(records);
+    body
+}
+
+/// A channel record (id 1, no schema) and a message on it, as a chunk holds them.
+fn channel_and_message() -> Vec<u8> {
+    use mcap::records::op;
+    let mut channel = vec![1, 0, 0, 0];
+    channel.extend_from_slice(&string("nav.depth"));
+    channel.extend_from_slice(&string(BYTES));
+    channel.extend_from_slice(&0u32.to_le_bytes()); // metadata: none
+    let mut message = vec![1, 0];
+    message.extend_from_slice(&7u32.to_le_bytes()); // sequence
+    message.extend_from_slice(&5u64.to_le_bytes()); // log time
+    message.extend_from_slice(&4u64.to_le_bytes()); // publish time
+    message.extend_from_slice(&[1, 2, 3]);
+    let mut records = record(op::CHANNEL, &channel);
+    records.extend_from_slice(&record(op::MESSAGE, &message));
+    records
+}
+
+/// An MCAP file: its header, `chunk` (a chunk record's body), data end, footer.
+fn file_with_chunk(chunk: &[u8]) -> (Vec<u8>, u64) {
+    use mcap::records::op;
+    let mut file = MAGIC.to_vec();
+    let mut header = string("");
+    header.extend_from_slice(&string("seabus tests"));
+    file.extend_from_slice(&record(op::HEADER, &header));
+    let at = file.len() as u64;
+    file.extend_from_slice(&record(op::CHUNK, chunk));
+    file.extend_from_slice(&record(op::DATA_END, &0u32.to_le_bytes()));
+    file.extend_from_slice(&record(op::FOOTER, &[0; 20]));
+    file.extend_from_slice(MAGIC);
+    (file, at)
+}
+
+#[test]
+fn an_uncompressed_chunk_whose_record_runs_past_its_end_is_damage_at_the_chunk() {
+    use mcap::records::op;
+    // the chunk well formed: its message reads
+    let (file, _) = file_with_chunk(&plain_chunk(&channel_and_message()));
+    let (messages, damage) = read_all(&file);
+    assert_eq!(damage, None);
+    assert_eq!(messages.len(), 1);
+    assert_eq!(
+        (messages[0].sequence, &messages[0].data[..]),
+        (7, &[1u8, 2, 3][..])
+    );
+
+    // a message record that says it is 40 bytes long with 20 left in the chunk: the `mcap` crate
+    // would read on into the records after the chunk
+    let mut records = channel_and_message();
+    let bad_at = records.len();
+    let mut bad = vec![op::MESSAGE];
+    bad.extend_from_slice(&40u64.to_le_bytes());
+    bad.extend_from_slice(&[0; 20]);
+    records.extend_from_slice(&bad);
+    let (file, chunk_at) = file_with_chunk(&plain_chunk(&records));
+    let (messages, damage) = read_all(&file);
+    assert!(
+        messages.is_empty(),
+        "none of the chunk's messages: {messages:?}"
+    );
+    let d = damage.expect("the overlong record is damage");
+    assert_eq!(d.offset, chunk_at, "{d}");
+    assert_eq!(
+        d.problem,
+        format!(
+            "a chunk record: the message record at byte {bad_at} of its records is 40 bytes \
+             long, longer than the 20 bytes left in them"
+        )
+    );
+
+    // the records end 5 bytes into a record's header
+    let mut records = channel_and_message();
+    let cut_at = records.len();
+    records.extend_from_slice(&[op::MESSAGE, 1, 0, 0, 0]);
+    let (file, chunk_at) = file_with_chunk(&plain_chunk(&records));
+    let d = read_all(&file).1.expect("the cut header is damage");
+    assert_eq!(d.offset, chunk_at, "{d}");
+    assert_eq!(
+        d.problem,
+        format!(
+            "a chunk record: its records end inside the header of the record at byte {cut_at} \
+             of them (5 of 9 bytes)"
+        )
+    );
+
+    // records said to be longer than the chunk
+    let mut chunk = plain_chunk(&channel_and_message());
+    let records = chunk.len() as u64 - 40;
+    // the records' size: the body's bytes 32 to 40, after the compression's empty name
+    chunk[32..40].copy_from_slice(&(records + 1).to_le_bytes());
+    let (file, chunk_at) = file_with_chunk(&chunk);
+    let d = read_all(&file).1.expect("the overlong records are damage");
+    assert_eq!(d.offset, chunk_at, "{d}");
+    assert_eq!(
+        d.problem,
+        format!(
+            "a chunk record: its records of {} bytes are longer than the {records} bytes left \
+             in it",
+            records + 1
+        )
+    );
+}
+
+/// What walking `chunk` (a chunk record's body) says when it comes in pieces of `size` bytes.
+fn walk_in_pieces(chunk: &[u8], size: usize) -> Result<(), String> {
+    let mut walk = ChunkWalk::new(chunk.len() as u64);
+    chunk.chunks(size).try_for_each(|piece| walk.pass(piece))
+}
+
+#[test]
+fn a_chunk_is_walked_the_same_whole_and_in_pieces() {
+    use mcap::records::op;
+    let good = plain_chunk(&channel_and_message());
+    let mut records = channel_and_message();
+    records.extend_from_slice(&record(op::MESSAGE, &[0; 30])[..20]);
+    let bad = plain_chunk(&records);
+    let said = format!(
+        "the message record at byte {} of its records is 30 bytes long, longer than the 11 bytes \
+         left in them",
+        channel_and_message().len()
+    );
+    for size in 1..=bad.len() {
+        assert_eq!(walk_in_pieces(&good, size), Ok(()), "pieces of {size}");
+        assert_eq!(
+            walk_in_pieces(&bad, size),
+            Err(said.clone()),
+            "pieces of {size}"
+        );
+    }
+    // a compressed chunk's records are left to the `mcap` crate
+    let mut zstd = bad[..28].to_vec();
+    zstd.extend_from_slice(&string("zstd"));
+    zstd.extend_from_slice(&bad[32..]);
+    assert_eq!(walk_in_pieces(&zstd, 7), Ok(()));
+    // padding after the records is passed over
+    let mut padded = good.clone();
+    padded.extend_from_slice(&[0xFF; 5]);
+    assert_eq!(walk_in_pieces(&padded, 3), Ok(()));
+
+    // a chunk longer than the reader's pieces (64 KiB) reads whole
+    let mut records = channel_and_message();
+    let mut message = vec![1, 0];
+    message.extend_from_slice(&[0; 20]);
+    message.extend_from_slice(&vec![9; 100_000]);
+    records.extend_from_slice(&record(op::MESSAGE, &message));
+    let (file, _) = file_with_chunk(&plain_chunk(&records));
+    let (messages, damage) = read_all(&file);
+    assert_eq!(damage, None);
+    assert_eq!(messages.len(), 2);
+    assert_eq!(messages[1].data, vec![9; 100_000]);
+}
