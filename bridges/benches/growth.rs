@@ -1,0 +1,191 @@
+//! How a bridge's cost grows with the system: routes on one medium pair (1, 10, 100), media in a
+//! chain (one hop, two hops), and distinct topics through it (10, 1 000, 100 000) with the memory
+//! they take. In-process media, a 10-field datamap per message, messages sent in batches of
+//! [`BATCH`] and each batch taken at the far end before the next. Prints each figure and the ratio
+//! to the smallest case, measured in one run.
+//!
+//! Run: `cargo bench -p seabus-bridges --bench growth`
+
+use seabus_bench::{Goals, scale};
+use seabus_medium::{DataMap, Topic};
+use seabus_modules::runtime::Runtime;
+use seabus_modules::{Catalogue, Registry, SystemSpec};
+use std::time::{Duration, Instant};
+
+/// Messages in flight at once, at most.
+const BATCH: usize = 200;
+
+fn ten_fields(i: usize) -> DataMap {
+    DataMap::new()
+        .with("yaw", 271.25f64)
+        .with("pitch", -2.5f64)
+        .with("roll", 0.75f64)
+        .with("depth", 12.125f64)
+        .with("lat", 43.508_123_4f64)
+        .with("lon", 16.440_234_5f64)
+        .with("fix", 1i64)
+        .with("seq", i as i64)
+        .with("source", "gps")
+        .with("valid", true)
+}
+
+/// This process's resident memory, bytes.
+fn rss() -> u64 {
+    std::fs::read_to_string("/proc/self/statm")
+        .ok()
+        .and_then(|s| s.split_whitespace().nth(1)?.parse::<u64>().ok())
+        .map_or(0, |pages| pages * 4096)
+}
+
+/// What a case measured.
+struct Measured {
+    /// Seconds per message, the best of the rounds.
+    per_message: f64,
+    /// Resident memory grown from before the system started to the end of the last round.
+    grown: u64,
+}
+
+/// Runs the system of `media` and `bridges` (XML), sends `n` messages on the first medium cycling
+/// through `topics` and takes them on the last, `rounds` times.
+fn run(media: &[&str], bridges: &str, topics: &[Topic], n: usize) -> Measured {
+    let before = rss();
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .expect("runtime");
+    let mut xml = String::from(r#"<seabus node="bench">"#);
+    for m in media {
+        xml.push_str(&format!(r#"<medium name="{m}" url="inproc://"/>"#));
+    }
+    xml.push_str(bridges);
+    xml.push_str("</seabus>");
+    let spec = SystemSpec::parse("bench.xml", &xml).expect("the bench's system reads");
+    let mut registry = Registry::new();
+    seabus_bridges::register(&mut registry);
+    rt.block_on(async {
+        let runtime = Runtime::start(&spec, &registry, Catalogue::built_in())
+            .await
+            .expect("the bench's system starts");
+        let tx = runtime.medium(media[0]).expect("first").attach("tx");
+        let mut rx = runtime
+            .medium(media[media.len() - 1])
+            .expect("last")
+            .attach_with("rx", 4 * BATCH, 16)
+            .subscribed("**")
+            .expect("pattern");
+        // the bridges' subscriptions are in place once a message gets through
+        loop {
+            tx.send(&topics[0], ten_fields(0)).await.expect("sent");
+            if tokio::time::timeout(Duration::from_millis(100), rx.recv())
+                .await
+                .is_ok()
+            {
+                break;
+            }
+        }
+        while rx.try_recv().is_ok() {}
+        let mut best = f64::INFINITY;
+        for _ in 0..scale(3, 2) {
+            let start = Instant::now();
+            let mut sent = 0;
+            while sent < n {
+                let batch = BATCH.min(n - sent);
+                for i in sent..sent + batch {
+                    tx.send(&topics[i % topics.len()], ten_fields(i))
+                        .await
+                        .expect("sent");
+                }
+                for _ in 0..batch {
+                    tokio::time::timeout(Duration::from_secs(10), rx.recv())
+                        .await
+                        .expect("every message crosses within 10 s")
+                        .expect("the medium stays open");
+                }
+                sent += batch;
+            }
+            best = best.min(start.elapsed().as_secs_f64() / n as f64);
+        }
+        let grown = rss().saturating_sub(before);
+        runtime.shutdown().await;
+        Measured {
+            per_message: best,
+            grown,
+        }
+    })
+}
+
+fn routes(count: usize) -> String {
+    let mut b = String::from(r#"<bridge name="ab" media="a b">"#);
+    for i in 0..count {
+        b.push_str(&format!(r#"<route from="a" to="b" topics="r{i}.**"/>"#));
+    }
+    b + "</bridge>"
+}
+
+fn topics(count: usize, prefix: &str) -> Vec<Topic> {
+    (0..count)
+        .map(|i| Topic::new(&format!("{prefix}.t{i}")).expect("topic"))
+        .collect()
+}
+
+fn main() {
+    let n = scale(100_000, 20_000);
+    let mut goals = Goals::new();
+    println!("bridge growth, in-process media, 10-field datamap, {n} messages a case:");
+
+    println!("  routes on one medium pair (the message matches the first):");
+    let one = topics(1, "r0");
+    let mut base = None;
+    for count in [1, 10, 100] {
+        let s = run(&["a", "b"], &routes(count), &one, n).per_message;
+        let first = *base.get_or_insert(s);
+        println!("    {count:>4} routes: {:>7.0} ns per message", s * 1e9);
+        if count > 1 {
+            goals.at_most(
+                &format!("bridge cost per message, {count} routes / 1"),
+                s / first,
+                1.25,
+            );
+        }
+    }
+
+    println!("  a chain of media, every topic routed:");
+    let all = |from: &str, to: &str| {
+        format!(
+            r#"<bridge name="{from}{to}" media="{from} {to}"><route from="{from}" to="{to}" topics="**"/></bridge>"#
+        )
+    };
+    let t = topics(1, "nav");
+    let hop = run(&["a", "b"], &all("a", "b"), &t, n).per_message;
+    let two = run(&["a", "b", "c"], &(all("a", "b") + &all("b", "c")), &t, n).per_message;
+    println!("    one hop:  {:>7.0} ns per message", hop * 1e9);
+    println!(
+        "    two hops: {:>7.0} ns per message ({:.0} ns the second hop)",
+        two * 1e9,
+        (two - hop) * 1e9
+    );
+    goals.at_most(
+        "bridge cost of a second hop / the first",
+        (two - hop) / hop,
+        1.25,
+    );
+
+    println!("  distinct topics through one bridge (memory: resident growth while it runs):");
+    let mut base = None;
+    for count in [10, 1_000, 100_000] {
+        let names = topics(count, "many");
+        let m = run(&["a", "b"], &all("a", "b"), &names, n.max(2 * count));
+        let s = m.per_message;
+        let first = *base.get_or_insert(s);
+        println!(
+            "    {count:>7} topics: {:>7.0} ns per message, resident memory grown {:.1} MB",
+            s * 1e9,
+            m.grown as f64 / 1e6
+        );
+        if count > 10 {
+            goals.at_least(&format!("bridge rate, {count} topics / 10"), first / s, 0.8);
+        }
+    }
+    goals.finish();
+}
