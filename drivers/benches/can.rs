@@ -8,8 +8,12 @@
 //!    adapter, read by an `slcan://` host medium on its other end and decoded with the DBC; p50 and
 //!    p99 at 500 frames per second.
 //!
+//! No reference is measured beside these, so there is no ratio and no goal: the smoke run
+//! (`SEABUS_BENCH_SMOKE=1`) only runs each part shorter.
+//!
 //! Run: `cargo bench -p seabus-drivers --bench can`
 
+use seabus_bench::scale;
 use seabus_drivers::can::dbc::Database;
 use seabus_medium::{DataMap, Node, Value};
 use seabus_medium_can::frame::CanFrame;
@@ -40,7 +44,8 @@ fn slcan_lines() {
         stream.extend(slcan::encode_frame(&frame, None).unwrap());
     }
     let lines = 30_000;
-    let ((), took) = best_of(5, || {
+    let runs = scale(5, 3);
+    let ((), took) = best_of(runs, || {
         let start = Instant::now();
         let mut n = 0;
         let mut splitter = Lines::new();
@@ -56,7 +61,7 @@ fn slcan_lines() {
         ((), start.elapsed())
     });
     println!(
-        "slcan: {:.2} M lines/s parsed into frames and datamaps ({} bytes, best of 5)",
+        "slcan: {:.2} M lines/s parsed into frames and datamaps ({} bytes, best of {runs})",
         f64::from(lines) / took.as_secs_f64() / 1e6,
         stream.len()
     );
@@ -75,8 +80,8 @@ fn dbc_signals() {
         [0x24, 0xFA, 0xD2, 0x04, 0x41, 0x02, 0, 0],
         [0x12, 0xC0, 0xFF, 0x83, 0xAF, 0xFB, 0, 0],
     ];
-    let iters = 200_000u32;
-    let (signals, took) = best_of(5, || {
+    let iters = scale(200_000u32, 50_000);
+    let (signals, took) = best_of(scale(5, 3), || {
         let start = Instant::now();
         let mut signals = 0usize;
         for _ in 0..iters {
@@ -135,7 +140,7 @@ fn latency() {
         }
         while let Ok(Some(_)) = tokio::time::timeout(Duration::from_millis(100), rx.recv()).await
         {}
-        let n = 2000usize;
+        let n = scale(2000usize, 500);
         let receiver = tokio::spawn(async move {
             let mut arrived = Vec::with_capacity(n);
             while let Ok(Some(m)) =

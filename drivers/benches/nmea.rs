@@ -21,14 +21,17 @@
 //!    Measured in the same rounds, what the path is built on: seabus's per-sentence work on one
 //!    thread without the pty and without tasks; the pty alone, read raw by a plain thread (a pty
 //!    moves some hundreds of MB/s here: the ceiling of any reader); and the pty read by the serial
-//!    medium with one subscriber and no drivers. Target: at least 1.0× the bare parse.
+//!    medium with one subscriber and no drivers. Target: a CPU ratio of at least 1.0× the bare
+//!    parse.
 //! 3. Serial → bus latency over a pseudo-terminal (`latency`): a sentence written on the far end of
 //!    a pty, until it is taken from an interface on the serial medium; p50 and p99 at 200 sentences
 //!    per second.
 //!
 //! Run: `cargo bench -p seabus-drivers --bench nmea` (all three), or name the parts to run:
-//! `cargo bench -p seabus-drivers --bench nmea -- line`.
+//! `cargo bench -p seabus-drivers --bench nmea -- line`. The smoke run (`SEABUS_BENCH_SMOKE=1`)
+//! takes fewer rounds and fewer sentences for the latency.
 
+use seabus_bench::{Goals, scale};
 use seabus_drivers::nmea::sensors::{Role, Sensor};
 use seabus_drivers::nmea::sentence::{build, parse};
 use seabus_medium::framing::{ChecksumPolicy, Framer, Framing, nmea_sentence};
@@ -71,7 +74,7 @@ fn best_rates(n: usize, rounds: usize, mut a: impl FnMut(), mut b: impl FnMut())
     })
 }
 
-fn throughput() {
+fn throughput(goals: &mut Goals) {
     let list = sentences();
     let stream: Vec<u8> = list
         .iter()
@@ -111,11 +114,14 @@ fn throughput() {
         }
         black_box(datasets);
     };
-    let (bare, ours) = best_rates(n, 9, bare, ours);
-    println!("NMEA sentences (GGA, RMC, VTG, HDT), in memory, best of 9 x {n}, taken in turns:");
+    let rounds = scale(9, 5);
+    let (bare, ours) = best_rates(n, rounds, bare, ours);
+    println!(
+        "NMEA sentences (GGA, RMC, VTG, HDT), in memory, best of {rounds} x {n}, taken in turns:"
+    );
     println!("  bare nmea::parse_str                              {bare:>9.0} sentences/s");
     println!("  seabus: frame, check, topic, parse, to datasets   {ours:>9.0} sentences/s");
-    println!("  ratio {:.2} (target: at least 0.8)", ours / bare);
+    goals.at_least("NMEA in memory, seabus / bare parse_str", ours / bare, 0.8);
 }
 
 /// The whole path over a pseudo-terminal, on 64-bit Linux (the process's CPU time and the
@@ -135,7 +141,9 @@ mod line {
     /// Seconds of traffic in the corpus (19 sentences each).
     const SECONDS: u32 = 500;
     /// Rounds of each measurement, after one to warm up.
-    const ROUNDS: usize = 7;
+    fn rounds() -> usize {
+        scale(7, 3)
+    }
     /// How long a count may stand still before a round is taken as over (something lost).
     const QUIET: Duration = Duration::from_secs(1);
     /// Sentences the device writes at a time, and how many such chunks it may be ahead of the
@@ -577,7 +585,7 @@ mod line {
         datasets
     }
 
-    pub fn whole_path() {
+    pub fn whole_path(goals: &mut Goals) {
         let lines = traffic(SECONDS);
         let n = lines.len();
         let traffic = Traffic::new(&lines, CHUNK);
@@ -662,7 +670,7 @@ mod line {
                 .expect("pattern");
             let mut drivers = drivers();
             // round 0 warms up, untimed
-            for round in 0..=ROUNDS {
+            for round in 0..=rounds() {
                 let timed = |best: &mut Best, r: Round, all: usize| {
                     if round > 0 {
                         best.add(r, all);
@@ -724,8 +732,9 @@ mod line {
         let bytes = traffic.bytes.len();
         println!(
             "NMEA whole path over a pty: {n} sentences of mixed traffic ({SECONDS} s of 19 a second, \
-             {} kB), {expected} datasets; best of {ROUNDS} rounds, taken in turns:",
-            bytes / 1000
+             {} kB), {expected} datasets; best of {} rounds, taken in turns:",
+            bytes / 1000,
+            rounds()
         );
         let row = |what: &str, b: &Best, cpu: &str, more: String| {
             println!(
@@ -771,12 +780,8 @@ mod line {
             ),
         );
         println!(
-            "  wall-clock ratio, whole path / bare parse_str: {:.2} (target: at least 1.0)",
+            "  wall-clock ratio, whole path / bare parse_str: {:.2}",
             ours.rate(n) / bare.rate(n)
-        );
-        println!(
-            "  CPU ratio, parse_str ns / whole path CPU ns per sentence: {:.2}",
-            bare.ns(n) / ours.ns(n)
         );
         if let Some(b) = burst {
             println!(
@@ -786,14 +791,22 @@ mod line {
                 b.took.as_secs_f64() * 1e3
             );
         }
+        goals.at_least(
+            "NMEA whole path CPU, parse_str ns / whole path ns per sentence",
+            bare.ns(n) / ours.ns(n),
+            1.0,
+        );
     }
 }
 
-fn whole_path() {
+fn whole_path(goals: &mut Goals) {
     #[cfg(all(target_os = "linux", target_pointer_width = "64"))]
-    line::whole_path();
+    line::whole_path(goals);
     #[cfg(not(all(target_os = "linux", target_pointer_width = "64")))]
-    println!("NMEA whole path over a pty: measured on 64-bit Linux only");
+    {
+        let _ = goals;
+        println!("NMEA whole path over a pty: measured on 64-bit Linux only");
+    }
 }
 
 /// Waits until `medium`'s link is up.
@@ -835,7 +848,7 @@ fn latency() {
             .subscribed("nmea.**")
             .expect("pattern");
         let tx = far.attach("tx");
-        let n = 2000;
+        let n = scale(2000, 400);
         // the receiver notes when each sentence arrives, on its own task
         let receiver = tokio::spawn(async move {
             let mut arrived = Vec::with_capacity(n);
@@ -897,13 +910,15 @@ fn main() {
         .filter(|a| !a.starts_with('-'))
         .collect();
     let run = |part: &str| named.is_empty() || named.iter().any(|a| a == part);
+    let mut goals = Goals::new();
     if run("memory") {
-        throughput();
+        throughput(&mut goals);
     }
     if run("line") {
-        whole_path();
+        whole_path(&mut goals);
     }
     if run("latency") {
         latency();
     }
+    goals.finish();
 }

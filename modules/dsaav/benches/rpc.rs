@@ -1,10 +1,13 @@
 //! Reliable DSAAV RPC round trips against a plain socket ping-pong of the same size, in one run:
 //! over UDP on loopback, and over raw Ethernet between two network namespaces joined by a veth
-//! pair (made here; needs root and `ip`, else that part says it was skipped); then sentuator
-//! notifications from one server to four listeners, in-process and over UDP.
+//! pair (made here; needs root and `ip`, else that part says it was skipped, or fails the smoke
+//! run when `SEABUS_REQUIRE_PRIVILEGES` is set); then sentuator notifications from one server to
+//! four listeners, in-process and over UDP. Goal: a reliable call's p50 at most 1.3× the plain
+//! ping-pong's, on each link. The smoke run (`SEABUS_BENCH_SMOKE=1`) makes fewer calls.
 //!
-//! Run: `cargo bench -p seabus-modules --bench rpc`
+//! Run: `cargo bench -p seabus-dsaav --bench rpc`
 
+use seabus_bench::{Goals, scale};
 use seabus_dsaav::rpc::{self, CallOptions, RpcClient};
 use seabus_dsaav::sentuator;
 use seabus_medium::{DataMap, Node};
@@ -14,8 +17,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-const CALLS: usize = 5_000;
 const SERVER: Address = Address { node: 2, port: 1 };
+
+/// Round trips timed on each side.
+fn calls() -> usize {
+    scale(5_000, 2_000)
+}
 
 fn quantile_us(sorted: &[Duration], q: f64) -> f64 {
     if sorted.is_empty() {
@@ -80,8 +87,8 @@ fn rpc_round_trips(
             for _ in 0..100 {
                 let _ = client.call(SERVER, 1, &params, opts).await;
             }
-            let mut out = Vec::with_capacity(CALLS);
-            for _ in 0..CALLS {
+            let mut out = Vec::with_capacity(calls());
+            for _ in 0..calls() {
                 let t = Instant::now();
                 if client.call(SERVER, 1, &params, opts).await.is_ok() {
                     out.push(t.elapsed());
@@ -112,8 +119,8 @@ fn udp_ping_pong(size: usize) -> Vec<Duration> {
     });
     let msg = vec![0u8; size];
     let mut buf = [0u8; 2048];
-    let mut out = Vec::with_capacity(CALLS);
-    for _ in 0..CALLS {
+    let mut out = Vec::with_capacity(calls());
+    for _ in 0..calls() {
         let t = Instant::now();
         let _ = a.send_to(&msg, b_addr);
         if a.recv(&mut buf).is_ok() {
@@ -158,8 +165,8 @@ fn ethernet_ping_pong(
             let s = RawSocket::open(&a_dev, 0x88B6).expect("raw socket");
             let msg = vec![1u8; size];
             let mut buf = vec![0u8; 2048];
-            let mut out = Vec::with_capacity(CALLS);
-            for _ in 0..CALLS {
+            let mut out = Vec::with_capacity(calls());
+            for _ in 0..calls() {
                 let t = Instant::now();
                 let _ = s.send(None, &msg).await;
                 // the answer, not the copy of what was just sent
@@ -191,16 +198,26 @@ fn ip(args: &[&str]) -> Result<(), String> {
     }
 }
 
-fn report(what: &str, rpc: &[Duration], plain: &[Duration]) {
+fn report(goals: &mut Goals, what: &str, rpc: &[Duration], plain: &[Duration]) {
     println!(
-        "  {what}: reliable RPC p50 {:.1} us p99 {:.1} us ({} calls)   plain ping-pong p50 {:.1} us p99 {:.1} us   p50 ratio {:.2}",
+        "  {what}: reliable RPC p50 {:.1} us p99 {:.1} us ({} calls)   plain ping-pong p50 {:.1} us p99 {:.1} us",
         quantile_us(rpc, 0.5),
         quantile_us(rpc, 0.99),
         rpc.len(),
         quantile_us(plain, 0.5),
         quantile_us(plain, 0.99),
-        quantile_us(rpc, 0.5) / quantile_us(plain, 0.5)
     );
+    goals.at_most(
+        &format!("{what}: reliable RPC p50 / ping-pong p50"),
+        quantile_us(rpc, 0.5) / quantile_us(plain, 0.5),
+        1.3,
+    );
+}
+
+/// Whether `SEABUS_REQUIRE_PRIVILEGES` is set (to anything but empty or `0`), as the tests read
+/// it: what needs privileges must then run.
+fn privileges_required() -> bool {
+    std::env::var_os("SEABUS_REQUIRE_PRIVILEGES").is_some_and(|v| !v.is_empty() && v != "0")
 }
 
 struct Gauge(f64);
@@ -268,8 +285,10 @@ fn notifications(base: &str, n: usize) -> (f64, Vec<usize>) {
 
 fn main() {
     println!(
-        "DSAAV reliable RPC round trips (two parameters, about 60-byte frames), {CALLS} calls each:"
+        "DSAAV reliable RPC round trips (two parameters, about 60-byte frames), {} calls each:",
+        calls()
     );
+    let mut goals = Goals::new();
     let group = format!(
         "239.255.{}.{}:{}",
         fastrand::u8(1..250),
@@ -281,7 +300,7 @@ fn main() {
         format!("dsaav+udp://{group}?ttl=0&node=1"),
         None,
     );
-    report("UDP on loopback", &rpc, &udp_ping_pong(60));
+    report(&mut goals, "UDP on loopback", &rpc, &udp_ping_pong(60));
 
     let id = std::process::id() % 100_000;
     let ns = (format!("sbr-a-{id}"), format!("sbr-b-{id}"));
@@ -297,7 +316,7 @@ fn main() {
         .and_then(|()| ip(&["link", "set", &devs.1, "netns", &ns.1]))
         .and_then(|()| ip(&["-n", &ns.0, "link", "set", &devs.0, "up"]))
         .and_then(|()| ip(&["-n", &ns.1, "link", "set", &devs.1, "up"]));
-    match made {
+    match &made {
         Ok(()) => {
             let rpc = rpc_round_trips(
                 format!("dsaav+eth://{}?node=2", devs.1),
@@ -305,6 +324,7 @@ fn main() {
                 Some(ns.clone()),
             );
             report(
+                &mut goals,
                 "raw Ethernet between two namespaces (veth)",
                 &rpc,
                 &ethernet_ping_pong(&ns, &devs, 60),
@@ -314,8 +334,18 @@ fn main() {
     }
     let _ = ip(&["netns", "del", &ns.0]);
     let _ = ip(&["netns", "del", &ns.1]);
+    if let Err(e) = made
+        && seabus_bench::smoke()
+        && privileges_required()
+    {
+        eprintln!(
+            "smoke run: raw Ethernet needs network namespaces and a veth pair, which could not be \
+             made ({e}), and SEABUS_REQUIRE_PRIVILEGES is set"
+        );
+        std::process::exit(1);
+    }
 
-    let n = 20_000;
+    let n = scale(20_000, 5_000);
     println!("Sentuator notifications, one server to four listeners, {n} readings:");
     for (what, base) in [
         (
@@ -339,4 +369,5 @@ fn main() {
             got
         );
     }
+    goals.finish();
 }

@@ -3,11 +3,15 @@
 //! 1. EKF updates per second: `PositionEkf` dead-reckoning steps (predict) and GPS fixes (update).
 //! 2. Depth Kalman updates per second.
 //! 3. The `logger` module's sustained rate to disk: a generator-like flood of ten-field datamaps
-//!    on an in-process bus for three seconds, a binary log and a CSV written; what reached the
-//!    files, per second.
+//!    on an in-process bus for three seconds (one in the smoke run), a binary log and a CSV
+//!    written; what reached the files, per second.
 //!
-//! Run: `cargo bench -p seabus-modules --bench estimate`
+//! No reference is measured beside these, so there is no ratio and no goal: the smoke run
+//! (`SEABUS_BENCH_SMOKE=1`) only runs each part shorter.
+//!
+//! Run: `cargo bench -p seabus-support --bench estimate`
 
+use seabus_bench::scale;
 use seabus_medium::DataMap;
 use seabus_modules::{Catalogue, Runtime, SystemSpec};
 use seabus_support::estimate::{DepthKalman, PositionEkf};
@@ -15,7 +19,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 fn ekf() {
-    let n = 1_000_000u32;
+    let n = scale(1_000_000u32, 200_000);
     let mut e = PositionEkf::new(0.0, 0.0, 3.0, 10.0, 0.03);
     let start = Instant::now();
     for i in 0..n {
@@ -67,9 +71,10 @@ fn logger() {
             .unwrap();
         let tx = runtime.medium("bus").unwrap().attach("tx");
         tokio::time::sleep(Duration::from_millis(200)).await;
+        let flood = Duration::from_secs(scale(3, 1));
         let start = Instant::now();
         let mut sent = 0u64;
-        while start.elapsed() < Duration::from_secs(3) {
+        while start.elapsed() < flood {
             for _ in 0..100 {
                 let m = DataMap::new()
                     .with("lat", 43.5 + sent as f64 * 1e-7)
