@@ -21,7 +21,7 @@
 
 use std::fmt;
 use std::fs::File;
-use std::io::{self, BufReader, BufWriter, Read, Write};
+use std::io::{self, BufWriter, Read, Write};
 use std::path::Path;
 use thiserror::Error;
 
@@ -156,42 +156,52 @@ pub struct Damage {
 
 /// Reads events from a log one at a time.
 ///
-/// Every event is read into one buffer the reader keeps, so reading allocates only when an event
-/// is larger than every one before it. After damage, the reader keeps returning the same
-/// [`Damage`].
+/// The reader reads the log in blocks of up to 128 KiB into one buffer it keeps, and every event it
+/// hands out borrows its channel and data from that buffer: nothing is copied or allocated per
+/// event. An event larger than the buffer grows it for as long as the events that follow are as
+/// large; the first event that fits again gives the memory back. It reads only while the event it
+/// is after is not whole, so an input that delivers a little at a time (a pipe, a socket) is not
+/// waited on for a whole block. After damage, the reader keeps returning the same [`Damage`].
 pub struct Reader<R> {
     input: R,
     /// Offset of the next event.
     offset: u64,
     size: Option<u64>,
+    /// Bytes read from the input; `buf[start..end]` are the ones not handed out yet, and the next
+    /// event starts at `start`.
     buf: Vec<u8>,
+    start: usize,
+    end: usize,
     failed: Option<Damage>,
 }
 
-impl Reader<BufReader<File>> {
+/// Bytes a [`Reader`] reads at a time, the size of its buffer while the events fit in it.
+const BUF_LEN: usize = 1 << 17;
+
+impl Reader<File> {
     /// Opens a log file; its size (for a regular file) lets the reader catch a length that reaches
     /// past the end before reading it.
     pub fn open(path: impl AsRef<Path>) -> io::Result<Self> {
         let file = File::open(path)?;
         let meta = file.metadata()?;
-        let size = meta.is_file().then_some(meta.len());
-        let input = BufReader::with_capacity(1 << 16, file);
-        Ok(match size {
-            Some(size) => Reader::with_size(input, size),
-            None => Reader::new(input),
+        Ok(match meta.is_file() {
+            true => Reader::with_size(file, meta.len()),
+            false => Reader::new(file),
         })
     }
 }
 
 impl<R: Read> Reader<R> {
-    /// Reads from `input`, whose size is not known. Give it a buffered input ([`BufReader`]): the
-    /// reader asks for a few bytes at a time.
+    /// Reads from `input`, whose size is not known. The reader reads in large blocks itself: the
+    /// input needs no buffer of its own.
     pub fn new(input: R) -> Self {
         Reader {
             input,
             offset: 0,
             size: None,
             buf: Vec::new(),
+            start: 0,
+            end: 0,
             failed: None,
         }
     }
@@ -216,17 +226,26 @@ impl<R: Read> Reader<R> {
 
     /// The next event; `Ok(None)` at the end of the log (after a whole event), `Err` where the log
     /// is damaged.
+    #[inline]
     pub fn next_event(&mut self) -> Result<Option<Event<'_>>, Damage> {
-        if let Some(d) = &self.failed {
-            return Err(d.clone());
+        if self.failed.is_some() {
+            return Err(fail(&mut self.failed, self.offset, None));
         }
         let problem = match self.read_event() {
             Ok(None) => return Ok(None),
-            Ok(Some((number, timestamp, channel_len))) => {
-                let (channel, data) = self.buf.split_at(channel_len);
-                match std::str::from_utf8(channel) {
+            Ok(Some((number, timestamp, channel_len, len))) => {
+                let event = &self.buf[self.start..self.start + len];
+                let (channel, data) = event[HEADER_LEN..].split_at(channel_len);
+                let channel = match channel.is_ascii() {
+                    // SAFETY: ASCII is UTF-8 (the check spares a full UTF-8 validation, the larger
+                    // part of the time an event of a few dozen bytes takes to read)
+                    true => Ok(unsafe { std::str::from_utf8_unchecked(channel) }),
+                    false => std::str::from_utf8(channel),
+                };
+                match channel {
                     Ok(channel) => {
-                        self.offset += (HEADER_LEN + self.buf.len()) as u64;
+                        self.start += len;
+                        self.offset += len as u64;
                         return Ok(Some(Event {
                             number,
                             timestamp,
@@ -241,25 +260,26 @@ impl<R: Read> Reader<R> {
             }
             Err(problem) => problem,
         };
-        let d = Damage {
-            offset: self.offset,
-            problem,
-        };
-        self.failed = Some(d.clone());
-        Err(d)
+        Err(fail(&mut self.failed, self.offset, Some(problem)))
     }
 
-    /// Reads one event's channel and data into the buffer; returns its number, timestamp and
-    /// channel length.
-    fn read_event(&mut self) -> Result<Option<(i64, i64, usize)>, Problem> {
-        let mut header = [0u8; HEADER_LEN];
-        let found = read_full(&mut self.input, &mut header).map_err(io_problem)?;
-        if found == 0 {
-            return Ok(None);
+    /// Has the next event whole in the buffer at `start`; returns its number, timestamp, channel
+    /// length and length in the log.
+    #[inline]
+    fn read_event(&mut self) -> Result<Option<(i64, i64, usize, usize)>, Problem> {
+        if self.end - self.start < HEADER_LEN {
+            self.fill(HEADER_LEN, true)?;
+            let found = self.end - self.start;
+            if found == 0 {
+                return Ok(None);
+            }
+            if found < HEADER_LEN {
+                return Err(Problem::TruncatedHeader { found });
+            }
         }
-        if found < HEADER_LEN {
-            return Err(Problem::TruncatedHeader { found });
-        }
+        let header: &[u8; HEADER_LEN] = self.buf[self.start..self.start + HEADER_LEN]
+            .try_into()
+            .expect("a header's bytes");
         let sync = u32::from_be_bytes([header[0], header[1], header[2], header[3]]);
         if sync != SYNC {
             return Err(Problem::BadSync(sync));
@@ -291,42 +311,84 @@ impl<R: Read> Reader<R> {
                 });
             }
         }
-        let found = if self.size.is_some() || needed <= EAGER_BODY {
-            // the length is bounded by the input's size, or small: read in place
-            self.buf.resize(needed as usize, 0);
-            read_full(&mut self.input, &mut self.buf).map_err(io_problem)? as u64
-        } else {
-            // a large length from an input of unknown size: grow only as bytes arrive
-            self.buf.clear();
-            (&mut self.input)
-                .take(needed)
-                .read_to_end(&mut self.buf)
-                .map_err(io_problem)? as u64
-        };
-        if found < needed {
-            return Err(Problem::TruncatedBody { needed, found });
+        // at most 28 + 999 + 2^31 - 1 bytes, which a usize holds
+        let len = HEADER_LEN + needed as usize;
+        if self.buf.len() > BUF_LEN && len <= BUF_LEN && self.end - self.start <= BUF_LEN {
+            // the events fit again: give back what the large ones took
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+            self.buf.truncate(BUF_LEN);
+            self.buf.shrink_to_fit();
         }
-        Ok(Some((number, timestamp, channel_len as usize)))
+        if self.end - self.start < len {
+            // the length is bounded by the input's size, or small: make room for it at once; a
+            // large length from an input of unknown size: grow only as the bytes arrive
+            self.fill(len, self.size.is_some() || needed <= EAGER_BODY)?;
+            let found = (self.end - self.start - HEADER_LEN) as u64;
+            if found < needed {
+                return Err(Problem::TruncatedBody { needed, found });
+            }
+        }
+        Ok(Some((number, timestamp, channel_len as usize, len)))
+    }
+
+    /// Reads until the buffer holds `want` bytes from `start`, or the input ends. With `eager`,
+    /// room for them all is made at once; without, the buffer grows as the bytes arrive.
+    #[inline(never)]
+    fn fill(&mut self, want: usize, eager: bool) -> Result<(), Problem> {
+        if self.buf.len() - self.start < want {
+            // move the unread bytes to the front
+            self.buf.copy_within(self.start..self.end, 0);
+            self.end -= self.start;
+            self.start = 0;
+            let base = match self.size {
+                // no larger than the input
+                Some(size) => (size.saturating_sub(self.offset)).min(BUF_LEN as u64) as usize,
+                None => BUF_LEN,
+            };
+            if self.buf.len() < base {
+                self.buf.resize(base, 0);
+            }
+            if eager && self.buf.len() < want {
+                self.buf.resize(want, 0);
+            }
+        }
+        while self.end - self.start < want {
+            if self.end == self.buf.len() {
+                // only without `eager`, where `start` is 0 and `want` more than the buffer holds
+                let grown = self.buf.len().saturating_mul(2).max(BUF_LEN).min(want);
+                self.buf.resize(grown, 0);
+            }
+            // a buffer grown for large events reads no further than the event
+            let stop = match self.buf.len() > BUF_LEN {
+                true => self.buf.len().min(self.start + want),
+                false => self.buf.len(),
+            };
+            match self.input.read(&mut self.buf[self.end..stop]) {
+                Ok(0) => break,
+                Ok(n) => self.end += n,
+                Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(io_problem(e)),
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The damage a reader keeps returning: `problem`, found at `offset`, or the damage it found
+/// before.
+#[cold]
+#[inline(never)]
+fn fail(failed: &mut Option<Damage>, offset: u64, problem: Option<Problem>) -> Damage {
+    match problem {
+        Some(problem) => failed.insert(Damage { offset, problem }).clone(),
+        None => failed.clone().expect("damage found before"),
     }
 }
 
 fn io_problem(e: io::Error) -> Problem {
     Problem::Io(e.to_string())
-}
-
-/// Fills `buf` as far as the input goes; returns the bytes read (fewer than `buf.len()` only at the
-/// end of the input).
-fn read_full(input: &mut impl Read, buf: &mut [u8]) -> io::Result<usize> {
-    let mut filled = 0;
-    while filled < buf.len() {
-        match input.read(&mut buf[filled..]) {
-            Ok(0) => break,
-            Ok(n) => filled += n,
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
-            Err(e) => return Err(e),
-        }
-    }
-    Ok(filled)
 }
 
 /// Why an event could not be written.
@@ -605,9 +667,95 @@ mod tests {
                 found: 11
             }
         );
-        assert!(r.buf.capacity() < 1 << 16, "{}", r.buf.capacity());
+        assert!(r.buf.capacity() <= BUF_LEN, "{}", r.buf.capacity());
         // the damage is kept
         assert_eq!(r.next_event().unwrap_err(), d);
+
+        // three times the buffer arrives: the buffer holds no more than twice what arrived
+        let arrived = 3 * BUF_LEN;
+        log.truncate(HEADER_LEN + 1);
+        log.resize(HEADER_LEN + 1 + arrived, 7);
+        let mut r = Reader::new(&log[..]);
+        assert_eq!(
+            r.next_event().unwrap_err().problem,
+            Problem::TruncatedBody {
+                needed: 1 + i32::MAX as u64,
+                found: 1 + arrived as u64
+            }
+        );
+        assert!(r.buf.capacity() <= 2 * (HEADER_LEN + 1 + arrived));
+    }
+
+    /// An input that hands out at most `most` bytes a read.
+    struct Dribble<'a> {
+        data: &'a [u8],
+        most: usize,
+    }
+
+    impl Read for Dribble<'_> {
+        fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+            let n = self.most.min(buf.len()).min(self.data.len());
+            buf[..n].copy_from_slice(&self.data[..n]);
+            self.data = &self.data[n..];
+            Ok(n)
+        }
+    }
+
+    #[test]
+    fn events_larger_than_the_buffer_read_and_the_memory_is_given_back() {
+        // small events across many refills, then large ones in a row, then small ones again
+        let sizes: Vec<usize> = (0..3000)
+            .map(|i| i * 37 % 300)
+            .chain([
+                BUF_LEN,
+                3 * BUF_LEN + 5,
+                BUF_LEN - HEADER_LEN - 4,
+                2 * BUF_LEN,
+            ])
+            .chain((0..3000).map(|i| i * 53 % 5000))
+            .collect();
+        let mut w = Writer::new(Vec::new());
+        for (i, &n) in sizes.iter().enumerate() {
+            let data: Vec<u8> = (0..n).map(|b| (b * 31 + i) as u8).collect();
+            w.write(i as i64, &format!("CH{}", i % 17), &data).unwrap();
+        }
+        let log = w.finish().unwrap();
+        for name in ["sized", "unsized", "dribbled"] {
+            let mut r: Reader<Box<dyn Read + '_>> = match name {
+                "sized" => Reader::with_size(Box::new(&log[..]), log.len() as u64),
+                "unsized" => Reader::new(Box::new(&log[..])),
+                _ => Reader::new(Box::new(Dribble {
+                    data: &log,
+                    most: 4093,
+                })),
+            };
+            let (mut offset, mut run) = (0, 0);
+            for (i, &n) in sizes.iter().enumerate() {
+                let e = r.next_event().unwrap().unwrap();
+                assert_eq!((e.number, e.timestamp), (i as i64, i as i64), "{name}");
+                assert_eq!(e.channel, format!("CH{}", i % 17), "{name}");
+                assert_eq!(e.data.len(), n, "{name}");
+                assert!(
+                    e.data
+                        .iter()
+                        .enumerate()
+                        .all(|(b, &v)| v == (b * 31 + i) as u8),
+                    "{name}: event {i}"
+                );
+                let len = e.encoded_len() as usize;
+                offset += len as u64;
+                assert_eq!(r.offset(), offset, "{name}");
+                // the buffer holds the largest of a run of events larger than it, and no more
+                run = if len > BUF_LEN { run.max(len) } else { 0 };
+                assert!(
+                    r.buf.len() <= BUF_LEN.max(run),
+                    "{name}: event {i}: {} bytes",
+                    r.buf.len()
+                );
+            }
+            assert_eq!(r.next_event(), Ok(None), "{name}");
+            assert!(r.buf.capacity() <= BUF_LEN, "{name}: {}", r.buf.capacity());
+        }
     }
 
     #[test]

@@ -92,7 +92,7 @@ impl std::fmt::Display for Damage {
 /// A log being read.
 pub enum Reader {
     /// An LCM event log.
-    Lcm(eventlog::Reader<io::BufReader<File>>),
+    Lcm(eventlog::Reader<File>),
     /// An MCAP file.
     Mcap(Box<crate::Reader>),
 }
