@@ -1,18 +1,26 @@
 //! liblcm (the C library, through the `lcm` crate) and seabus's LCM medium side by side, on
 //! loopback multicast with ttl 0, in the same run: one sender and one receiver each.
 //!
-//! - 64-byte messages unpaced: delivered rate and loss;
+//! - 64-byte messages unpaced: delivered rate and loss; senders' rates, with a plain socket sending
+//!   prepared datagrams (to a seabus receiver) taken in turn with the two;
 //! - seabus paced at 300k msg/s: loss;
-//! - 100 kB messages unpaced: delivered MB/s;
+//! - 100 kB messages unpaced: delivered MB/s, and how many arrived;
 //! - 64-byte messages paced at 2 kHz: one-way latency p50 / p99.
 //!
-//! Run: `cargo bench -p seabus-medium --bench lcm`
+//! Goals: seabus's 64 B sender at least 0.9× the plain socket's (both unpaced, to a seabus
+//! receiver), 64 B delivered at least 3.5× liblcm's, 100 kB MB/s at least liblcm's, latency
+//! p50 at most liblcm's. seabus's receiver loses nothing from one sender: the smoke run fails on
+//! such a loss (losses with two or three plain senders are reported: with more sender threads
+//! than a 2-core machine has cores, they take the receiver's CPU).
+//!
+//! Run: `cargo bench -p seabus-medium-lcm --bench lcm` (`SEABUS_BENCH_SMOKE=1`: the short run)
 
 #[path = "../../core/benches/common.rs"]
 mod common;
 #[path = "../tests/support/liblcm.rs"]
 mod liblcm;
 
+use seabus_bench::{Goals, scale};
 use seabus_medium::{Node, Payload, Stamp, Topic};
 use seabus_medium_lcm::wire;
 use std::cell::RefCell;
@@ -58,10 +66,11 @@ impl Seen {
         }
     }
 
+    /// Seconds from the first message to the last; infinite (no rate) with fewer than two.
     fn span(&self) -> f64 {
         match (self.first, self.last) {
-            (Some(f), Some(l)) => (l - f).as_secs_f64().max(1e-9),
-            _ => 1e-9,
+            (Some(f), Some(l)) if self.count >= 2 => (l - f).as_secs_f64().max(1e-9),
+            _ => f64::INFINITY,
         }
     }
 
@@ -212,8 +221,9 @@ fn send_batch(sock: &std::net::UdpSocket, batch: &[Vec<u8>]) {
     }
 }
 
-/// A seabus LCM medium receiving what plain sockets send (`senders` threads sharing `rate`): LC02
-/// datagrams made beforehand, so that the offered rate is the kernel's, not a sender library's.
+/// A seabus LCM medium receiving what plain sockets send (`senders` threads sharing `rate`,
+/// unpaced when infinite): LC02 datagrams made beforehand, so that the offered rate is the
+/// kernel's, not a sender library's.
 fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) -> Seen {
     let receiver = seabus_receiver(url, n);
     let rest = url.trim_start_matches("udpm://");
@@ -253,15 +263,44 @@ fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) 
     seen
 }
 
+/// What seabus's receiver lost from one sender, by run: none is the target.
+#[derive(Default)]
+struct Losses(Vec<String>);
+
+impl Losses {
+    fn count(&mut self, run: &str, sent: usize, got: usize) {
+        if got < sent {
+            self.0.push(format!("{run}: {} of {sent} lost", sent - got));
+        }
+    }
+
+    /// In the smoke run, a loss fails the program (after the goals are reported).
+    fn finish(self, goals: Goals) {
+        let failed = seabus_bench::smoke() && !self.0.is_empty();
+        if failed {
+            eprintln!(
+                "smoke run: seabus's LCM receiver lost messages:\n  {}",
+                self.0.join("\n  ")
+            );
+        }
+        goals.finish();
+        if failed {
+            std::process::exit(1);
+        }
+    }
+}
+
 fn main() {
     let c_url = url();
     liblcm::use_url(&c_url);
     let sb_url = format!("{}&recv_buf_size=8388608", url());
     println!("LCM on loopback multicast, ttl 0: liblcm (C, its defaults) vs seabus's LCM medium");
+    let mut goals = Goals::new();
+    let mut losses = Losses::default();
 
-    let n = 300_000;
+    let n = scale(300_000, 100_000);
     let (mut c_rates, mut s_rates, mut c_got, mut s_got) = (Vec::new(), Vec::new(), 0, 0);
-    let (mut c_sent, mut s_sent) = (Vec::new(), Vec::new());
+    let (mut c_sent, mut s_sent, mut p_sent) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..ROUNDS {
         let c = c_lcm(64, n, None);
         c_got += c.count;
@@ -271,23 +310,31 @@ fn main() {
         s_got += s.count;
         s_rates.push(s.rate());
         s_sent.push(s.offered);
+        let p = seabus_from_raw(&sb_url, 64, n, f64::INFINITY, 1);
+        losses.count("64 B unpaced, 1 plain socket", n, p.count);
+        p_sent.push(p.offered);
     }
+    losses.count("64 B unpaced, seabus sender", n * ROUNDS, s_got);
+    let (s_sent, p_sent) = (common::median(s_sent), common::median(p_sent));
     println!(
-        "  64 B unpaced, senders' rates: liblcm {}   seabus {}",
+        "  64 B unpaced, senders' rates: liblcm {}   seabus {}   a plain socket (prepared datagrams, sendmmsg) {}",
         common::rate(common::median(c_sent)),
-        common::rate(common::median(s_sent))
+        common::rate(s_sent),
+        common::rate(p_sent)
     );
+    goals.at_least("64 B sender, seabus / plain socket", s_sent / p_sent, 0.9);
     let (c, s) = (common::median(c_rates), common::median(s_rates));
     let total = (n * ROUNDS) as f64;
     println!(
-        "  64 B unpaced, {n} sent per run, median of {ROUNDS}: liblcm delivers {} ({:.0}% received)   seabus {} ({:.0}% received)   ratio {:.2} (target: at least 3)",
+        "  64 B unpaced, {n} sent per run, median of {ROUNDS}: liblcm delivers {} ({:.0}% received)   seabus {} ({:.0}% received)",
         common::rate(c),
         100.0 * c_got as f64 / total,
         common::rate(s),
         100.0 * s_got as f64 / total,
-        s / c
     );
+    goals.at_least("64 B delivered, seabus / liblcm", s / c, 3.5);
     let paced = seabus(&sb_url, 64, n, Some(300_000.0));
+    losses.count("64 B at 300k msg/s, seabus sender", n, paced.count);
     println!(
         "  64 B paced at 300k msg/s from a seabus sender (it reached {}): seabus delivered {} of {n}, lost {}",
         common::rate(paced.offered),
@@ -297,37 +344,49 @@ fn main() {
     for senders in [1, 2, 3] {
         let raw = seabus_from_raw(&sb_url, 64, n, 300_000.0, senders);
         println!(
-            "  64 B paced at 300k msg/s from {senders} plain socket(s) (they reached {}): seabus delivered {} of {n}, lost {} (target: none)",
+            "  64 B paced at 300k msg/s from {senders} plain socket(s) (they reached {}): seabus delivered {} of {n}, lost {}",
             common::rate(raw.offered),
             raw.count,
             n - raw.count
         );
+        if senders == 1 {
+            losses.count("64 B at 300k msg/s, 1 plain socket", n, raw.count);
+        }
     }
 
-    let n = 20_000;
-    let (mut c_mb, mut s_mb) = (Vec::new(), Vec::new());
+    let n = scale(20_000, 10_000);
+    let (mut c_mb, mut s_mb, mut c_got, mut s_got) = (Vec::new(), Vec::new(), 0, 0);
     for _ in 0..ROUNDS {
         let c = c_lcm(100_000, n, None);
         c_mb.push(c.mb_per_s());
+        c_got += c.count;
         let s = seabus(&sb_url, 100_000, n, None);
         s_mb.push(s.mb_per_s());
+        s_got += s.count;
     }
     let (c, s) = (common::median(c_mb), common::median(s_mb));
+    let total = (n * ROUNDS) as f64;
     println!(
-        "  100 kB unpaced, {n} sent per run, median of {ROUNDS}: liblcm {c:.0} MB/s   seabus {s:.0} MB/s   ratio {:.2} (target: at least 1)",
-        s / c
+        "  100 kB unpaced, {n} sent per run, median of {ROUNDS}: liblcm {c:.0} MB/s ({:.0}% received)   seabus {s:.0} MB/s ({:.0}% received)",
+        100.0 * c_got as f64 / total,
+        100.0 * s_got as f64 / total,
     );
+    goals.at_least("100 kB MB/s, seabus / liblcm", s / c, 1.0);
 
-    let n = 10_000;
+    let n = scale(10_000, 2_000);
     let mut c_lat = c_lcm(64, n, Some(2_000.0)).latencies;
-    let mut s_lat = seabus(&sb_url, 64, n, Some(2_000.0)).latencies;
+    let s_run = seabus(&sb_url, 64, n, Some(2_000.0));
+    losses.count("64 B at 2 kHz, seabus sender", n, s_run.count);
+    let mut s_lat = s_run.latencies;
     c_lat.sort();
     s_lat.sort();
+    let c50 = common::quantile_us(&c_lat, 0.5);
+    let s50 = common::quantile_us(&s_lat, 0.5);
     println!(
-        "  64 B paced at 2 kHz, one-way latency: liblcm p50 {:.1} us p99 {:.1} us   seabus p50 {:.1} us p99 {:.1} us",
-        common::quantile_us(&c_lat, 0.5),
+        "  64 B paced at 2 kHz, {n} messages, one-way latency: liblcm p50 {c50:.1} us p99 {:.1} us   seabus p50 {s50:.1} us p99 {:.1} us",
         common::quantile_us(&c_lat, 0.99),
-        common::quantile_us(&s_lat, 0.5),
         common::quantile_us(&s_lat, 0.99)
     );
+    goals.at_most("64 B latency p50 at 2 kHz, seabus / liblcm", s50 / c50, 1.0);
+    losses.finish(goals);
 }

@@ -37,9 +37,15 @@
 //!
 //! Every session has multicast scouting off and listens on loopback only.
 //!
+//! Goals, against bare Zenoh (callback): 64 B and 4 kB delivered at least 0.8×; latency p50 and
+//! p99 at most 1.3×.
+//!
 //! ```text
 //! cargo bench -p seabus-medium-zenoh --bench zenoh [-- throughput|latency|fleet]
 //! ```
+//!
+//! The smoke run (`SEABUS_BENCH_SMOKE=1`) is shorter: fewer messages (and latency rounds), only
+//! seabus and bare Zenoh (callback), and no fleet (which has no goal).
 //!
 //! `-- profile [SIZE]` runs only seabus's flood (64 B unless SIZE is given), five times, to be
 //! profiled (`perf record -g`).
@@ -48,6 +54,7 @@
 mod common;
 
 use bytes::Bytes;
+use seabus_bench::{Goals, scale, smoke};
 use seabus_medium::{DataMap, Interface, LinkState, Medium, Node, Payload, Stamp, Topic};
 use std::collections::HashSet;
 use std::io::BufRead;
@@ -421,9 +428,9 @@ async fn flood(side: Side, size: usize, n: usize) -> Flood {
     }
 }
 
-async fn one_way(side: Side) -> (f64, f64) {
+async fn one_way(side: Side, n: usize) -> (f64, f64) {
     let seen = Seen::new(true);
-    let pair = Pair::open(side, seen.clone(), LAT_N + 16).await;
+    let pair = Pair::open(side, seen.clone(), n + 16).await;
     let mut data = vec![0u8; LAT_SIZE];
     let stamped = |data: &mut Vec<u8>| {
         data[..8].copy_from_slice(&Stamp::now().0.to_le_bytes());
@@ -431,21 +438,17 @@ async fn one_way(side: Side) -> (f64, f64) {
     };
     pair.warm_up(&seen, &stamped(&mut data)).await;
     let start = tokio::time::Instant::now();
-    for i in 0..LAT_N {
+    for i in 0..n {
         tokio::time::sleep_until(start + Duration::from_secs_f64(i as f64 / LAT_RATE)).await;
         pair.put(&stamped(&mut data)).await;
     }
-    drain(&seen, LAT_N as u64).await;
+    drain(&seen, n as u64).await;
     pair.close().await;
     let mut l: Vec<Duration> = std::mem::take(&mut *seen.latencies.lock().expect("lock"))
         .into_iter()
         .map(Duration::from_nanos)
         .collect();
-    assert!(
-        l.len() >= LAT_N * 9 / 10,
-        "only {} of {LAT_N} arrived",
-        l.len()
-    );
+    assert!(l.len() >= n * 9 / 10, "only {} of {n} arrived", l.len());
     l.sort();
     (common::quantile_us(&l, 0.5), common::quantile_us(&l, 0.99))
 }
@@ -464,15 +467,31 @@ const FLOOD_SIDES: [Side; 6] = [
     Side::BareWild,
     Side::SeabusWild,
 ];
+/// The sides of the smoke run: those the goals compare.
+const SMOKE_SIDES: [Side; 2] = [Side::Bare, Side::Seabus];
 
-async fn throughput() {
+/// `sides`' figures, found by side.
+struct BySide<'a, T>(&'a [Side], &'a [T]);
+
+impl<T> BySide<'_, T> {
+    fn get(&self, side: Side) -> Option<&T> {
+        self.0.iter().position(|s| *s == side).map(|i| &self.1[i])
+    }
+}
+
+async fn throughput(goals: &mut Goals) {
+    let rounds = ROUNDS;
+    let sides: &[Side] = if smoke() { &SMOKE_SIDES } else { &FLOOD_SIDES };
     println!(
-        "Throughput, peer to peer on loopback, CongestionControl::Drop on both sides, best of {ROUNDS} rounds taken in turn:"
+        "Throughput, peer to peer on loopback, CongestionControl::Drop on both sides, best of {rounds} rounds taken in turn:"
     );
-    for (size, n) in [(64usize, 200_000usize), (4096, 50_000)] {
-        let mut best: Vec<Option<Flood>> = (0..FLOOD_SIDES.len()).map(|_| None).collect();
-        for _ in 0..ROUNDS {
-            for (i, side) in FLOOD_SIDES.iter().enumerate() {
+    for (size, n) in [
+        (64usize, scale(200_000usize, 50_000)),
+        (4096, scale(50_000, 20_000)),
+    ] {
+        let mut best: Vec<Option<Flood>> = (0..sides.len()).map(|_| None).collect();
+        for _ in 0..rounds {
+            for (i, side) in sides.iter().enumerate() {
                 let f = flood(*side, size, n).await;
                 if best[i].as_ref().is_none_or(|b| f.delivered > b.delivered) {
                     best[i] = Some(f);
@@ -480,7 +499,7 @@ async fn throughput() {
             }
         }
         let best: Vec<Flood> = best.into_iter().map(|b| b.expect("a round")).collect();
-        for (side, f) in FLOOD_SIDES.iter().zip(&best) {
+        for (side, f) in sides.iter().zip(&best) {
             println!(
                 "  {size:>4} B {:<17} delivered {:>12} ({} of {n} arrived; offered {})",
                 side.label(),
@@ -489,44 +508,64 @@ async fn throughput() {
                 common::rate(f.offered),
             );
         }
-        println!(
-            "  {size:>4} B ratio seabus / bare (callback) {:.2}, seabus / bare (channel) {:.2} (target: at least 0.80 of bare)",
-            best[2].delivered / best[0].delivered,
-            best[2].delivered / best[1].delivered
-        );
-        println!(
-            "  {size:>4} B ratio seabus / bare advanced {:.2}; seabus on ** / bare on bench/** {:.2}",
-            best[2].delivered / best[3].delivered,
-            best[5].delivered / best[4].delivered
+        let by = BySide(sides, &best);
+        let rate = |side| by.get(side).map_or(f64::NAN, |f| f.delivered);
+        let seabus = rate(Side::Seabus);
+        if !smoke() {
+            println!(
+                "  {size:>4} B ratio seabus / bare (channel) {:.2}; seabus / bare advanced {:.2}; seabus on ** / bare on bench/** {:.2}",
+                seabus / rate(Side::BareChannel),
+                seabus / rate(Side::BareAdvanced),
+                rate(Side::SeabusWild) / rate(Side::BareWild)
+            );
+        }
+        goals.at_least(
+            &format!("{size} B delivered, seabus / bare (callback)"),
+            seabus / rate(Side::Bare),
+            0.8,
         );
     }
 }
 
-async fn latency() {
+async fn latency(goals: &mut Goals) {
+    let rounds = scale(LAT_ROUNDS, 2);
+    let n = scale(LAT_N, 500);
+    let sides: &[Side] = if smoke() { &SMOKE_SIDES } else { &PAIR_SIDES };
     println!(
-        "One-way latency, peer to peer on loopback, {LAT_N} messages of {LAT_SIZE} B at {LAT_RATE} per second, best of {LAT_ROUNDS} rounds taken in turn:"
+        "One-way latency, peer to peer on loopback, {n} messages of {LAT_SIZE} B at {LAT_RATE} per second, best of {rounds} rounds taken in turn:"
     );
-    let mut best = [(f64::MAX, f64::MAX); PAIR_SIDES.len()];
-    for _ in 0..LAT_ROUNDS {
-        for (i, side) in PAIR_SIDES.iter().enumerate() {
-            let (p50, p99) = one_way(*side).await;
+    let mut best = vec![(f64::MAX, f64::MAX); sides.len()];
+    for _ in 0..rounds {
+        for (i, side) in sides.iter().enumerate() {
+            let (p50, p99) = one_way(*side, n).await;
             best[i] = (best[i].0.min(p50), best[i].1.min(p99));
         }
     }
-    for (side, (p50, p99)) in PAIR_SIDES.iter().zip(best) {
+    for (side, (p50, p99)) in sides.iter().zip(&best) {
         println!("  {:<17} p50 {p50:.1} us  p99 {p99:.1} us", side.label());
     }
-    println!(
-        "  ratio seabus / bare (callback) p50 {:.2} p99 {:.2}; seabus / bare (channel) p50 {:.2} p99 {:.2} (target: within 1.30 of bare)",
-        best[2].0 / best[0].0,
-        best[2].1 / best[0].1,
-        best[2].0 / best[1].0,
-        best[2].1 / best[1].1
+    let by = BySide(sides, &best);
+    let of = |side| by.get(side).copied().unwrap_or((f64::NAN, f64::NAN));
+    let (seabus, bare) = (of(Side::Seabus), of(Side::Bare));
+    if !smoke() {
+        let (channel, advanced) = (of(Side::BareChannel), of(Side::BareAdvanced));
+        println!(
+            "  ratio seabus / bare (channel) p50 {:.2} p99 {:.2}; seabus / bare advanced p50 {:.2} p99 {:.2}",
+            seabus.0 / channel.0,
+            seabus.1 / channel.1,
+            seabus.0 / advanced.0,
+            seabus.1 / advanced.1
+        );
+    }
+    goals.at_most(
+        "latency p50, seabus / bare (callback)",
+        seabus.0 / bare.0,
+        1.3,
     );
-    println!(
-        "  ratio seabus / bare advanced p50 {:.2} p99 {:.2}",
-        best[2].0 / best[3].0,
-        best[2].1 / best[3].1
+    goals.at_most(
+        "latency p99, seabus / bare (callback)",
+        seabus.1 / bare.1,
+        1.3,
     );
 }
 
@@ -994,15 +1033,20 @@ fn main() {
         .build()
         .expect("runtime");
     let started = Instant::now();
+    let mut goals = Goals::new();
     rt.block_on(async {
         if run("throughput") {
-            throughput().await;
+            throughput(&mut goals).await;
         }
         if run("latency") {
-            latency().await;
+            latency(&mut goals).await;
         }
         if run("fleet") {
-            fleet().await;
+            if smoke() {
+                println!("Fleet: not in the smoke run (no goal)");
+            } else {
+                fleet().await;
+            }
         }
         if profile {
             // seabus's flood alone, for `perf record`
@@ -1019,4 +1063,5 @@ fn main() {
     });
     println!("(bench took {:.0} s)", started.elapsed().as_secs_f64());
     rt.shutdown_timeout(Duration::from_secs(1));
+    goals.finish();
 }
