@@ -33,14 +33,32 @@ const HEADING: usize = 0;
 const ATTITUDE: usize = 1;
 const RATE: usize = 2;
 
-/// A datamap of the fields that are there, in order.
+/// A datamap of the fields that are there, in order: one allocation of the exact size.
+#[inline]
 fn map<const N: usize>(fields: [(&'static str, Option<Value>); N]) -> DataMap {
-    DataMap::from_entries(
-        fields
-            .into_iter()
-            .filter_map(|(k, v)| Some((Key::Borrowed(k), v?)))
-            .collect(),
-    )
+    let mut entries = Vec::with_capacity(fields.iter().filter(|(_, v)| v.is_some()).count());
+    for (k, v) in fields {
+        if let Some(v) = v {
+            entries.push((Key::Borrowed(k), v));
+        }
+    }
+    DataMap::from_entries(entries)
+}
+
+/// Powers of ten that bracket the magnitudes sentences carry, `POWERS[i]` = 10^(i - 10).
+const POWERS: [f64; 21] = [
+    1e-10, 1e-9, 1e-8, 1e-7, 1e-6, 1e-5, 1e-4, 1e-3, 1e-2, 1e-1, 1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6,
+    1e7, 1e8, 1e9, 1e10,
+];
+
+/// The decimal exponent of `x` (> 0, finite): ⌊log10 x⌋, from the table where it brackets `x`.
+fn exponent(x: f64) -> i32 {
+    if (POWERS[0]..POWERS[20]).contains(&x) {
+        // (the first power above x, less one)
+        POWERS.partition_point(|p| *p <= x) as i32 - 11
+    } else {
+        x.log10().floor() as i32
+    }
 }
 
 /// An `f32` of the `nmea` crate as the decimal it was written as (`22.4`, not
@@ -50,7 +68,7 @@ fn decimal(x: f32) -> f64 {
     if x == 0.0 || !x.is_finite() {
         return x;
     }
-    let scale = 10f64.powi(6 - x.abs().log10().floor() as i32);
+    let scale = 10f64.powi(6 - exponent(x.abs()));
     (x * scale).round() / scale
 }
 
@@ -358,7 +376,11 @@ impl Sensor {
     /// An attitude when this sentence gave a true heading and pitch and roll are fresh; it says
     /// which sentence gave each angle.
     fn attitude(&self, formatter: &str, now: Instant, out: &mut Readings) {
-        let (Some(yaw), Some(made)) = (out.true_heading(), self.combined.fresh(now)) else {
+        // (pitch and roll are looked at first: without them no heading makes an attitude)
+        let Some(made) = self.combined.fresh(now) else {
+            return;
+        };
+        let Some(yaw) = out.true_heading() else {
             return;
         };
         let sources = format!(
@@ -701,4 +723,30 @@ fn heading(h: f64, magnetic: bool) -> DataMap {
         ("heading", Some(wrap360(h).into())),
         ("magnetic", Some(magnetic.into())),
     ])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_exponent_from_the_table_is_that_of_log10() {
+        // every power of ten an f32 holds, its neighbours and values between (what `decimal` sees)
+        for e in -40..=38 {
+            let p: f32 = format!("1e{e}").parse().expect("a power of ten");
+            let near = [p.to_bits() - 1, p.to_bits(), p.to_bits() + 1].map(f32::from_bits);
+            for v in near.into_iter().chain([p * 2.5, p * 7.3, p * 9.99]) {
+                let v = f64::from(v);
+                if v > 0.0 && v.is_finite() {
+                    assert_eq!(exponent(v), v.log10().floor() as i32, "{v}");
+                }
+            }
+        }
+        for v in [
+            22.4_f32, 0.9, 545.4, 46.9, 1.5, 359.9, 1e-3, 99.99, 12_000.0,
+        ] {
+            let d = decimal(v);
+            assert_eq!(d.to_string(), v.to_string(), "{v}");
+        }
+    }
 }
