@@ -121,7 +121,7 @@ fn throughput(goals: &mut Goals) {
     );
     println!("  bare nmea::parse_str                              {bare:>9.0} sentences/s");
     println!("  seabus: frame, check, topic, parse, to datasets   {ours:>9.0} sentences/s");
-    goals.at_least("NMEA in memory, seabus / bare parse_str", ours / bare, 0.8);
+    goals.at_least("NMEA in memory, seabus / bare parse_str", ours / bare, 1.0);
 }
 
 /// The whole path over a pseudo-terminal, on 64-bit Linux (the process's CPU time and the
@@ -791,10 +791,12 @@ mod line {
                 b.took.as_secs_f64() * 1e3
             );
         }
-        goals.at_least(
+        goals.aim_at_least(
             "NMEA whole path CPU, parse_str ns / whole path ns per sentence",
             bare.ns(n) / ours.ns(n),
             1.0,
+            "each sentence also crosses a pseudo-terminal, the serial medium and the drivers' tasks, \
+             which the bare parse does not",
         );
     }
 }
