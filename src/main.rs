@@ -6,6 +6,7 @@ mod export;
 mod lcmtypes;
 mod logtail;
 mod media;
+mod memory;
 mod record;
 mod spy;
 
@@ -257,6 +258,7 @@ fn init_logs(verbose: u8) {
 
 fn main() -> ExitCode {
     use clap::{CommandFactory, FromArgMatches};
+    memory::bound();
     // `--version` names the media compiled in; made once, for the life of the program
     let version: &'static str = Box::leak(media::long_version().into_boxed_str());
     let cli = match Cli::command()
@@ -469,6 +471,8 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
             .collect::<Vec<_>>()
             .join(", ")
     );
+    // what starting took (the users' password hashes above all) is given back at once
+    let giving_back = tokio::spawn(memory::keep_giving_back());
     match duration {
         Some(d) => {
             tokio::select! {
@@ -478,6 +482,7 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
         }
         None => terminated().await,
     }
+    giving_back.abort();
     tracing::info!("shutting down");
     drop(foxgloves);
     drop(consoles);
