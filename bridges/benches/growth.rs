@@ -6,28 +6,18 @@
 //!
 //! Run: `cargo bench -p seabus-bridges --bench growth`
 
+// the sample message every medium benchmark sends
+#[path = "../../medium/core/benches/common.rs"]
+mod common;
+
 use seabus_bench::{Goals, scale};
-use seabus_medium::{DataMap, Topic};
+use seabus_medium::Topic;
 use seabus_modules::runtime::Runtime;
 use seabus_modules::{Catalogue, Registry, SystemSpec};
 use std::time::{Duration, Instant};
 
 /// Messages in flight at once, at most.
 const BATCH: usize = 200;
-
-fn ten_fields(i: usize) -> DataMap {
-    DataMap::new()
-        .with("yaw", 271.25f64)
-        .with("pitch", -2.5f64)
-        .with("roll", 0.75f64)
-        .with("depth", 12.125f64)
-        .with("lat", 43.508_123_4f64)
-        .with("lon", 16.440_234_5f64)
-        .with("fix", 1i64)
-        .with("seq", i as i64)
-        .with("source", "gps")
-        .with("valid", true)
-}
 
 /// This process's resident memory, bytes.
 fn rss() -> u64 {
@@ -76,7 +66,9 @@ fn run(media: &[&str], bridges: &str, topics: &[Topic], n: usize) -> Measured {
             .expect("pattern");
         // the bridges' subscriptions are in place once a message gets through
         loop {
-            tx.send(&topics[0], ten_fields(0)).await.expect("sent");
+            tx.send(&topics[0], common::ten_fields())
+                .await
+                .expect("sent");
             if tokio::time::timeout(Duration::from_millis(100), rx.recv())
                 .await
                 .is_ok()
@@ -92,7 +84,7 @@ fn run(media: &[&str], bridges: &str, topics: &[Topic], n: usize) -> Measured {
             while sent < n {
                 let batch = BATCH.min(n - sent);
                 for i in sent..sent + batch {
-                    tx.send(&topics[i % topics.len()], ten_fields(i))
+                    tx.send(&topics[i % topics.len()], common::ten_fields())
                         .await
                         .expect("sent");
                 }
