@@ -10,7 +10,7 @@
 mod common;
 use common::*;
 use serde_json::Value as Json;
-use std::io::{BufRead, BufReader};
+use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
@@ -233,15 +233,20 @@ fn a_quiet_topic_is_unadvertised_junk_is_answered_or_disconnected_and_shown_in_t
             break rest.split_whitespace().next().unwrap().to_string();
         }
     };
-    let watcher = Command::new("node")
+    let mut watcher = Command::new("node")
         .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/foxglove_watch.js"))
-        .args([&url, "6"])
+        .args([&url, "3"])
         .env("NODE_PATH", &modules)
+        .stdin(Stdio::piped())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .expect("node runs");
-    std::thread::sleep(Duration::from_millis(800));
+    // the watch starts once both its connections are open
+    let mut watched = BufReader::new(watcher.stdout.take().unwrap());
+    let mut first = String::new();
+    watched.read_line(&mut first).unwrap();
+    assert_eq!(first.trim(), "watching", "the watcher connects");
     // a burst on one topic, the other topic steady for the whole watch
     let burst = seabus()
         .args([
@@ -271,9 +276,13 @@ fn a_quiet_topic_is_unadvertised_junk_is_answered_or_disconnected_and_shown_in_t
         .output()
         .unwrap();
     assert!(steady.status.success(), "{}", stderr(&steady));
+    // the watch ends with the steady topic's last message, before the sweep could take it
+    drop(watcher.stdin.take());
+    let mut rest = String::new();
+    watched.read_to_string(&mut rest).unwrap();
     let out = watcher.wait_with_output().unwrap();
     assert!(out.status.success(), "{}", stderr(&out));
-    let got: Json = serde_json::from_slice(&out.stdout).unwrap();
+    let got: Json = serde_json::from_str(&rest).unwrap();
     let events = got["events"].as_array().unwrap();
     let of = |topic: &str, event: &str| -> Vec<u64> {
         events

@@ -1,14 +1,14 @@
-// Watches a Foxglove WebSocket server for SECONDS with the official protocol client
-// (@foxglove/ws-protocol over `ws`), subscribed to every channel, while a second connection sends
-// what the protocol does not allow (text that is not JSON, an unknown binary opcode) every 200 ms
-// for the first half of the watch, then bytes that are no WebSocket frame at all.
-// `foxglove.Log` messages (protobuf, as Foxglove's Log panel reads them) are decoded with
-// protobufjs from the schema the channel advertises.
+// Watches a Foxglove WebSocket server with the official protocol client (@foxglove/ws-protocol
+// over `ws`), subscribed to every channel, while a second connection sends what the protocol does
+// not allow (text that is not JSON, an unknown binary opcode) every 200 ms for JUNK_SECONDS, then
+// bytes that are no WebSocket frame at all. `foxglove.Log` messages (protobuf, as Foxglove's Log
+// panel reads them) are decoded with protobufjs from the schema the channel advertises.
 //
-//   node foxglove_watch.js URL SECONDS
+//   node foxglove_watch.js URL JUNK_SECONDS
 //
-// Prints one JSON object: {"events": [{"t": ms, "event": "advertise"|"unadvertise", "topic": …}],
-// "messages": {topic: [ms, …]}, "logs": [{level, name, message, file, line}],
+// Prints "watching" once both connections are open; the watch lasts until standard input closes.
+// Then it prints one JSON object: {"events": [{"t": ms, "event": "advertise"|"unadvertise",
+// "topic": …}], "messages": {topic: [ms, …]}, "logs": [{level, name, message, file, line}],
 // "junk": {"statuses": N, "sent": N, "garbage_at": ms, "closed_at": ms|null}}
 
 "use strict";
@@ -18,14 +18,16 @@ const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const protobuf = require("protobufjs");
 const descriptor = require("protobufjs/ext/descriptor");
 
-const [url, secondsText] = process.argv.slice(2);
-const seconds = Number(secondsText);
-if (!url || !(seconds > 0)) {
-  console.error("usage: node foxglove_watch.js URL SECONDS");
+const [url, junkText] = process.argv.slice(2);
+const junkSeconds = Number(junkText);
+if (!url || !(junkSeconds > 0)) {
+  console.error("usage: node foxglove_watch.js URL JUNK_SECONDS");
   process.exit(2);
 }
 const started = Date.now();
 const now = () => Date.now() - started;
+// the watch starts once both connections are open ("watching" on a line of its own)
+let watchFrom = null;
 const out = {
   events: [],
   messages: {},
@@ -72,10 +74,25 @@ client.on("error", (e) => {
 });
 
 const junk = new WebSocket(url, ["foxglove.sdk.v1"]);
-junk.on("open", () => {
+const open = { client: false, junk: false };
+const opened = (which) => {
+  open[which] = true;
+  if (watchFrom !== null || !open.client || !open.junk) return;
+  watchFrom = Date.now();
+  console.log("watching");
+  // the watch ends when whoever started it closes its standard input
+  process.stdin.on("end", () => {
+    console.log(JSON.stringify(out));
+    process.exit(0);
+  });
+  process.stdin.resume();
+  setTimeout(() => {
+    console.error("standard input still open after 60 s");
+    process.exit(4);
+  }, 60_000);
   const timer = setInterval(() => {
     if (junk.readyState !== WebSocket.OPEN) return clearInterval(timer);
-    if (now() < (seconds * 1000) / 2) {
+    if (Date.now() - watchFrom < junkSeconds * 1000) {
       junk.send(out.junk.sent % 2 === 0 ? "{not json" : Buffer.from([0xff, 1, 2, 3]));
       out.junk.sent += 1;
     } else {
@@ -85,7 +102,15 @@ junk.on("open", () => {
       clearInterval(timer);
     }
   }, 200);
-});
+};
+setTimeout(() => {
+  if (watchFrom === null) {
+    console.error("not both connections open within 20 s");
+    process.exit(3);
+  }
+}, 20_000);
+client.on("open", () => opened("client"));
+junk.on("open", () => opened("junk"));
 junk.on("message", (data, binary) => {
   if (!binary && JSON.parse(data.toString()).op === "status") out.junk.statuses += 1;
 });
@@ -94,7 +119,3 @@ junk.on("close", () => {
   out.junk.closed_at = now();
 });
 
-setTimeout(() => {
-  console.log(JSON.stringify(out));
-  process.exit(0);
-}, seconds * 1000);
