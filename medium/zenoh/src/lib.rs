@@ -406,6 +406,15 @@ fn kind_qos(command: bool) -> Qos {
     }
 }
 
+/// Whether `topic` carries what became of commands (`cmd.status`, a vehicle's `auv1.cmd.status`):
+/// an operator waits for those as for the command itself, so they go with a command's quality of
+/// service. Under congestion, a dropped `pending` would leave the console without the command's
+/// first answer.
+fn answers_commands(topic: &Topic) -> bool {
+    let t = topic.as_str();
+    t == "cmd.status" || t.ends_with(".cmd.status")
+}
+
 impl SendQos {
     /// `qos` over the defaults of the kind (`command` or data).
     fn of(qos: Qos, command: bool) -> SendQos {
@@ -750,7 +759,7 @@ impl ZenohTransport {
     /// How a message of `kind` on `topic` is sent: the first quality of service declared for it
     /// over its kind's.
     fn qos_of(&self, topic: &Topic, kind: Kind) -> SendQos {
-        let command = kind == Kind::Command;
+        let command = kind == Kind::Command || answers_commands(topic);
         let overrides = self.overrides.read().unwrap_or_else(|p| p.into_inner());
         let declared = overrides
             .iter()

@@ -737,7 +737,8 @@ async fn bare_session(port: u16) -> zenoh::Session {
 
 /// What a bridge route's `priority`, `congestion` and `express` become on the wire, read by a
 /// program that is not seabus from each sample: each attribute a route sets replaces its kind's,
-/// the others stay, and a route without any sends with its kind's.
+/// the others stay, and a route without any sends with its kind's (command statuses with a
+/// command's).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_routes_quality_of_service_reaches_the_wire_attribute_by_attribute() {
     use zenoh::qos::{CongestionControl, Priority};
@@ -770,6 +771,11 @@ async fn a_routes_quality_of_service_reaches_the_wire_attribute_by_attribute() {
             "fleet/auv1/env/wind",
             (Priority::Data, CongestionControl::Drop, false),
         ),
+        // what became of a command is data that goes as a command does
+        (
+            "fleet/auv1/cmd/status",
+            (Priority::InteractiveHigh, CongestionControl::Block, true),
+        ),
     ]);
     let mut seen = std::collections::BTreeMap::new();
     let map = DataMap::new().and("x", 1.0);
@@ -778,7 +784,7 @@ async fn a_routes_quality_of_service_reaches_the_wire_attribute_by_attribute() {
         if seen.len() == expected.len() {
             break;
         }
-        for topic in ["nav.depth", "sensors.temp", "env.wind"] {
+        for topic in ["nav.depth", "sensors.temp", "env.wind", "cmd.status"] {
             bus.send(topic, Payload::from(map.clone())).await.unwrap();
         }
         bus.command("cmd.course", Payload::from(map.clone()))
