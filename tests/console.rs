@@ -38,25 +38,6 @@ fn repo(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
 }
 
-/// Adds a user with `seabus user add`, the password on stdin.
-fn add_user(users: &Path, name: &str, roles: &str, password: &str) {
-    let mut child = seabus()
-        .args(["user", "add"])
-        .arg(users)
-        .args([name, "--roles", roles])
-        .stdin(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("seabus user add runs");
-    writeln!(child.stdin.take().expect("stdin"), "{password}").expect("password written");
-    let out = child.wait_with_output().expect("it ends");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-}
-
 /// The simulated Iver2 frontseat and its driver, the GPS and compass drivers and the health
 /// monitor; `{d}` is the system's directory, `{rules}` the health rules.
 const IVER: &str = r#"

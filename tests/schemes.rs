@@ -1,28 +1,74 @@
-//! What the default build says it holds: `seabus schemes` lists every scheme of every medium
-//! family with what it opens and leaves no family out; `seabus --version` names the version and
-//! the media; a URL of a scheme no family has is refused by `seabus check`.
+//! What a build says it holds, for the default build and for a vehicle's build with only some
+//! media (`--no-default-features --features serial,udp`): `seabus schemes` lists every scheme
+//! compiled in with what it opens and names the families left out with their features; `seabus
+//! --version` names the version and the media; `seabus check` refuses a medium left out, naming
+//! the feature, and a URL of a scheme no family has.
 
 mod common;
 use common::*;
 
-/// Every scheme of the default build with its family, in the order `seabus schemes` lists them.
-const SCHEMES: [(&str, &str); 15] = [
-    ("inproc", "inproc"),
-    ("udp", "udp"),
-    ("serial", "serial"),
-    ("pty", "serial"),
-    ("slcan", "can"),
-    ("slcan+pty", "can"),
-    ("cannelloni", "can"),
-    ("socketcan", "can"),
-    ("udpm", "lcm"),
-    ("dsaav+eth", "dsaav"),
-    ("dsaav+udp", "dsaav"),
-    ("dsaav+inproc", "dsaav"),
-    ("moos", "moos"),
-    ("zenoh", "zenoh"),
-    ("mavlink", "mavlink"),
+/// Every medium family in the order `seabus schemes` lists them: its name (which is its cargo
+/// feature), whether this build has it, its schemes and a URL of its first scheme.
+const FAMILIES: [(&str, bool, &[&str], &str); 8] = [
+    (
+        "udp",
+        cfg!(feature = "udp"),
+        &["udp"],
+        "udp://127.0.0.1:47999",
+    ),
+    (
+        "serial",
+        cfg!(feature = "serial"),
+        &["serial", "pty"],
+        "serial:///dev/ttyS9",
+    ),
+    (
+        "can",
+        cfg!(feature = "can"),
+        &["slcan", "slcan+pty", "cannelloni", "socketcan"],
+        "slcan:///dev/ttyACM0",
+    ),
+    (
+        "lcm",
+        cfg!(feature = "lcm"),
+        &["udpm"],
+        "udpm://239.255.76.67:7667?ttl=0",
+    ),
+    (
+        "dsaav",
+        cfg!(feature = "dsaav"),
+        &["dsaav+eth", "dsaav+udp", "dsaav+inproc"],
+        "dsaav+inproc://",
+    ),
+    (
+        "moos",
+        cfg!(feature = "moos"),
+        &["moos"],
+        "moos://127.0.0.1:9000",
+    ),
+    (
+        "zenoh",
+        cfg!(feature = "zenoh"),
+        &["zenoh"],
+        "zenoh://?mode=peer",
+    ),
+    (
+        "mavlink",
+        cfg!(feature = "mavlink"),
+        &["mavlink"],
+        "mavlink://udpin:127.0.0.1:14550",
+    ),
 ];
+
+fn compiled()
+-> impl Iterator<Item = &'static (&'static str, bool, &'static [&'static str], &'static str)> {
+    FAMILIES.iter().filter(|f| f.1)
+}
+
+fn left_out()
+-> impl Iterator<Item = &'static (&'static str, bool, &'static [&'static str], &'static str)> {
+    FAMILIES.iter().filter(|f| !f.1)
+}
 
 fn stdout_of(args: &[&str]) -> String {
     let out = seabus().args(args).output().expect("seabus runs");
@@ -36,15 +82,16 @@ fn stdout_of(args: &[&str]) -> String {
 }
 
 #[test]
-fn schemes_lists_every_scheme_of_the_default_build_with_what_it_opens() {
+fn schemes_lists_every_scheme_of_this_build_with_what_it_opens_and_names_the_rest() {
     let text = stdout_of(&["schemes"]);
     let registry = schemes();
     let mut listed = Vec::new();
+    let mut not_compiled = Vec::new();
     for line in text.lines() {
-        assert!(
-            !line.starts_with("not compiled in"),
-            "the default build leaves nothing out: {line}\n{text}"
-        );
+        if let Some(rest) = line.strip_prefix("not compiled in: ") {
+            not_compiled.push(rest.to_string());
+            continue;
+        }
         let mut words = line.split_whitespace();
         let (name, family) = (
             words.next().expect("a scheme"),
@@ -56,9 +103,17 @@ fn schemes_lists_every_scheme_of_the_default_build_with_what_it_opens() {
         if let Some(s) = registry.iter().find(|s| s.name == name) {
             assert_eq!(summary, s.summary, "{line}");
         }
-        listed.push((name, family));
+        listed.push((name.to_string(), family.to_string()));
     }
-    assert_eq!(listed, SCHEMES, "{text}");
+    let mut expected = vec![("inproc".to_string(), "inproc".to_string())];
+    for (family, _, schemes, _) in compiled() {
+        expected.extend(schemes.iter().map(|s| (s.to_string(), family.to_string())));
+    }
+    assert_eq!(listed, expected, "{text}");
+    let expected: Vec<String> = left_out()
+        .map(|(f, ..)| format!("{f} (cargo feature `{f}`)"))
+        .collect();
+    assert_eq!(not_compiled, expected, "{text}");
 }
 
 #[test]
@@ -70,29 +125,49 @@ fn version_names_the_version_and_the_media_compiled_in() {
         Some(concat!("seabus ", env!("CARGO_PKG_VERSION"))),
         "{text}"
     );
-    let media = lines.next().expect("a media line");
-    assert_eq!(
-        media,
-        "media: inproc (inproc) udp (udp) serial (serial, pty) \
-         can (slcan, slcan+pty, cannelloni, socketcan) lcm (udpm) \
-         dsaav (dsaav+eth, dsaav+udp, dsaav+inproc) moos (moos) zenoh (zenoh) mavlink (mavlink)",
-        "{text}"
-    );
-    // the families, without their schemes
-    let families: Vec<&str> = media
-        .trim_start_matches("media:")
-        .split(')')
-        .filter_map(|f| f.split('(').next())
-        .map(str::trim)
-        .filter(|f| !f.is_empty())
-        .collect();
-    assert_eq!(
-        families,
-        [
-            "inproc", "udp", "serial", "can", "lcm", "dsaav", "moos", "zenoh", "mavlink"
-        ]
-    );
-    assert_eq!(lines.next(), None, "no family is left out: {text}");
+    let mut media = String::from("media: inproc (inproc)");
+    for (family, _, schemes, _) in compiled() {
+        media += &format!(" {family} ({})", schemes.join(", "));
+    }
+    assert_eq!(lines.next(), Some(media.as_str()), "{text}");
+    let out: Vec<&str> = left_out().map(|f| f.0).collect();
+    if out.is_empty() {
+        assert_eq!(lines.next(), None, "no family is left out: {text}");
+    } else {
+        assert_eq!(
+            lines.next(),
+            Some(format!("left out: {}", out.join(", ")).as_str()),
+            "{text}"
+        );
+    }
+}
+
+/// A medium of every family: one this build left out is refused by `check` with the feature to
+/// build with; one it has is read as that family's (whatever else `check` says of it).
+#[test]
+fn check_names_the_feature_of_a_medium_left_out_of_this_build() {
+    for (family, has, _, url) in FAMILIES {
+        let (_dir, path) = system_file(
+            "one.xml",
+            &format!(
+                "<seabus node=\"n\">\n  <medium name=\"m\" url=\"{}\"/>\n</seabus>\n",
+                url.replace('&', "&amp;")
+            ),
+        );
+        let out = check(&path);
+        let err = String::from_utf8_lossy(&out.stderr);
+        let refusal = format!(
+            "{}:2:20: medium `{family}` is not compiled into this seabus (feature `{family}`)",
+            path.display()
+        );
+        if has {
+            assert!(!err.contains("not compiled"), "{family}: {err}");
+            assert!(!err.contains("unknown medium scheme"), "{family}: {err}");
+        } else {
+            assert_eq!(out.status.code(), Some(2), "{family}: {err}");
+            assert!(err.contains(&refusal), "{family}: {err}");
+        }
+    }
 }
 
 #[test]

@@ -449,3 +449,26 @@ impl Drop for PythonPeer {
         }
     }
 }
+
+/// Adds a user with `seabus user add`, the password on stdin.
+pub fn add_user(users: &Path, name: &str, roles: &str, password: &str) {
+    let mut child = seabus()
+        .args(["user", "add"])
+        .arg(users)
+        .args([name, "--roles", roles])
+        .stdin(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("seabus user add runs");
+    std::io::Write::write_all(
+        &mut child.stdin.take().expect("stdin"),
+        format!("{password}\n").as_bytes(),
+    )
+    .expect("password written");
+    let out = child.wait_with_output().expect("it ends");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
