@@ -122,6 +122,7 @@ impl MoosConfig {
             link_state: true,
             native: None,
             qos: false,
+            lists: false,
         }
     }
 }
