@@ -5,7 +5,7 @@
 mod common;
 use common::*;
 use seabus_medium::{DataMap, LinkState, Node};
-use seabus_medium_moos::db::MoosDb;
+use seabus_medium_moos::db::{Clock, MoosDb};
 use seabus_medium_moos::wire::data;
 use std::time::{Duration, Instant};
 
@@ -119,10 +119,25 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
 }
 
 /// `seabus pub` on a `moos://` medium waits for the connection to the DB, and what it sent is
-/// written before it exits: one run, one value in the DB.
+/// written before it exits: one run, one value in the DB. The DB reads the client's name 100 ms
+/// late, as a MOOSDB does; the value is stamped with the time it was sent all the same (the DB
+/// runs on this host: its clock is ours), not 100 ms ahead.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pub_waits_for_the_moosdb_and_sends_before_exiting() {
-    let db = MoosDb::start("127.0.0.1:0".parse().unwrap()).await.unwrap();
+    let slow = Clock {
+        ahead: 0.0,
+        welcome_delay: Duration::from_millis(100),
+    };
+    let db = MoosDb::start_with("127.0.0.1:0".parse().unwrap(), slow)
+        .await
+        .unwrap();
+    let now = || {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_secs_f64()
+    };
+    let started = now();
     let url = format!("moos://127.0.0.1:{}?name=cli", db.addr().port());
     let out = tokio::task::spawn_blocking(move || {
         seabus()
@@ -142,8 +157,15 @@ async fn pub_waits_for_the_moosdb_and_sends_before_exiting() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let x = db.value("NAV_X").expect("NAV_X reached the DB");
+    let ended = now();
     assert_eq!(
         (x.data_type, x.value, x.source.as_slice()),
         (data::DOUBLE, 4.5, &b"cli"[..])
+    );
+    assert!(
+        x.time >= started && x.time <= ended,
+        "stamped {:.4} s after pub started, {:.4} s after it ended",
+        x.time - started,
+        x.time - ended
     );
 }
