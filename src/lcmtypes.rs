@@ -147,7 +147,9 @@ mod tests {
             let p = out.payload(Stamp(stamp)).unwrap_or_else(|e| panic!("{e}"));
             let bytes = p.as_bytes().expect("bytes");
             let ty = types.get(name).expect("type");
-            seabus_medium_lcm::codec::decode(&types, ty, bytes).unwrap_or_else(|e| panic!("{e}"))
+            seabus_medium_lcm::codec::decode(&types, ty, bytes)
+                .unwrap_or_else(|e| panic!("{e}"))
+                .0
         };
         // each message sent gets its own time
         let out = LcmMessage::of(types.clone(), "t.s_t", &map).unwrap_or_else(|e| panic!("{e}"));

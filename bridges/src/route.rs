@@ -424,9 +424,15 @@ impl RouteBridge {
         // the payload is taken out of the message, so a datamap no one else holds is renamed in place
         let taken = std::mem::replace(&mut msg.payload, Payload::from(Vec::new()));
         let converted = match (&leg.lcm, &self.types) {
-            (Some(lcm), Some(types)) => {
-                convert_lcm(taken, leg, lcm, types, &msg.topic, &topic, msg.stamp)
-            }
+            (Some(lcm), Some(types)) => convert_lcm(
+                taken,
+                leg,
+                lcm,
+                types,
+                (&msg.topic, &topic),
+                msg.stamp,
+                (&self.problems, self.report_topic.as_str()),
+            ),
             _ => convert(taken, &leg.fields, leg.keep, leg.format)
                 .map_err(|e| Problem::new("conversion", format!("topic `{}`: {e}", msg.topic))),
         };
@@ -491,6 +497,11 @@ impl RouteBridge {
                 "route_latency_max_ms",
                 list(&|s| Value::Float(s.latency_max_ms)),
             );
+        // what was not carried across, or carried as liblcm reads it, by reason
+        let mut map = map;
+        for (reason, n) in self.problems.counts() {
+            map.push(reason, i64::try_from(n).unwrap_or(i64::MAX));
+        }
         // latency is reported per period
         for s in &mut self.stats {
             s.latency_sum_ms = 0.0;
@@ -512,18 +523,19 @@ fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[L
 }
 
 /// Carries a payload across a route with an LCM type: decoded from LCM bytes read on `from`, field
-/// renames applied, then encoded for the LCM channel `to` (or put in the far side's format).
+/// renames applied, then encoded for the LCM channel `to` (or put in the far side's format). What
+/// is read leniently is counted in `tally`, logged as `source`.
 fn convert_lcm(
     p: Payload,
     leg: &Leg,
     lcm: &crate::lcm::Mapping,
     types: &ResolvedTypes,
-    from: &Topic,
-    to: &Topic,
+    (from, to): (&Topic, &Topic),
     stamp: Stamp,
+    (tally, source): (&Tally, &str),
 ) -> Result<Payload, Problem> {
     let p = if lcm.decodes() {
-        Payload::from(lcm.decode(types, from.as_str(), &p)?)
+        Payload::from(lcm.decode(types, from.as_str(), &p, tally, source)?)
     } else {
         p
     };
