@@ -303,6 +303,7 @@ fn pub_sends_typed_lcm_messages_that_lcm_programs_read() {
             "depth=3.5",
             "--lcm",
             "seabus.depth_t",
+            "--allow-missing",
         ])
         .output()
         .unwrap();
