@@ -7,7 +7,7 @@ mod common;
 use common::*;
 use seabus_medium::{DataMap, Kind, Node, Payload, Value};
 use seabus_medium_moos::db::MoosDb;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::time::{Duration, Instant};
 
 #[tokio::test(flavor = "multi_thread")]
@@ -79,14 +79,9 @@ async fn a_bridge_from_a_serial_line_to_udp_reports_on_udp_and_logs_no_warning()
 }
 
 /// The WARN and ERROR lines of a finished `seabus run`, after checking that it ended well.
-fn warnings_of(mut run: Running, limit: Duration) -> Vec<String> {
-    let status = wait_for(&mut run, limit).expect("seabus run --for ends");
-    let mut stderr = String::new();
-    run.stderr
-        .take()
-        .unwrap()
-        .read_to_string(&mut stderr)
-        .unwrap();
+fn warnings_of(run: Running, limit: Duration) -> Vec<String> {
+    let (status, stderr) = ended(run, limit);
+    let status = status.expect("seabus run --for ends");
     assert!(status.success(), "{status}\n{stderr}");
     stderr
         .lines()

@@ -8,7 +8,6 @@
 mod common;
 use common::*;
 use std::collections::BTreeMap;
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -114,14 +113,8 @@ fn every_example_system_runs_10_s_without_repeating_a_warning() {
     let mut failures = Vec::new();
     for wave in [first, second] {
         let running: Vec<(String, Running)> = wave.iter().map(|p| (name_of(p), start(p))).collect();
-        for (name, mut run) in running {
-            let status = wait_for(&mut run, Duration::from_secs(30));
-            let mut stderr = String::new();
-            run.stderr
-                .take()
-                .unwrap()
-                .read_to_string(&mut stderr)
-                .unwrap();
+        for (name, run) in running {
+            let (status, stderr) = ended(run, Duration::from_secs(30));
             match status {
                 Some(s) if s.success() => {}
                 other => failures.push(format!("{name}: ended {other:?}:\n{stderr}")),

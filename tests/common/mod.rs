@@ -545,3 +545,15 @@ pub fn lcm_c_lines(
     );
     got
 }
+
+/// Waits at most `limit` for a `seabus run` to end (killed if it does not); its exit status
+/// (`None` when it was killed) and all it wrote to stderr.
+pub fn ended(mut run: Running, limit: Duration) -> (Option<std::process::ExitStatus>, String) {
+    use std::io::Read;
+    let status = wait_for(&mut run, limit);
+    let mut stderr = String::new();
+    if let Some(mut err) = run.stderr.take() {
+        let _ = err.read_to_string(&mut stderr);
+    }
+    (status, stderr)
+}
