@@ -9,7 +9,8 @@ use std::path::PathBuf;
 mod imp {
     use super::*;
     use seabus_medium::Value;
-    use seabus_medium_lcm::types::ResolvedTypes;
+    use seabus_medium_lcm::codec::RAW_SUFFIX;
+    use seabus_medium_lcm::types::{MemberType, ResolvedTypes, Size, StructType};
 
     /// The LCM types known: the built-in ones and those of `--lcm-types`.
     pub struct Types(pub ResolvedTypes);
@@ -29,6 +30,85 @@ mod imp {
         }
     }
 
+    /// Checks the fields of `map` against struct `ty` (found at `path`, empty at the top), and
+    /// those of the maps in it against the structs of its members.
+    fn check_fields(
+        types: &ResolvedTypes,
+        ty: &StructType,
+        map: &DataMap,
+        path: &str,
+        allow_missing: bool,
+    ) -> Result<(), String> {
+        let members = ty.members();
+        let listed = || {
+            let names: Vec<&str> = members.iter().map(|m| m.name.as_str()).collect();
+            format!("{} has {}", ty.full_name(), names.join(", "))
+        };
+        let at = |key: &str| {
+            if path.is_empty() {
+                key.to_string()
+            } else {
+                format!("{path}.{key}")
+            }
+        };
+        for (key, _) in map.iter() {
+            let member = key.strip_suffix(RAW_SUFFIX).unwrap_or(key);
+            if !members.iter().any(|m| m.name == member) {
+                return Err(format!("no field `{}`: {}", at(key), listed()));
+            }
+        }
+        // members that size arrays, and the one stamped as sent
+        let sizes: Vec<usize> = members
+            .iter()
+            .flat_map(|m| m.dims.iter())
+            .filter_map(|d| match d.size {
+                Size::Member(j) => Some(j),
+                Size::Fixed(_) => None,
+            })
+            .collect();
+        let stamped = path.is_empty() && seabus_bridges::lcm::has_utime(ty);
+        for (j, m) in members.iter().enumerate() {
+            let value = map.get(&m.name);
+            if value.is_none() {
+                if allow_missing || sizes.contains(&j) || (stamped && m.name == "utime") {
+                    continue;
+                }
+                return Err(format!(
+                    "field `{}` missing (--allow-missing sends defaults): {}",
+                    at(&m.name),
+                    listed()
+                ));
+            }
+            let MemberType::Struct(inner) = &m.ty else {
+                continue;
+            };
+            let Some(inner) = types.get(inner) else {
+                continue;
+            };
+            // the struct's maps, inside as many lists as the member has dimensions
+            let mut level = vec![(at(&m.name), value)];
+            for _ in &m.dims {
+                level = level
+                    .into_iter()
+                    .flat_map(|(p, v)| match v.and_then(Value::as_list) {
+                        Some(items) => items
+                            .iter()
+                            .enumerate()
+                            .map(|(i, item)| (format!("{p}[{i}]"), Some(item)))
+                            .collect(),
+                        None => Vec::new(),
+                    })
+                    .collect();
+            }
+            for (p, v) in level {
+                if let Some(Value::Map(inner_map)) = v {
+                    check_fields(types, inner, inner_map, &p, allow_missing)?;
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// An LCM message of one type, made anew from the same fields each time it is sent.
     pub struct LcmMessage {
         types: ResolvedTypes,
@@ -38,15 +118,25 @@ mod imp {
 
     impl LcmMessage {
         /// The message of type `name` made from `map`, with the types of `paths` besides the
-        /// built-in ones; checked by making it once.
-        pub fn new(name: &str, paths: &[PathBuf], map: &DataMap) -> Result<LcmMessage, String> {
+        /// built-in ones; checked by making it once. Every field must be a member of the type
+        /// (of its nested structs, in nested maps), and every member must be given but for
+        /// `utime` (stamped as sent) and the sizes of arrays (their lengths), unless
+        /// `allow_missing` (then they take their defaults).
+        pub fn new(
+            name: &str,
+            paths: &[PathBuf],
+            map: &DataMap,
+            allow_missing: bool,
+        ) -> Result<LcmMessage, String> {
             let Types(types) = load(paths)?;
-            if types.get(name).is_none() {
+            let Some(ty) = types.get(name) else {
                 return Err(format!(
                     "--lcm {name}: no such LCM type; known types: {}",
                     seabus_bridges::lcm::known_types(&types)
                 ));
-            }
+            };
+            check_fields(&types, ty, map, "", allow_missing)
+                .map_err(|e| format!("--lcm {name}: {e}"))?;
             LcmMessage::of(types, name, map)
         }
 
@@ -111,7 +201,7 @@ mod imp {
 
     impl LcmMessage {
         /// Refused: `--lcm` needs LCM.
-        pub fn new(name: &str, _: &[PathBuf], _: &DataMap) -> Result<LcmMessage, String> {
+        pub fn new(name: &str, _: &[PathBuf], _: &DataMap, _: bool) -> Result<LcmMessage, String> {
             Err(format!("--lcm {name}: {LEFT_OUT}"))
         }
 
@@ -147,7 +237,9 @@ mod tests {
             let p = out.payload(Stamp(stamp)).unwrap_or_else(|e| panic!("{e}"));
             let bytes = p.as_bytes().expect("bytes");
             let ty = types.get(name).expect("type");
-            seabus_medium_lcm::codec::decode(&types, ty, bytes).unwrap_or_else(|e| panic!("{e}"))
+            seabus_medium_lcm::codec::decode(&types, ty, bytes)
+                .unwrap_or_else(|e| panic!("{e}"))
+                .0
         };
         // each message sent gets its own time
         let out = LcmMessage::of(types.clone(), "t.s_t", &map).unwrap_or_else(|e| panic!("{e}"));

@@ -15,7 +15,7 @@ use seabus_medium::xml::FileError;
 use seabus_medium::{Format, Kind, Node, Payload, Stamp};
 use seabus_modules::system::{self, SystemSpec};
 use seabus_modules::{Catalogue, Registry, Runtime};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -85,7 +85,11 @@ enum Command {
         #[arg(long = "n2k-database", value_name = "FILE", requires = "n2k")]
         n2k_database: Option<PathBuf>,
     },
-    /// Publish a datamap on a medium.
+    /// Publish a message on a medium: fields, a JSON payload or raw bytes.
+    ///
+    /// Exit 0 when it was sent; 1 when the medium's link did not come up or what was sent did
+    /// not go out in time; 2 when the arguments or payload cannot be used; 3 when the medium
+    /// refused the message (the reason is shown).
     Pub(PubArgs),
     /// Record the traffic on a medium to an LCM event log, until Ctrl-C, SIGTERM or --for.
     ///
@@ -185,8 +189,21 @@ struct PubArgs {
     url: String,
     /// The topic.
     topic: String,
-    /// Fields as key=value (true/false, integers and numbers are typed; "quoted" is a string).
+    /// Fields as key=value (true/false, integers and numbers are typed; "quoted" is a string;
+    /// hex:0102 and base64:AQI= are bytes).
     fields: Vec<String>,
+    /// The payload in seabus's JSON form, as `spy --json` prints payloads: an object whose values
+    /// may be lists and nested objects, bytes as {"base64": "…"}, NaN and ±inf as
+    /// {"float": "NaN"}, {"float": "inf"}, {"float": "-inf"}.
+    #[arg(long, value_name = "JSON", conflicts_with_all = ["fields", "json_file", "raw"])]
+    json: Option<String>,
+    /// The payload in seabus's JSON form (as --json) read from a file.
+    #[arg(long = "json-file", value_name = "FILE", conflicts_with_all = ["fields", "raw"])]
+    json_file: Option<PathBuf>,
+    /// Send these bytes as the payload, hex:0102 or base64:AQI= (on a CAN topic, the frame's
+    /// data).
+    #[arg(long, value_name = "BYTES", conflicts_with_all = ["fields", "lcm"])]
+    raw: Option<String>,
     /// How many messages to send.
     #[arg(long, default_value_t = 1)]
     count: u64,
@@ -205,6 +222,45 @@ struct PubArgs {
     /// .lcm files or directories with the type (besides the built-in ones).
     #[arg(long = "lcm-types", value_name = "PATH")]
     lcm_types: Vec<PathBuf>,
+    /// With --lcm: send the type's members not given with their defaults (NaN, 0, false, "")
+    /// rather than refuse the message.
+    #[arg(long = "allow-missing", requires = "lcm")]
+    allow_missing: bool,
+}
+
+/// What `seabus pub` sends before any conversion: from its fields, its JSON, or raw bytes.
+fn pub_payload(
+    fields: &[String],
+    json: Option<&str>,
+    json_file: Option<&Path>,
+    raw: Option<&str>,
+) -> Result<Payload, String> {
+    if let Some(raw) = raw {
+        return match seabus_medium::parse::parse_bytes(raw) {
+            Some(bytes) => bytes.map(Payload::from).map_err(|e| format!("--raw: {e}")),
+            None => Err(format!(
+                "--raw `{raw}`: bytes are written hex:0102 or base64:AQI="
+            )),
+        };
+    }
+    let from_json = |source: &str, text: &str| {
+        seabus_medium::json::from_json(text).map_err(|e| {
+            // serde says where as " at line L column C": said first, as everywhere else
+            let text = e.to_string();
+            let what = text.split(" at line ").next().unwrap_or(&text);
+            format!("{source}:{}:{}: {what}", e.line(), e.column())
+        })
+    };
+    let map = match (json, json_file) {
+        (Some(text), _) => from_json("--json", text)?,
+        (None, Some(file)) => {
+            let text = std::fs::read_to_string(file)
+                .map_err(|e| format!("--json-file {}: {e}", file.display()))?;
+            from_json(&file.display().to_string(), &text)?
+        }
+        (None, None) => seabus_medium::parse::parse_fields(fields.iter().map(String::as_str))?,
+    };
+    Ok(Payload::from(map))
 }
 
 fn registry() -> Registry {
@@ -568,11 +624,23 @@ async fn publish(args: PubArgs) -> ExitCode {
         format,
         lcm,
         lcm_types,
+        json,
+        json_file,
+        raw,
+        allow_missing,
     } = args;
-    let map = match seabus_medium::parse::parse_fields(fields.iter().map(String::as_str)) {
-        Ok(m) => m,
+    let payload = match pub_payload(
+        &fields,
+        json.as_deref(),
+        json_file.as_deref(),
+        raw.as_deref(),
+    ) {
+        Ok(p) => p,
         Err(e) => return usage(e),
     };
+    if let Err(e) = seabus_medium::Topic::new(&topic) {
+        return usage(e.to_string());
+    }
     let Some(format) = Format::parse(&format) else {
         return usage(format!("`{format}` is not a format: map, xml or bytes"));
     };
@@ -581,12 +649,16 @@ async fn publish(args: PubArgs) -> ExitCode {
             "--rate {rate}: expected above 0 and at most a million per second"
         ));
     };
-    let outgoing = match &lcm {
-        Some(name) => match lcmtypes::LcmMessage::new(name, &lcm_types, &map) {
-            Ok(m) => Outgoing::Lcm(m),
-            Err(e) => return usage(e),
-        },
-        None => match Payload::from(map).convert(format) {
+    let outgoing = match (&lcm, payload.as_map()) {
+        (Some(name), Some(map)) => {
+            match lcmtypes::LcmMessage::new(name, &lcm_types, map, allow_missing) {
+                Ok(m) => Outgoing::Lcm(m),
+                Err(e) => return usage(e),
+            }
+        }
+        // raw bytes go as they are, whatever the format
+        _ if raw.is_some() => Outgoing::Same(payload),
+        _ => match payload.convert(format) {
             Ok(p) => Outgoing::Same(p),
             Err(e) => return usage(e.to_string()),
         },
@@ -624,7 +696,8 @@ async fn publish(args: PubArgs) -> ExitCode {
             Err(e) => return usage(e),
         };
         if let Err(e) = port.publish(kind, topic.as_str(), payload).await {
-            return usage(e.to_string());
+            eprintln!("seabus pub: not sent: {e}");
+            return ExitCode::from(3);
         }
     }
     // what a connection's task still holds goes out before the process ends

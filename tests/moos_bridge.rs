@@ -5,7 +5,7 @@
 mod common;
 use common::*;
 use seabus_medium::{DataMap, LinkState, Node};
-use seabus_medium_moos::db::MoosDb;
+use seabus_medium_moos::db::{Clock, MoosDb};
 use seabus_medium_moos::wire::data;
 use std::time::{Duration, Instant};
 
@@ -119,10 +119,25 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
 }
 
 /// `seabus pub` on a `moos://` medium waits for the connection to the DB, and what it sent is
-/// written before it exits: one run, one value in the DB.
+/// written before it exits: one run, one value in the DB. The DB reads the client's name 100 ms
+/// late, as a MOOSDB does; the value is stamped with the time it was sent all the same (the DB
+/// runs on this host: its clock is ours), not 100 ms ahead.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn pub_waits_for_the_moosdb_and_sends_before_exiting() {
-    let db = MoosDb::start("127.0.0.1:0".parse().unwrap()).await.unwrap();
+    let slow = Clock {
+        ahead: 0.0,
+        welcome_delay: Duration::from_millis(100),
+    };
+    let db = MoosDb::start_with("127.0.0.1:0".parse().unwrap(), slow)
+        .await
+        .unwrap();
+    let now = || {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .unwrap()
+            .as_secs_f64()
+    };
+    let started = now();
     let url = format!("moos://127.0.0.1:{}?name=cli", db.addr().port());
     let out = tokio::task::spawn_blocking(move || {
         seabus()
@@ -142,8 +157,129 @@ async fn pub_waits_for_the_moosdb_and_sends_before_exiting() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let x = db.value("NAV_X").expect("NAV_X reached the DB");
+    let ended = now();
     assert_eq!(
         (x.data_type, x.value, x.source.as_slice()),
         (data::DOUBLE, 4.5, &b"cli"[..])
     );
+    assert!(
+        x.time >= started && x.time <= ended,
+        "stamped {:.4} s after pub started, {:.4} s after it ended",
+        x.time - started,
+        x.time - ended
+    );
+}
+
+/// A MOOS app writing strings with nothing but the MOOS wire format: what a C++ MOOS client
+/// sends.
+async fn moos_app_writes(db: std::net::SocketAddr, name: &str, writes: &[(&str, &str)]) {
+    use seabus_medium_moos::wire::{self, MoosMsg, Packet, kind};
+    use tokio::io::AsyncWriteExt;
+    let mut sock = tokio::net::TcpStream::connect(db).await.unwrap();
+    sock.write_all(&wire::hello(name, 0.0)).await.unwrap();
+    let mut buf = Vec::new();
+    let welcome = wire::next_packet(&mut sock, &mut buf, Duration::from_secs(5))
+        .await
+        .unwrap();
+    assert_eq!(welcome.messages[0].kind, kind::WELCOME);
+    let messages = writes
+        .iter()
+        .map(|(key, text)| MoosMsg {
+            kind: kind::NOTIFY,
+            data_type: data::STRING,
+            source: name.as_bytes().to_vec(),
+            key: key.as_bytes().to_vec(),
+            string: text.as_bytes().to_vec(),
+            ..MoosMsg::default()
+        })
+        .collect();
+    sock.write_all(&Packet { messages }.encode()).await.unwrap();
+    sock.flush().await.unwrap();
+}
+
+/// MOOS strings read back as strings both ways: `seabus pub` of a string shaped like pairs reads
+/// back as that string, and what a MOOS app writes crosses a bridge and reaches MOOS again as it
+/// was written.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn moos_strings_read_back_as_strings_both_ways() {
+    let db = MoosDb::start("127.0.0.1:0".parse().unwrap()).await.unwrap();
+    let port = db.addr().port();
+
+    // seabus → MOOS → seabus
+    let url = format!("moos://127.0.0.1:{port}?name=cli");
+    let reader = schemes()
+        .open(
+            "reader",
+            &format!("moos://127.0.0.1:{port}?name=reader&register=MODE"),
+            &Node::new("test"),
+        )
+        .unwrap();
+    let mut rx = reader.attach("rx");
+    rx.subscribe("**").unwrap();
+    let out = tokio::task::spawn_blocking(move || {
+        seabus()
+            .args(["pub", &url, "MODE", "value=\"x=1\""])
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stored = db.value("MODE").expect("MODE reached the DB");
+    assert_eq!(
+        (stored.data_type, stored.string.as_slice()),
+        (data::STRING, &br#"value="x=1""#[..])
+    );
+    let m = tokio::time::timeout(Duration::from_secs(5), rx.recv())
+        .await
+        .expect("MODE read back within 5 s")
+        .unwrap();
+    assert_eq!(m.payload.as_map().unwrap().get_str("value"), Some("x=1"));
+    assert_eq!(m.payload.as_map().unwrap().len(), 1);
+
+    // MOOS → seabus → MOOS: a bridge carries what an app writes to other variables
+    let system = format!(
+        r#"<seabus node="gw">
+  <medium name="in" url="moos://127.0.0.1:{port}?name=gw-in&amp;register=A_*"/>
+  <medium name="out" url="moos://127.0.0.1:{port}?name=gw-out&amp;register=NONE"/>
+  <bridge name="mirror" media="in out" report="0">
+    <route from="in" topics="A_PAIRS" rename="B_PAIRS"/>
+    <route from="in" topics="A_QUOTED" rename="B_QUOTED"/>
+    <route from="in" topics="A_WORD" rename="B_WORD"/>
+  </bridge>
+</seabus>"#
+    );
+    let (_dir, path) = system_file("mirror.xml", &system);
+    let checked = check(&path);
+    assert!(checked.status.success(), "{}", stderr(&checked));
+    let _run = spawn_run(&path, &[]);
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while db.clients().len() < 3 && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let written = [
+        ("A_PAIRS", "x=1"),
+        ("A_QUOTED", r#"value="x=1""#),
+        ("A_WORD", "survey"),
+    ];
+    moos_app_writes(db.addr(), "uApp", &written).await;
+    for (key, text) in written {
+        let back = key.replace("A_", "B_");
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while db.value(&back).is_none() && Instant::now() < deadline {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let got = db.value(&back).unwrap_or_else(|| {
+            panic!(
+                "{back} written ({key}: {:?}; clients {:?})",
+                db.value(key),
+                db.clients()
+            )
+        });
+        assert_eq!(
+            String::from_utf8_lossy(&got.string),
+            text,
+            "{key} came back to MOOS as {back}"
+        );
+    }
 }

@@ -9,6 +9,7 @@
 //! an `int64_t utime` member gets the message's stamp there (microseconds) when the map has none.
 
 use crate::route::Problem;
+use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{Capabilities, DataMap, Payload, Stamp, Value};
 use seabus_medium_lcm::codec::{self, CodecError};
@@ -72,7 +73,7 @@ pub fn recognise<'t>(types: &'t ResolvedTypes, payload: &Payload) -> Option<(&'t
     let bytes = payload.as_bytes()?;
     let fingerprint = u64::from_be_bytes(bytes.get(..8)?.try_into().ok()?);
     let ty = types.by_fingerprint(fingerprint)?;
-    let map = codec::decode(types, ty, bytes).ok()?;
+    let (map, _) = codec::decode(types, ty, bytes).ok()?;
     Some((ty.full_name(), map))
 }
 
@@ -134,12 +135,15 @@ impl Mapping {
         self.encode
     }
 
-    /// Decodes LCM bytes read on `channel` into a datamap.
+    /// Decodes LCM bytes read on `channel` into a datamap. What liblcm reads leniently
+    /// ([`codec::Leniency`]) is read too, and counted in `tally` by case (logged as `source`).
     pub fn decode(
         &self,
         types: &ResolvedTypes,
         channel: &str,
         payload: &Payload,
+        tally: &Tally,
+        source: &str,
     ) -> Result<DataMap, Problem> {
         let Some(ty) = types.get(&self.ty) else {
             return Err(Problem::new("lcm-type", format!("no LCM type {}", self.ty)));
@@ -153,7 +157,12 @@ impl Mapping {
                 ),
             ));
         };
-        codec::decode(types, ty, bytes).map_err(|e| codec_problem(channel, e))
+        let (map, lenient) =
+            codec::decode(types, ty, bytes).map_err(|e| codec_problem(channel, e))?;
+        for (reason, what) in lenient.cases() {
+            tally.record(source, reason, format_args!("channel `{channel}`: {what}"));
+        }
+        Ok(map)
     }
 
     /// Encodes a datamap as this type, for `channel`; `stamp` fills a missing `utime`.

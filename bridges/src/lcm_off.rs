@@ -45,7 +45,14 @@ impl Mapping {
     }
 
     /// Never called: there is no mapping.
-    pub fn decode(&self, _: &ResolvedTypes, _: &str, _: &Payload) -> Result<DataMap, Problem> {
+    pub fn decode(
+        &self,
+        _: &ResolvedTypes,
+        _: &str,
+        _: &Payload,
+        _: &seabus_medium::tally::Tally,
+        _: &str,
+    ) -> Result<DataMap, Problem> {
         match *self {}
     }
 

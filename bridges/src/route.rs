@@ -25,7 +25,11 @@
 //!
 //! Every second (the `report` parameter) it publishes its counters and latency on
 //! `seabus.bridge.<name>` on each of its media that carries datamaps as they are (not a serial
-//! line, a CAN bus, LCM or DSAAV, which carry only their own kind of messages).
+//! line, a CAN bus, LCM or DSAAV, which carry only their own kind of messages). The per-route
+//! lists (`route_forwarded`, …) go to a medium whose datamaps carry no lists (MOOS, see
+//! [`Capabilities::lists`]) flattened, one field per route (`route_forwarded.0`, …). A report
+//! that cannot be published is logged once (until one is published there again) and counted
+//! apart (`reports_unpublished`): `errors` counts only messages the bridge failed to forward.
 
 use crate::lcm::ResolvedTypes;
 use async_trait::async_trait;
@@ -186,6 +190,7 @@ struct Counters {
     echoes: u64,
     unrouted: u64,
     errors: u64,
+    reports_unpublished: u64,
 }
 
 /// What the bridges of this program forwarded into one medium (held by the medium, see
@@ -215,6 +220,10 @@ pub struct RouteBridge {
     report_topic: Topic,
     /// The ports reports go out on: those whose medium carries datamaps as they are.
     report_ports: Vec<usize>,
+    /// Each side's medium carries lists in its datamaps (else reports go flattened).
+    lists: [bool; 2],
+    /// A report could not be published on this side, and was logged as such.
+    report_failing: [bool; 2],
     /// LCM types, when a route has one.
     types: Option<Arc<ResolvedTypes>>,
     /// Messages not carried across, by reason (logged without flooding).
@@ -293,6 +302,8 @@ impl RouteBridge {
             report: (!report.is_zero()).then_some(report),
             report_topic,
             report_ports: (0..2).filter(|&i| caps[i].carries_datamaps()).collect(),
+            lists: caps.each_ref().map(|c| c.lists),
+            report_failing: [false; 2],
             types,
             problems: Tally::new(),
             echo: [0, 1].map(|i| (!caps[i].provenance).then(EchoMemory::default)),
@@ -413,9 +424,15 @@ impl RouteBridge {
         // the payload is taken out of the message, so a datamap no one else holds is renamed in place
         let taken = std::mem::replace(&mut msg.payload, Payload::from(Vec::new()));
         let converted = match (&leg.lcm, &self.types) {
-            (Some(lcm), Some(types)) => {
-                convert_lcm(taken, leg, lcm, types, &msg.topic, &topic, msg.stamp)
-            }
+            (Some(lcm), Some(types)) => convert_lcm(
+                taken,
+                leg,
+                lcm,
+                types,
+                (&msg.topic, &topic),
+                msg.stamp,
+                (&self.problems, self.report_topic.as_str()),
+            ),
             _ => convert(taken, &leg.fields, leg.keep, leg.format)
                 .map_err(|e| Problem::new("conversion", format!("topic `{}`: {e}", msg.topic))),
         };
@@ -460,6 +477,7 @@ impl RouteBridge {
             .with("rate_limited", rate_limited as i64)
             .with("unrouted", c.unrouted as i64)
             .with("errors", c.errors as i64)
+            .with("reports_unpublished", c.reports_unpublished as i64)
             .with("route_forwarded", list(&|s| Value::Int(s.forwarded as i64)))
             .with(
                 "route_rate_limited",
@@ -479,6 +497,11 @@ impl RouteBridge {
                 "route_latency_max_ms",
                 list(&|s| Value::Float(s.latency_max_ms)),
             );
+        // what was not carried across, or carried as liblcm reads it, by reason
+        let mut map = map;
+        for (reason, n) in self.problems.counts() {
+            map.push(reason, i64::try_from(n).unwrap_or(i64::MAX));
+        }
         // latency is reported per period
         for s in &mut self.stats {
             s.latency_sum_ms = 0.0;
@@ -500,18 +523,19 @@ fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[L
 }
 
 /// Carries a payload across a route with an LCM type: decoded from LCM bytes read on `from`, field
-/// renames applied, then encoded for the LCM channel `to` (or put in the far side's format).
+/// renames applied, then encoded for the LCM channel `to` (or put in the far side's format). What
+/// is read leniently is counted in `tally`, logged as `source`.
 fn convert_lcm(
     p: Payload,
     leg: &Leg,
     lcm: &crate::lcm::Mapping,
     types: &ResolvedTypes,
-    from: &Topic,
-    to: &Topic,
+    (from, to): (&Topic, &Topic),
     stamp: Stamp,
+    (tally, source): (&Tally, &str),
 ) -> Result<Payload, Problem> {
     let p = if lcm.decodes() {
-        Payload::from(lcm.decode(types, from.as_str(), &p)?)
+        Payload::from(lcm.decode(types, from.as_str(), &p, tally, source)?)
     } else {
         p
     };
@@ -612,7 +636,12 @@ impl Module for RouteBridge {
             }
             if let Err(e) = iface.forward(out).await {
                 self.counters.errors += 1;
-                tracing::warn!(bridge = ctx.name(), to = %self.media[to], "not forwarded: {e}");
+                // a medium whose link is down refuses every message: counted, logged now and then
+                self.problems.record(
+                    self.report_topic.as_str(),
+                    "not-forwarded",
+                    format_args!("not forwarded to {}: {e}", self.media[to]),
+                );
             }
         }
         Ok(())
@@ -621,19 +650,30 @@ impl Module for RouteBridge {
     async fn on_timer(&mut self, ctx: &mut Context, _: TimerId) -> Result<(), ModuleError> {
         // the media that carry datamaps hear about the bridge between them
         let map = self.report_map();
-        for &port in &self.report_ports {
-            // a report that cannot go out is counted, never a reason to stop forwarding
-            if let Err(e) = ctx
-                .publish_on(port, Kind::Data, &self.report_topic, map.clone())
+        for port in self.report_ports.clone() {
+            let report = if self.lists[port] {
+                map.clone()
+            } else {
+                map.clone().flatten_lists()
+            };
+            // a report that cannot go out is counted apart, never a reason to stop forwarding
+            match ctx
+                .publish_on(port, Kind::Data, &self.report_topic, report)
                 .await
             {
-                self.counters.errors += 1;
-                // a medium whose link is down fails every period: counted, logged now and then
-                self.problems.record(
-                    self.report_topic.as_str(),
-                    "report",
-                    format_args!("report not published on {}: {e}", self.media[port]),
-                );
+                Ok(_) => self.report_failing[port] = false,
+                Err(e) => {
+                    self.counters.reports_unpublished += 1;
+                    // a medium whose link is down fails every period: said once, until a
+                    // report goes out there again
+                    if !std::mem::replace(&mut self.report_failing[port], true) {
+                        tracing::warn!(
+                            bridge = ctx.name(),
+                            "report not published on {} (said once until one is): {e}",
+                            self.media[port]
+                        );
+                    }
+                }
             }
         }
         prune_rate_limits(&mut self.last_sent, &self.legs);

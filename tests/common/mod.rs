@@ -472,3 +472,111 @@ pub fn add_user(users: &Path, name: &str, roles: &str, password: &str) {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// The C LCM peer (`tests/peers/lcm_peer.c`), built in `dir` with the C types lcm-gen makes of
+/// `tests/peers/lcm_peer.lcm` and liblcm (Debian's `liblcm-dev` and `liblcm-bin`, which
+/// `./scripts/test` installs); `dir` also gets a copy of the `.lcm` file, for seabus to read.
+pub fn lcm_c_peer(dir: &Path) -> PathBuf {
+    let peers = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers");
+    for file in ["lcm_peer.c", "lcm_peer.lcm"] {
+        std::fs::copy(peers.join(file), dir.join(file)).expect("the peer's files are copied");
+    }
+    let run = |program: &str, args: &[&str]| {
+        let out = Command::new(program)
+            .args(args)
+            .current_dir(dir)
+            .output()
+            .unwrap_or_else(|e| {
+                panic!("{program} runs (install liblcm-bin and liblcm-dev: ./scripts/test): {e}")
+            });
+        assert!(
+            out.status.success(),
+            "{program} {args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    // lcm-gen of the same release as the C library
+    run("/usr/bin/lcm-gen", &["-c", "lcm_peer.lcm"]);
+    run(
+        "cc",
+        &[
+            "-Wall",
+            "-Werror",
+            "-o",
+            "lcm_peer",
+            "lcm_peer.c",
+            "peer_reading_t.c",
+            "peer_survey_t.c",
+            "-I.",
+            "-llcm",
+        ],
+    );
+    dir.join("lcm_peer")
+}
+
+/// Starts the C LCM peer receiving `n` messages of `what` (`readings`, `surveys`) on `channel`
+/// of `url` for at most `secs` s; returns once it has subscribed, with its lines to come.
+pub fn lcm_c_receiver(
+    peer: &Path,
+    what: &str,
+    url: &str,
+    channel: &str,
+    n: usize,
+    secs: u32,
+) -> (Running, std::sync::mpsc::Receiver<String>) {
+    use std::io::BufRead;
+    let mut child = Command::new(peer)
+        .args([
+            &format!("recv-{what}"),
+            url,
+            channel,
+            &n.to_string(),
+            &secs.to_string(),
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("the C LCM peer starts");
+    let stdout = child.stdout.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    let ready = rx.recv_timeout(Duration::from_secs(10));
+    assert_eq!(ready.as_deref(), Ok("ready"), "the C LCM peer subscribes");
+    (Running(child), rx)
+}
+
+/// The lines a C LCM peer printed until it ended (at most `limit` away).
+pub fn lcm_c_lines(
+    mut peer: Running,
+    lines: std::sync::mpsc::Receiver<String>,
+    limit: Duration,
+) -> Vec<String> {
+    let status = wait_for(&mut peer, limit);
+    // the peer has ended: its output ends too
+    let got: Vec<String> = lines.iter().collect();
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "the C LCM peer received what it waited for ({status:?}): {got:?}"
+    );
+    got
+}
+
+/// Waits at most `limit` for a `seabus run` to end (killed if it does not); its exit status
+/// (`None` when it was killed) and all it wrote to stderr.
+pub fn ended(mut run: Running, limit: Duration) -> (Option<std::process::ExitStatus>, String) {
+    use std::io::Read;
+    let status = wait_for(&mut run, limit);
+    let mut stderr = String::new();
+    if let Some(mut err) = run.stderr.take() {
+        let _ = err.read_to_string(&mut stderr);
+    }
+    (status, stderr)
+}

@@ -94,6 +94,11 @@ pub enum FrameError {
     },
 }
 
+/// The fields of a datamap that is a CAN frame ([`CanFrame::to_map`], [`CanFrame::from_message`]).
+pub const FRAME_FIELDS: [&str; 9] = [
+    "data", "ext", "rtr", "dlc", "fd", "brs", "esi", "error", "time_ms",
+];
+
 impl CanFrame {
     fn check_id(id: u32, extended: bool) -> Result<(), FrameError> {
         let max = if extended {
@@ -340,6 +345,18 @@ impl CanFrame {
                 (Some(&map), data)
             }
         };
+        // a datamap with other fields is not a frame (fields meant for a DBC mapping, a typo)
+        if let Some((key, _)) = map
+            .into_iter()
+            .flat_map(|m| m.iter())
+            .find(|(k, _)| !FRAME_FIELDS.contains(k))
+        {
+            return Err(format!(
+                "topic `{topic}`: `{key}` is not a CAN frame's field ({}); send the frame's data \
+                 as `data` bytes",
+                FRAME_FIELDS.join(", ")
+            ));
+        }
         let flag = |key: &str| -> Result<bool, String> {
             match map.and_then(|m| m.get(key)) {
                 None => Ok(false),
@@ -483,6 +500,12 @@ mod tests {
         );
         let bad = Payload::from(DataMap::new().with("data", "text"));
         assert_eq!(err("can.1", &bad), "`data` must be bytes, not \"text\"");
+        let fields = Payload::from(DataMap::new().with("x", 1i64));
+        assert_eq!(
+            err("can.1", &fields),
+            "topic `can.1`: `x` is not a CAN frame's field (data, ext, rtr, dlc, fd, brs, esi, \
+             error, time_ms); send the frame's data as `data` bytes"
+        );
     }
 
     #[test]

@@ -69,6 +69,7 @@ pub fn capabilities(link_state: bool) -> Capabilities {
         link_state,
         native: Some("can"),
         qos: false,
+        lists: false,
     }
 }
 

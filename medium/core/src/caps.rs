@@ -59,6 +59,11 @@ pub struct Capabilities {
     /// honours those declared for some topics ([`crate::Medium::set_qos`]): a bridge route's
     /// `priority`, `congestion` and `express` apply to what it delivers here (Zenoh).
     pub qos: bool,
+    /// The wire's datamaps carry lists as values (UDP, Zenoh, the in-process medium; LCM and
+    /// MAVLink through their types' arrays). A datamap with lists goes to a medium that does not
+    /// (MOOS `key=value` pairs, DSAAV IComms, CAN signals) with each list flattened into one field
+    /// per element ([`crate::DataMap::flatten_lists`]).
+    pub lists: bool,
 }
 
 impl Capabilities {
@@ -72,6 +77,7 @@ impl Capabilities {
         link_state: false,
         native: None,
         qos: false,
+        lists: true,
     };
 
     /// Whether a datamap can be sent here (a report, a standard dataset) as it is.

@@ -352,6 +352,36 @@ impl DataMap {
         true
     }
 
+    /// The map with each list field replaced by one field per element, named by the list's key and
+    /// the element's index (`route_forwarded` = `[3, 5]` becomes `route_forwarded.0` = 3 and
+    /// `route_forwarded.1` = 5), in place of the list; lists inside lists flatten the same way
+    /// (`a.1.0`). An empty list leaves no field. Other values stay as they are: the form for a
+    /// wire whose key-value messages carry no lists ([`crate::Capabilities::lists`]).
+    pub fn flatten_lists(self) -> DataMap {
+        fn put(out: &mut DataMap, key: Key, value: Value) {
+            match value {
+                Value::List(items) => {
+                    for (i, v) in items.into_iter().enumerate() {
+                        put(out, Cow::Owned(format!("{key}.{i}")), v);
+                    }
+                }
+                v => out.push(key, v),
+            }
+        }
+        if !self
+            .entries
+            .iter()
+            .any(|(_, v)| matches!(v, Value::List(_)))
+        {
+            return self;
+        }
+        let mut out = DataMap::with_capacity(self.entries.len());
+        for (k, v) in self.entries {
+            put(&mut out, k, v);
+        }
+        out
+    }
+
     /// The entries in order.
     pub fn iter(&self) -> impl Iterator<Item = (&str, &Value)> {
         self.entries.iter().map(|(k, v)| (k.as_ref(), v))
@@ -425,6 +455,28 @@ mod tests {
         let keys: Vec<_> = m.iter().map(|(k, _)| k).collect();
         assert_eq!(keys, ["b", "a"]);
         assert_eq!(m.get_i64("b"), Some(3));
+    }
+
+    #[test]
+    fn lists_flatten_into_one_field_per_element_in_place() {
+        let m = DataMap::new()
+            .with("n", 1i64)
+            .with("l", Value::List(vec![Value::Int(3), Value::Float(0.5)]))
+            .with("empty", Value::List(vec![]))
+            .with(
+                "nested",
+                Value::List(vec![Value::List(vec![Value::Bool(true)])]),
+            )
+            .with("s", "x");
+        assert_eq!(
+            m.flatten_lists(),
+            DataMap::new()
+                .with("n", 1i64)
+                .with("l.0", 3i64)
+                .with("l.1", 0.5)
+                .with("nested.0.0", true)
+                .with("s", "x")
+        );
     }
 
     #[test]

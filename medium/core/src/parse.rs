@@ -97,8 +97,9 @@ pub fn split_words(text: &str) -> Result<Vec<&str>, String> {
 }
 
 /// One `key=value` field: the key is what comes before the first `=` (not empty), the value is
-/// typed by [`Value::parse_loose`] (`1` an integer, `2.5` a float, `true` a boolean, `"7"` and
-/// anything else a string).
+/// bytes when written `hex:0102ff` or `base64:AQL/` ([`parse_bytes`]), else typed by
+/// [`Value::parse_loose`] (`1` an integer, `2.5` a float, `true` a boolean, `"7"` and anything
+/// else a string).
 pub fn parse_field(text: &str) -> Result<(&str, Value), String> {
     let (key, value) = text
         .split_once('=')
@@ -106,7 +107,43 @@ pub fn parse_field(text: &str) -> Result<(&str, Value), String> {
     if key.is_empty() {
         return Err(format!("`{text}` has an empty key"));
     }
-    Ok((key, Value::parse_loose(value)))
+    match parse_bytes(value) {
+        Some(bytes) => Ok((
+            key,
+            Value::Bytes(bytes.map_err(|e| format!("`{key}`: {e}"))?),
+        )),
+        None => Ok((key, Value::parse_loose(value))),
+    }
+}
+
+/// Bytes written `hex:0102ff` (two hex digits a byte, upper or lower case; `hex:` alone is no
+/// bytes) or `base64:AQL/` (standard base64 with its padding); `None` when `text` is neither form.
+pub fn parse_bytes(text: &str) -> Option<Result<Vec<u8>, String>> {
+    use base64::Engine as _;
+    if let Some(hex) = text.strip_prefix("hex:") {
+        if let Some((i, c)) = hex.char_indices().find(|(_, c)| !c.is_ascii_hexdigit()) {
+            return Some(Err(format!("`{text}`: `{c}` at {i} is not a hex digit")));
+        }
+        if hex.len() % 2 != 0 {
+            return Some(Err(format!(
+                "`{text}`: hex bytes are two digits each, {} digits given",
+                hex.len()
+            )));
+        }
+        let digit = |c: u8| (c as char).to_digit(16).unwrap_or(0) as u8;
+        let bytes = hex
+            .as_bytes()
+            .chunks(2)
+            .map(|p| digit(p[0]) << 4 | digit(p[1]))
+            .collect();
+        return Some(Ok(bytes));
+    }
+    let b64 = text.strip_prefix("base64:")?;
+    Some(
+        base64::engine::general_purpose::STANDARD
+            .decode(b64)
+            .map_err(|e| format!("`{text}`: not base64 ({e})")),
+    )
 }
 
 /// A datamap of `key=value` fields ([`parse_field`]) in order; a key given again replaces its
@@ -184,6 +221,35 @@ mod tests {
         assert_eq!(
             split_words("a b=\"open").unwrap_err(),
             "a double quote `\"` is not closed"
+        );
+        assert_eq!(
+            parse_field("data=hex:01fF").unwrap(),
+            ("data", Value::Bytes(vec![1, 255]))
+        );
+        assert_eq!(
+            parse_field("data=base64:AQI=").unwrap(),
+            ("data", Value::Bytes(vec![1, 2]))
+        );
+        assert_eq!(
+            parse_field("data=hex:").unwrap(),
+            ("data", Value::Bytes(vec![]))
+        );
+        assert_eq!(
+            parse_field("data=hex:012").unwrap_err(),
+            "`data`: `hex:012`: hex bytes are two digits each, 3 digits given"
+        );
+        assert_eq!(
+            parse_field("data=hex:0g").unwrap_err(),
+            "`data`: `hex:0g`: `g` at 1 is not a hex digit"
+        );
+        assert!(
+            parse_field("data=base64:A")
+                .unwrap_err()
+                .starts_with("`data`: `base64:A`: not base64")
+        );
+        assert_eq!(
+            parse_field("word=hexagon").unwrap(),
+            ("word", Value::from("hexagon"))
         );
         let (k, v) = parse_field("reason=\"no  depth\"").unwrap();
         assert_eq!((k, v), ("reason", Value::Str("no  depth".into())));

@@ -101,6 +101,7 @@ impl DsaavConfig {
             link_state: false,
             native: Some("dsaav"),
             qos: false,
+            lists: false,
         }
     }
 

@@ -89,6 +89,7 @@ impl RelayConfig {
             link_state: false,
             native: Some(NATIVE),
             qos: false,
+            lists: false,
         }
     }
 }

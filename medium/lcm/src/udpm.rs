@@ -181,6 +181,7 @@ impl LcmConfig {
             link_state: true,
             native: Some("lcm"),
             qos: false,
+            lists: true,
         }
     }
 }

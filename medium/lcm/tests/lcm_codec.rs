@@ -375,7 +375,7 @@ fn python_reads_what_seabus_writes() {
                 "{name} as {}: Python read, then what seabus expected",
                 setup.name
             );
-            let back = decode(&setup.types, ty, &bytes).unwrap_or_else(|e| panic!("{e}"));
+            let (back, _) = decode(&setup.types, ty, &bytes).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(back, expected, "{name}: seabus reads back");
         }
     }
@@ -398,7 +398,7 @@ fn seabus_reads_what_python_writes() {
                 serde_json::from_str(python).unwrap_or_else(|e| panic!("{python:?}: {e}"));
             let ty = setup.types.get(name).unwrap_or_else(|| panic!("no {name}"));
             let bytes = unhex(hex);
-            let map = decode(&setup.types, ty, &bytes)
+            let (map, _) = decode(&setup.types, ty, &bytes)
                 .unwrap_or_else(|e| panic!("{name} from {}: {e}", setup.name));
             assert_eq!(view_map(&map), python, "{name} from {}", setup.name);
             let again = encode(&setup.types, ty, &map).unwrap_or_else(|e| panic!("{e}"));

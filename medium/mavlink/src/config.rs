@@ -291,6 +291,7 @@ impl MavlinkConfig {
             link_state: true,
             native: Some("mavlink"),
             qos: false,
+            lists: true,
         }
     }
 }

@@ -1,12 +1,13 @@
 //! The MOOS medium: an asynchronous V10 client of a MOOSDB (`moos://HOST:9000?name=seabus`).
 //!
-//! It connects, sends the handshake and its name, and on the welcome takes the clock skew the DB
-//! measured; then it registers for what its URL's `register` lists (variable names, or patterns
-//! with `*` and `?` registered by wildcard; each may end `:SECONDS`, the minimum interval between
-//! notifications). Every second it sends a timing message, which keeps the connection alive and
-//! refines the skew (new = 0.9 old + 0.1 measured). When the DB goes away the link goes down, sends
-//! fail at once, and the medium connects again (after `reopen`, doubling up to `reopen_max`; see
-//! [`Backoff`]) and registers again.
+//! It connects, sends the handshake and its name, and on the welcome estimates the clock skew
+//! from the handshake's round trip ([`handshake_skew`]); then it registers for what its URL's
+//! `register` lists (variable names, or patterns with `*` and `?` registered by wildcard; each may
+//! end `:SECONDS`, the minimum interval between notifications). Every second it sends a timing
+//! message, which keeps the connection alive and refines the skew from that round trip
+//! ([`refined_skew`]). When the DB goes away the link goes down, sends fail at once, and the
+//! medium connects again (after `reopen`, doubling up to `reopen_max`; see [`Backoff`]), estimates
+//! the skew afresh and registers again.
 //!
 //! A MOOS variable is a topic of the same name. Values become payloads as [`super`] describes;
 //! notifications the medium itself published (the DB sends back what a client registered for) are
@@ -122,6 +123,7 @@ impl MoosConfig {
             link_state: true,
             native: None,
             qos: false,
+            lists: false,
         }
     }
 }
@@ -242,16 +244,27 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
     .map_err(|_| "no connection within 5 s".to_string())?
     .map_err(|e| format!("cannot connect: {e}"))?;
     let _ = sock.set_nodelay(true);
-    sock.write_all(&wire::hello(&cfg.name, local_now()))
+    let asked = local_now();
+    sock.write_all(&wire::hello(&cfg.name, asked))
         .await
         .map_err(|e| format!("handshake: {e}"))?;
     let mut buf = Vec::new();
     let answer = wire::next_packet(&mut sock, &mut buf, Duration::from_secs(5)).await?;
+    let answered = local_now();
     let Some(first) = answer.messages.first() else {
         return Err("an empty answer to the handshake".into());
     };
     match first.kind {
-        kind::WELCOME => skew.set(first.value),
+        kind::WELCOME => {
+            // the DB's time when it welcomed; a DB that leaves it out gives it as the skew it
+            // measured against the time the client sent
+            let db_time = if first.time.is_finite() && first.time > 0.0 {
+                first.time
+            } else {
+                asked + first.value
+            };
+            skew.set(handshake_skew(asked, db_time, answered));
+        }
         kind::POISON => {
             return Err(format!(
                 "refused: {}",
@@ -388,16 +401,35 @@ async fn session(
     }
 }
 
-/// The skew after a timing reply: `rq` when the request left (local time), `tx` when the DB
-/// answered (its time), `rx` when the answer came (local time). As a MOOS client does: the measured
-/// skew is 0.5·((tx − rx) + (tx − rq)), and the new skew 0.9·old + 0.1·measured. A reply whose
-/// times are not finite leaves the skew as it was.
-pub(crate) fn refined_skew(old: f64, rq: f64, tx: f64, rx: f64) -> f64 {
-    let measured = 0.5 * ((tx - rx) + (tx - rq));
-    if measured.is_finite() {
-        0.9 * old + 0.1 * measured
-    } else {
-        old
+/// What one round trip to the DB says about the skew (MOOS time − local time): `rq` when the
+/// request left (local time), `tx` the DB's time in its answer, `rx` when the answer came (local
+/// time). The DB took its time between the two, so the skew lies between `tx − rx` and `tx − rq`;
+/// `None` when the times are not finite or out of order.
+fn skew_bounds(rq: f64, tx: f64, rx: f64) -> Option<(f64, f64)> {
+    let (low, high) = (tx - rx, tx - rq);
+    (low.is_finite() && high.is_finite() && low <= high).then_some((low, high))
+}
+
+/// The skew the handshake gives: `rq` when the client's name left (local time), `tx` the DB's
+/// time in its welcome, `rx` when the welcome came (local time). Of the skews the round trip
+/// allows, the one nearest zero: clocks the round trip cannot tell apart are taken as equal, so on
+/// one host the skew is 0 however late the DB reads the client's name (a MOOSDB's welcome alone
+/// says about 0.1 s there, which is why a MOOS client on the DB's host leaves its skew at 0), and
+/// a DB on another host with a clock further off than the round trip is within a round trip of
+/// the truth at once. Times not in order give 0, to be refined.
+pub fn handshake_skew(rq: f64, tx: f64, rx: f64) -> f64 {
+    skew_bounds(rq, tx, rx).map_or(0.0, |(low, high)| 0.0f64.clamp(low, high))
+}
+
+/// The skew after a timing reply (`rq`, `tx`, `rx` as for [`handshake_skew`]). A skew the round
+/// trip allows stays as it is; one it rules out moves a tenth of the way to the nearest skew it
+/// allows (a MOOS client smooths its measurements the same way, new = 0.9·old + 0.1·measured), so
+/// one slow reply never throws the clock off and a skew never settles outside what the round trips
+/// allow. A reply whose times are not finite or out of order leaves the skew as it was.
+pub fn refined_skew(old: f64, rq: f64, tx: f64, rx: f64) -> f64 {
+    match skew_bounds(rq, tx, rx) {
+        Some((low, high)) => 0.9 * old + 0.1 * old.clamp(low, high),
+        None => old,
     }
 }
 
@@ -438,5 +470,36 @@ fn deliver(
             "moos-bad-value",
             format_args!("variable `{}`: {e}", m.key_str()),
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_handshake_takes_the_skew_nearest_zero_that_the_round_trip_allows() {
+        // one host, the DB reading the name 0.1 s late: its time is 0.1 s past the request
+        assert_eq!(handshake_skew(100.0, 100.1, 100.1002), 0.0);
+        // a DB clock 5 s ahead, 2 ms round trip: within the round trip of 5 s
+        let s = handshake_skew(100.0, 105.001, 100.002);
+        assert!((s - 4.999).abs() < 1e-9, "{s}");
+        // and 5 s behind
+        let s = handshake_skew(100.0, 95.001, 100.002);
+        assert!((s + 4.999).abs() < 1e-9, "{s}");
+        // times out of order or not finite
+        assert_eq!(handshake_skew(100.0, 100.0, 99.0), 0.0);
+        assert_eq!(handshake_skew(100.0, f64::NAN, 100.0), 0.0);
+    }
+
+    #[test]
+    fn a_timing_reply_moves_only_a_skew_it_rules_out() {
+        // allowed: kept as it is, however late the DB answered
+        assert_eq!(refined_skew(0.0, 10.0, 10.08, 10.1), 0.0);
+        assert_eq!(refined_skew(0.05, 10.0, 10.08, 10.1), 0.05);
+        // ruled out (the DB is 5 s ahead): a tenth of the way to the nearest allowed
+        let s = refined_skew(0.0, 10.0, 15.0005, 10.001);
+        assert!((s - 0.49995).abs() < 1e-9, "{s}");
+        assert_eq!(refined_skew(0.3, 10.0, f64::INFINITY, 10.1), 0.3);
     }
 }

@@ -84,8 +84,27 @@ struct Client {
     last: HashMap<String, Instant>,
 }
 
+/// How the DB's clock and its answer to a handshake behave, to try a client's clock estimate
+/// against: a DB on another computer has its own clock, and a busy MOOSDB reads a client's name
+/// late (about 0.1 s on one host), so the skew its welcome carries is that much too large.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Clock {
+    /// The DB's clock runs this many seconds ahead of this host's (negative: behind).
+    pub ahead: f64,
+    /// How long after the client's name arrives the DB takes its time for the welcome.
+    pub welcome_delay: Duration,
+}
+
+impl Clock {
+    /// The DB's time now, UNIX seconds.
+    fn now(&self) -> f64 {
+        now_s() + self.ahead
+    }
+}
+
 #[derive(Default)]
 struct State {
+    clock: Clock,
     vars: HashMap<String, MoosMsg>,
     clients: HashMap<String, Client>,
     refused_writes: u64,
@@ -139,9 +158,17 @@ fn now_s() -> f64 {
 impl MoosDb {
     /// Starts serving on `bind` (port 0 for any free one). Must be called inside a tokio runtime.
     pub async fn start(bind: SocketAddr) -> std::io::Result<MoosDb> {
+        MoosDb::start_with(bind, Clock::default()).await
+    }
+
+    /// Starts serving on `bind` with its clock and handshake as `clock` says.
+    pub async fn start_with(bind: SocketAddr, clock: Clock) -> std::io::Result<MoosDb> {
         let listener = TcpListener::bind(bind).await?;
         let addr = listener.local_addr()?;
-        let state: Arc<Mutex<State>> = Arc::default();
+        let state = Arc::new(Mutex::new(State {
+            clock,
+            ..State::default()
+        }));
         let st = state.clone();
         let task = tokio::spawn(async move {
             let mut conns = tokio::task::JoinSet::new();
@@ -242,14 +269,18 @@ async fn serve(mut sock: TcpStream, state: Arc<Mutex<State>>) {
         let _ = send(&mut sock, vec![poison]).await;
         return;
     }
+    let clock = state.lock().unwrap_or_else(|p| p.into_inner()).clock;
+    tokio::time::sleep(clock.welcome_delay).await;
+    // as a MOOSDB: its time when it welcomes, and that time less the client's as the skew
+    let now = clock.now();
     let welcome = MoosMsg {
         id: -1,
         kind: kind::WELCOME,
         data_type: data::DOUBLE,
         source_aux: b"hostname=seabus-moosdb".to_vec(),
         community: b"#1".to_vec(),
-        time: now_s(),
-        value: now_s() - first.time,
+        time: now,
+        value: now - first.time,
         string: b"asynchronous".to_vec(),
         ..MoosMsg::default()
     };
@@ -421,7 +452,7 @@ fn handle(p: Packet, name: &str, state: &Arc<Mutex<State>>) -> (Vec<MoosMsg>, De
                 }
             }
             kind::TIMING if i == 0 => {
-                m.value = now_s();
+                m.value = st.clock.now();
                 m.value2 = 0.0;
                 replies.insert(0, m);
             }

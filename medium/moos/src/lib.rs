@@ -11,7 +11,9 @@
 //! | binary | bytes |
 //!
 //! and back: a datamap with a single numeric `value` is a double, with a single string `value` a
-//! string, any other datamap a string of `key=value` pairs; bytes are binary; XML text a string.
+//! string (unless that string reads as `key=value` pairs: then it is the pair `value="…"`, so that
+//! it reads back as the same string rather than as a datamap of its pairs), any other datamap a
+//! string of `key=value` pairs; bytes are binary; XML text a string.
 //! In the pairs a value holding `,`, `=`, `"` or `\`, blanks at its ends, or text that would read
 //! as a number or boolean is written in double quotes with `\"` and `\\` escapes; numbers and
 //! booleans are written plain, so they read back as they were (`seabus pub` types them the same
@@ -166,7 +168,10 @@ pub fn to_moos(p: &Payload) -> Result<(u8, f64, Vec<u8>), String> {
                     Value::Int(_) | Value::Float(_) => {
                         return Ok((data::DOUBLE, v.as_f64().unwrap_or(0.0), Vec::new()));
                     }
-                    Value::Str(s) => return Ok((data::STRING, 0.0, s.as_bytes().to_vec())),
+                    // text shaped like pairs goes as the pair `value="…"`, so it reads back whole
+                    Value::Str(s) if parse_pairs(s).is_none() => {
+                        return Ok((data::STRING, 0.0, s.as_bytes().to_vec()));
+                    }
                     _ => {}
                 }
             }
@@ -233,6 +238,16 @@ mod tests {
         assert_eq!((d.0, d.1), (data::DOUBLE, 12.5));
         let s = to_moos(&Payload::from(DataMap::new().with("value", "survey"))).unwrap();
         assert_eq!((s.0, s.2), (data::STRING, b"survey".to_vec()));
+        // a string shaped like pairs reads back as that string
+        let pairs = Payload::from(DataMap::new().with("value", "x=1"));
+        let s = to_moos(&pairs).unwrap();
+        assert_eq!((s.0, &s.2[..]), (data::STRING, &br#"value="x=1""#[..]));
+        let back = from_moos(&MoosMsg {
+            data_type: s.0,
+            string: s.2,
+            ..MoosMsg::default()
+        });
+        assert_eq!(back.unwrap(), pairs);
         let p = to_moos(&Payload::from(
             DataMap::new().with("x", 1i64).with("y", 2i64),
         ))

@@ -1,9 +1,10 @@
 //! The MOOS medium against a MOOSDB: the handshake, register and notify, wildcard registration,
 //! interval throttling, structured values as key=value strings, the keep-alive, a name already
-//! taken, the DB restarting (clients reconnect and register again), and a DB that sends garbage.
+//! taken, the DB restarting (clients reconnect and register again), a DB that sends garbage, and
+//! the clock skew estimated from the handshake's round trip.
 
 use seabus_medium::{DataMap, Interface, LinkState, Medium, Message, Node};
-use seabus_medium_moos::db::MoosDb;
+use seabus_medium_moos::db::{Clock, MoosDb};
 use seabus_medium_moos::wire::{self, MoosMsg, Packet, Read, data, kind};
 use std::net::SocketAddr;
 use std::time::{Duration, Instant};
@@ -556,4 +557,110 @@ async fn the_test_db_registers_times_and_unregisters_as_a_moosdb() {
         (kind::TIMING, 7, 1234.5, &b"_async_timing"[..])
     );
     assert!((t.value - now).abs() < 2.0, "the DB's time: {}", t.value);
+}
+
+fn local_now() -> f64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_secs_f64()
+}
+
+/// Starts a DB on `addr`, waiting (at most 5 s) for the port to be free again.
+async fn db_on(addr: SocketAddr, clock: Clock) -> MoosDb {
+    let deadline = Instant::now() + Duration::from_secs(5);
+    loop {
+        match MoosDb::start_with(addr, clock).await {
+            Ok(db) => return db,
+            Err(e) if Instant::now() < deadline => {
+                let _ = e;
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+            Err(e) => panic!("cannot listen on {addr} again: {e}"),
+        }
+    }
+}
+
+/// Writes `NAV_CLOCK` through `m` and returns how far the time it carried was from the local
+/// clock while it was sent (0 when it lies between the send and its arrival at the DB).
+async fn stamp_offset(m: &Medium, db: &MoosDb, n: f64) -> f64 {
+    let tx = m.attach("clock");
+    let before = local_now();
+    tx.send("NAV_CLOCK", DataMap::new().with("value", n))
+        .await
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while db.value("NAV_CLOCK").is_none_or(|v| v.value != n) && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(1)).await;
+    }
+    let after = local_now();
+    let stamped = db
+        .value("NAV_CLOCK")
+        .expect("the write reached the DB")
+        .time;
+    if stamped < before {
+        stamped - before
+    } else if stamped > after {
+        stamped - after
+    } else {
+        0.0
+    }
+}
+
+/// A DB on this host that reads a client's name 100 ms late (as a MOOSDB does): the skew is 0
+/// within 1 ms from the first message on, and again after the DB restarts.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn on_one_host_the_skew_is_zero_at_once_and_after_reconnecting() {
+    let slow = Clock {
+        ahead: 0.0,
+        welcome_delay: Duration::from_millis(100),
+    };
+    let db = MoosDb::start_with(any_port(), slow).await.unwrap();
+    let addr = db.addr();
+    let m = client(addr, "pClock", "NONE");
+    up(&m).await;
+    let off = stamp_offset(&m, &db, 1.0).await;
+    assert!(off.abs() < 0.001, "MOOS time off by {off} s at once");
+    // the timing replies keep it there
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    let off = stamp_offset(&m, &db, 2.0).await;
+    assert!(off.abs() < 0.001, "MOOS time off by {off} s after 2.5 s");
+    let mut db = db;
+    for round in 0..2 {
+        drop(db);
+        down(&m, "").await;
+        db = db_on(addr, slow).await;
+        up(&m).await;
+        let off = stamp_offset(&m, &db, 3.0 + f64::from(round)).await;
+        assert!(
+            off.abs() < 0.001,
+            "MOOS time off by {off} s after reconnect {round}"
+        );
+    }
+}
+
+/// A DB whose clock runs 5 s ahead (another host), reading names 100 ms late: the skew is 5 s
+/// from the first message on, within the handshake's return leg (a few milliseconds for a debug
+/// build on a busy machine; the DB's own measure in its welcome would be 0.1 s off).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_db_clock_ahead_gives_its_skew_at_once() {
+    let db = MoosDb::start_with(
+        any_port(),
+        Clock {
+            ahead: 5.0,
+            welcome_delay: Duration::from_millis(100),
+        },
+    )
+    .await
+    .unwrap();
+    let m = client(db.addr(), "pAhead", "NONE");
+    up(&m).await;
+    let off = stamp_offset(&m, &db, 1.0).await;
+    assert!((off - 5.0).abs() < 0.01, "MOOS time ahead by {off} s");
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    let off = stamp_offset(&m, &db, 2.0).await;
+    assert!(
+        (off - 5.0).abs() < 0.01,
+        "MOOS time ahead by {off} s after 2.5 s"
+    );
 }

@@ -196,6 +196,7 @@ impl SerialConfig {
             link_state: true,
             native: None,
             qos: false,
+            lists: false,
         }
     }
 

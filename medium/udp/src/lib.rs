@@ -70,6 +70,7 @@ impl UdpConfig {
             link_state: false,
             native: None,
             qos: false,
+            lists: true,
         }
     }
 }

@@ -225,6 +225,7 @@ impl ZenohConfig {
             link_state: true,
             native: None,
             qos: true,
+            lists: true,
         }
     }
 
