@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{Running, group, seabus, spy_json, wait_for_line};
+use common::{Running, add_user, group, seabus, spy_json, wait_for_line};
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value as Json, json};
 use std::io::{BufRead, Write};
