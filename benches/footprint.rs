@@ -189,10 +189,9 @@ fn main() {
         std::thread::sleep(Duration::from_secs(secs).saturating_sub(started.elapsed()));
         sample(pid).expect("the demo runs")
     };
-    let (idle, cpu_idle_from) = at(early / 2);
+    let (_, cpu_idle_from) = at(early / 2);
     let (idle_end, cpu_idle_to) = at(early);
     let idle_cpu = (cpu_idle_to - cpu_idle_from) / (early - early / 2) as f64;
-    let _ = idle;
     let mut cookie = String::new();
     for _ in 0..10 {
         cookie = log_in(console, "pilot", &pilot);

@@ -1,15 +1,14 @@
-//! The console's cost: 50 bound variables (10 topics × 5 fields) updated at 20 Hz, sent to 10
-//! logged-in WebSocket clients for 10 s. Printed: the server process's CPU share (of one core) and
-//! the bytes per second each client receives; then the same for the floor — every bus message
-//! written raw (JSON lines) to 10 plain TCP sockets, no coalescing, no WebSocket.
-//!
-//! Then the Foxglove live view (`seabus_ui::foxglove`): 50 topics of 5 fields at 20 Hz served to 5
-//! Foxglove WebSocket clients subscribed to every channel, the server's CPU share beside the
-//! console's.
+//! The console's cost as its clients grow: 50 bound variables (10 topics × 5 fields) updated at
+//! 20 Hz, sent to 1, 10 and 50 logged-in WebSocket clients. Printed for each count: the server
+//! process's CPU share (of one core) and the bytes per second each client receives; the same for
+//! the floor — every bus message written raw (JSON lines) to as many plain TCP sockets, no
+//! coalescing, no WebSocket; and the Foxglove live view (`seabus_ui::foxglove`): 50 topics of 5
+//! fields at 20 Hz to as many Foxglove WebSocket clients subscribed to every channel.
 //!
 //! The clients run in a child process (this binary again), so the CPU figure is the server's
 //! alone (with the publisher, which every run has). Goal: the console's CPU at most 1.5× the
-//! floor's. The smoke run (`SEABUS_BENCH_SMOKE=1`) measures each for 8 s instead of 10.
+//! floor's at 10 clients. The smoke run (`SEABUS_BENCH_SMOKE=1`) measures 1 and 10 clients, 8 s
+//! each instead of 10.
 //!
 //! ```text
 //! cargo bench -p seabus-ui --bench console
@@ -29,10 +28,14 @@ use tokio::net::{TcpListener, TcpStream};
 const TOPICS: usize = 10;
 const FIELDS: usize = 5;
 const RATE_HZ: f64 = 20.0;
-const CLIENTS: usize = 10;
-/// The Foxglove run's topics and clients.
+/// The client counts measured (the goal is held at 10); the smoke run leaves out 50.
+fn client_counts() -> Vec<usize> {
+    scale(vec![1, 10, 50], vec![1, 10])
+}
+/// The client count the goal is held at.
+const GOAL_CLIENTS: usize = 10;
+/// The Foxglove run's topics.
 const FOXGLOVE_TOPICS: usize = 50;
-const FOXGLOVE_CLIENTS: usize = 5;
 
 /// Seconds each run is measured (the child process, started with the same environment, agrees).
 fn seconds() -> u64 {
@@ -89,13 +92,8 @@ fn publish_topics(bus: &Medium, topics: usize) -> tokio::task::JoinHandle<()> {
 }
 
 /// Runs the clients (in the child process); prints the bytes each received.
-async fn clients(mode: &str, addr: &str, cookie: &str) {
+async fn clients(mode: &str, addr: &str, cookie: &str, count: usize) {
     let mut tasks = Vec::new();
-    let count = if mode == "foxglove" {
-        FOXGLOVE_CLIENTS
-    } else {
-        CLIENTS
-    };
     for _ in 0..count {
         let (mode, addr, cookie) = (mode.to_string(), addr.to_string(), cookie.to_string());
         tasks.push(tokio::spawn(async move {
@@ -189,7 +187,7 @@ async fn foxglove_client(addr: &str, deadline: Instant) -> usize {
     bytes
 }
 
-async fn foxglove_run() -> (f64, f64) {
+async fn foxglove_run(clients: usize) -> (f64, f64) {
     let dir = tempfile::tempdir().expect("dir");
     let system = dir.path().join("system.xml");
     std::fs::write(
@@ -205,7 +203,13 @@ async fn foxglove_run() -> (f64, f64) {
         .await
         .expect("the server starts");
     let publisher = publish_topics(&bus, FOXGLOVE_TOPICS);
-    let r = measure("foxglove", server.addr().to_string(), String::new()).await;
+    let r = measure(
+        "foxglove",
+        server.addr().to_string(),
+        String::new(),
+        clients,
+    )
+    .await;
     publisher.abort();
     r
 }
@@ -236,10 +240,10 @@ async fn login(addr: std::net::SocketAddr) -> String {
 
 /// Runs the clients in a child process while measuring this one; returns (CPU share, bytes/s
 /// per client).
-async fn measure(mode: &str, addr: String, cookie: String) -> (f64, f64) {
+async fn measure(mode: &str, addr: String, cookie: String, clients: usize) -> (f64, f64) {
     let exe = std::env::current_exe().expect("this binary");
     let child = tokio::process::Command::new(exe)
-        .args(["--clients", mode, &addr, &cookie])
+        .args(["--clients", mode, &addr, &cookie, &clients.to_string()])
         .stdout(std::process::Stdio::piped())
         .spawn()
         .expect("clients start");
@@ -256,7 +260,7 @@ async fn measure(mode: &str, addr: String, cookie: String) -> (f64, f64) {
     (100.0 * cpu / wall, mean)
 }
 
-async fn console_run() -> (f64, f64) {
+async fn console_run(clients: usize) -> (f64, f64) {
     let dir = tempfile::tempdir().expect("dir");
     std::fs::write(dir.path().join("bench.xml"), layout()).expect("layout");
     std::fs::write(
@@ -282,12 +286,12 @@ async fn console_run() -> (f64, f64) {
         .expect("console starts");
     let publisher = publish(&bus);
     let cookie = login(console.addr()).await;
-    let r = measure("console", console.addr().to_string(), cookie).await;
+    let r = measure("console", console.addr().to_string(), cookie, clients).await;
     publisher.abort();
     r
 }
 
-async fn raw_run() -> (f64, f64) {
+async fn raw_run(clients: usize) -> (f64, f64) {
     let bus = Medium::in_process("bus", &Node::new("b"));
     let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
     let addr = listener.local_addr().expect("addr");
@@ -321,7 +325,7 @@ async fn raw_run() -> (f64, f64) {
         }
     });
     let publisher = publish(&bus);
-    let r = measure("raw", addr.to_string(), String::new()).await;
+    let r = measure("raw", addr.to_string(), String::new(), clients).await;
     publisher.abort();
     server.abort();
     r
@@ -336,36 +340,44 @@ fn main() {
         .expect("runtime");
     if let Some(i) = args.iter().position(|a| a == "--clients") {
         let get = |k: usize| args.get(i + k).cloned().unwrap_or_default();
-        rt.block_on(clients(&get(1), &get(2), &get(3)));
+        let count = get(4).parse().expect("a client count");
+        rt.block_on(clients(&get(1), &get(2), &get(3), count));
         return;
     }
     if args.iter().any(|a| a == "--bench") || args.len() == 1 {
-        let (c_cpu, c_bytes) = rt.block_on(console_run());
-        let (r_cpu, r_bytes) = rt.block_on(raw_run());
-        let (f_cpu, f_bytes) = rt.block_on(foxglove_run());
         let seconds = seconds();
         println!(
-            "console: {} variables ({TOPICS} topics x {FIELDS} fields) at {RATE_HZ} Hz to {CLIENTS} clients, {seconds} s:",
+            "server CPU (% of a core) and bytes per client, {seconds} s each:\n\
+             - console: {} variables ({TOPICS} topics x {FIELDS} fields) at {RATE_HZ} Hz, WebSocket, bound \
+             fields, <= 20 frames/s\n\
+             - raw floor: every message as a JSON line on TCP\n\
+             - Foxglove live view: {FOXGLOVE_TOPICS} topics x {FIELDS} fields at {RATE_HZ} Hz, every \
+             message, clients subscribed to every channel",
             TOPICS * FIELDS
         );
         println!(
-            "  console (WebSocket, bound fields, <= 20 frames/s)  server CPU {c_cpu:.1} % of a core, {:.1} kB/s per client",
-            c_bytes / 1e3
-        );
-        println!(
-            "  raw (every message as a JSON line on TCP)          server CPU {r_cpu:.1} % of a core, {:.1} kB/s per client",
-            r_bytes / 1e3
-        );
-        println!(
-            "foxglove: {FOXGLOVE_TOPICS} topics x {FIELDS} fields at {RATE_HZ} Hz to {FOXGLOVE_CLIENTS} clients subscribed to every channel, {seconds} s:"
-        );
-        println!(
-            "  Foxglove live view (every message, JSON)           server CPU {f_cpu:.1} % of a core, {:.1} kB/s per client; {:.2}x the console's CPU",
-            f_bytes / 1e3,
-            f_cpu / c_cpu
+            "  clients   console CPU  kB/s/client   raw CPU  kB/s/client   console/raw   Foxglove CPU  kB/s/client"
         );
         let mut goals = Goals::new();
-        goals.at_most("console server CPU / raw floor's", c_cpu / r_cpu, 1.5);
+        for n in client_counts() {
+            let (c_cpu, c_bytes) = rt.block_on(console_run(n));
+            let (r_cpu, r_bytes) = rt.block_on(raw_run(n));
+            let (f_cpu, f_bytes) = rt.block_on(foxglove_run(n));
+            println!(
+                "  {n:>7}   {c_cpu:>9.1} %  {:>11.1}   {r_cpu:>5.1} %  {:>11.1}   {:>11.2}   {f_cpu:>10.1} %  {:>11.1}",
+                c_bytes / 1e3,
+                r_bytes / 1e3,
+                c_cpu / r_cpu,
+                f_bytes / 1e3
+            );
+            if n == GOAL_CLIENTS {
+                goals.at_most(
+                    &format!("console server CPU / raw floor's, {n} clients"),
+                    c_cpu / r_cpu,
+                    1.5,
+                );
+            }
+        }
         goals.finish();
     }
 }
