@@ -404,7 +404,7 @@ fn seconds(value: Option<f64>) -> Result<Option<Duration>, ExitCode> {
 }
 
 /// Runs a system until Ctrl-C, SIGTERM or `duration`; `demo_dir` is the demo's own directory
-/// (its consoles get the demo's users; it is removed at the end). Nothing starts unless the system
+/// (removed at the end). Nothing starts unless the system
 /// passes the same validation as `seabus check`; its warnings are logged.
 async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>) -> ExitCode {
     let duration = match seconds(duration) {
@@ -413,20 +413,17 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
     };
     let registry = registry();
     let catalogue = Catalogue::built_in();
-    let given = match demo_dir.as_ref().map(|_| console::demo_users()).transpose() {
-        Ok(users) => users,
-        Err(e) => {
-            eprintln!("seabus demo: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let checked = match seabus_ui::console::check(&spec, &registry, &catalogue, given.as_ref()) {
+    let mut checked = match seabus_ui::console::check(&spec, &registry, &catalogue) {
         Ok(c) => c,
         Err(e) => return file_error(&e),
     };
     // the system's own warnings are logged by the runtime as it starts
     for w in &checked.warnings {
         tracing::warn!("{w}");
+    }
+    if let Err(e) = console::one_time_users(&mut checked.consoles) {
+        eprintln!("seabus: {e}");
+        return ExitCode::from(2);
     }
     let runtime = match Runtime::start(&spec, &registry, catalogue).await {
         Ok(r) => r,
@@ -499,7 +496,7 @@ fn check(file: &std::path::Path) -> ExitCode {
         Ok(s) => s,
         Err(e) => return file_error(&e),
     };
-    let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in(), None);
+    let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in());
     match checked {
         Err(e) => file_error(&e),
         Ok(c) if c.report.warnings.is_empty() && c.warnings.is_empty() => {
@@ -690,10 +687,7 @@ mod tests {
         // as `seabus demo` runs it: from its own directory, with its built-in files and users
         let (dir, file) = console::write_demo(DEMO).unwrap();
         let spec = SystemSpec::load(&file).unwrap();
-        let users =
-            seabus_ui::users::Users::with_passwords(&[("pilot", &["pilot"], "pw")]).unwrap();
-        let checked =
-            seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in(), Some(&users));
+        let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in());
         std::fs::remove_dir_all(dir).unwrap();
         let checked = checked.unwrap();
         assert!(
@@ -704,5 +698,7 @@ mod tests {
         assert!(checked.warnings.is_empty(), "{:?}", checked.warnings);
         assert_eq!(checked.consoles.len(), 1);
         assert_eq!(checked.consoles[0].layouts.len(), 2);
+        // a console on 127.0.0.1 without a users file: its users are made as it starts
+        assert!(checked.consoles[0].users.is_none());
     }
 }

@@ -449,3 +449,47 @@ impl Drop for PythonPeer {
         }
     }
 }
+
+/// Reads a running system's stderr up to its console's address: the one-time password it printed
+/// for user `name` and the console's URL (`http://ADDR`). The rest of stderr is drained.
+pub fn one_time_password(run: &mut Running, name: &str) -> (String, String) {
+    use std::io::BufRead;
+    let err = run.0.stderr.take().expect("stderr piped");
+    let mut lines = std::io::BufReader::new(err).lines();
+    let mut password = None;
+    let mut url = None;
+    for line in lines.by_ref().take(200).map_while(Result::ok) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if words.first() == Some(&name) && words.len() >= 3 {
+            password = Some(words[1].to_string());
+        }
+        if let Some(u) = line.trim().strip_prefix("Console: ") {
+            url = Some(u.to_string());
+            break;
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    (
+        password.unwrap_or_else(|| panic!("no password printed for {name}")),
+        url.expect("the console's address is printed"),
+    )
+}
+
+/// Logs in to the console at `url` (`http://ADDR`) as a browser's form does; the whole answer.
+pub fn http_login(url: &str, name: &str, password: &str) -> String {
+    use std::io::Write;
+    let addr = url.trim_start_matches("http://");
+    let body = format!("name={name}&password={password}");
+    let mut s = std::net::TcpStream::connect(addr).expect("the console listens");
+    s.set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("a timeout");
+    write!(
+        s,
+        "POST /login HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("sent");
+    let mut answer = String::new();
+    std::io::Read::read_to_string(&mut s, &mut answer).expect("answer");
+    answer
+}
