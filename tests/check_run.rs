@@ -409,7 +409,7 @@ fn check_and_run_agree_on_every_example_system() {
 }
 
 /// A copy of `configs/demo.xml` in `dir` without its helm (the README's step 3), with the files
-/// that travel with it when `companions`.
+/// that travel with it when `companions`; its console and Foxglove server on any free port.
 fn demo_copy(dir: &Path, companions: bool) -> std::path::PathBuf {
     let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
     let text = std::fs::read_to_string(configs.join("demo.xml")).expect("the demo reads");
@@ -417,8 +417,21 @@ fn demo_copy(dir: &Path, companions: bool) -> std::path::PathBuf {
         .lines()
         .find(|l| l.contains(r#"<module name="helm""#))
         .expect("the demo has a helm");
+    // (on any free ports, so that it runs beside other programs that use the demo's)
+    let text = text
+        .replacen(helm, "", 1)
+        .replacen(
+            r#"<console medium="bus""#,
+            r#"<console listen="127.0.0.1:0" medium="bus""#,
+            1,
+        )
+        .replacen(
+            r#"<foxglove medium="bus""#,
+            r#"<foxglove listen="127.0.0.1:0" medium="bus""#,
+            1,
+        );
     let path = dir.join("demo.xml");
-    std::fs::write(&path, text.replacen(helm, "", 1)).expect("the copy is written");
+    std::fs::write(&path, text).expect("the copy is written");
     if companions {
         std::fs::create_dir(dir.join("console")).expect("a console folder");
         for rel in [
