@@ -42,8 +42,6 @@ use seabus_modules::module::{
 };
 use seabus_modules::registry::{BridgeType, Built};
 use seabus_modules::system::{BridgeSpec, RouteSpec};
-use std::collections::HashMap;
-use std::collections::hash_map::Entry;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -210,7 +208,8 @@ pub struct RouteBridge {
     stats: Vec<LegStats>,
     counters: Counters,
     seen: Dedup,
-    last_sent: HashMap<(usize, Topic), Instant>,
+    /// When each rate-limited topic's next message is due.
+    schedule: crate::rate::Schedule,
     report: Option<Duration>,
     report_topic: Topic,
     /// The ports reports go out on: those whose medium carries datamaps as they are.
@@ -289,7 +288,7 @@ impl RouteBridge {
             legs,
             counters: Counters::default(),
             seen: Dedup::new(),
-            last_sent: HashMap::new(),
+            schedule: crate::rate::Schedule::default(),
             report: (!report.is_zero()).then_some(report),
             report_topic,
             report_ports: (0..2).filter(|&i| caps[i].carries_datamaps()).collect(),
@@ -390,23 +389,18 @@ impl RouteBridge {
                 }
             }
         };
-        if let (Some(gap), Kind::Data) = (leg.min_interval, msg.kind) {
+        if let (Some(period), Kind::Data) = (leg.min_interval, msg.kind) {
             let now = Instant::now();
-            match self.last_sent.entry((i, topic.clone())) {
-                Entry::Occupied(e) if now.duration_since(*e.get()) < gap => {
-                    self.stats[i].rate_limited += 1;
-                    return Verdict::Drop("rate limit");
-                }
-                Entry::Occupied(mut e) => *e.get_mut() = now,
-                Entry::Vacant(e) => {
-                    e.insert(now);
-                }
+            if !self.schedule.admit(i, &topic, period, now) {
+                self.stats[i].rate_limited += 1;
+                return Verdict::Drop("rate limit");
             }
-            if self.last_sent.len() > MAX_RATE_ENTRIES {
-                prune_rate_limits(&mut self.last_sent, &self.legs);
-                if self.last_sent.len() > MAX_RATE_ENTRIES {
+            if self.schedule.len() > MAX_RATE_ENTRIES {
+                let legs = &self.legs;
+                self.schedule.prune(now, |i| legs[i].min_interval);
+                if self.schedule.len() > MAX_RATE_ENTRIES {
                     // a flood of distinct topics: start over rather than grow without bound
-                    self.last_sent.clear();
+                    self.schedule.clear();
                 }
             }
         }
@@ -487,16 +481,6 @@ impl RouteBridge {
         }
         map
     }
-}
-
-/// Forgets rate-limit entries whose interval has passed: they no longer hold anything back.
-fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[Leg]) {
-    let now = Instant::now();
-    last_sent.retain(|(i, _), last| {
-        legs[*i]
-            .min_interval
-            .is_some_and(|gap| now.duration_since(*last) < gap)
-    });
 }
 
 /// Carries a payload across a route with an LCM type: decoded from LCM bytes read on `from`, field
@@ -636,7 +620,9 @@ impl Module for RouteBridge {
                 );
             }
         }
-        prune_rate_limits(&mut self.last_sent, &self.legs);
+        let legs = &self.legs;
+        self.schedule
+            .prune(Instant::now(), |i| legs[i].min_interval);
         Ok(())
     }
 }
