@@ -11,8 +11,9 @@ use std::process::ExitCode;
 /// What `seabus export` was asked to do.
 #[derive(clap::Args)]
 pub struct ExportArgs {
-    /// Log files (LCM event logs or MCAP), or directories whose `.lcmlog` and `.mcap` files are
-    /// read (in name order).
+    /// Log files (LCM event logs or MCAP), or folders whose logs are read (in name order): every
+    /// file that is an LCM event log or MCAP file by its first bytes, whatever it is named; the
+    /// others are named as skipped.
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
     /// Only events from this time on: seconds since 1970, or RFC 3339 (2026-11-21T10:00:00Z).
@@ -43,17 +44,24 @@ fn parse_time(text: &str) -> Option<f64> {
     })
 }
 
-/// The files a path names.
-fn files(path: &Path) -> std::io::Result<Vec<PathBuf>> {
+/// The logs a path names: the file itself, or the logs in a folder (the others are said to be
+/// skipped); a folder without any is an error.
+fn files(path: &Path) -> Result<Vec<PathBuf>, String> {
     if !path.is_dir() {
         return Ok(vec![path.to_path_buf()]);
     }
-    let mut v: Vec<PathBuf> = std::fs::read_dir(path)?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "lcmlog" || x == "mcap"))
-        .collect();
-    v.sort();
-    Ok(v)
+    let (logs, skipped) =
+        seabus_record::log::logs_in(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    for (file, why) in &skipped {
+        eprintln!("seabus export: skipped {}: {why}", file.display());
+    }
+    if logs.is_empty() {
+        return Err(format!(
+            "{}: no LCM event log or MCAP file in this folder",
+            path.display()
+        ));
+    }
+    Ok(logs)
 }
 
 /// An event's payload as a datamap: a datamap as it is, bytes that are a binary datamap decoded,
@@ -110,6 +118,16 @@ impl CsvFiles {
     }
 }
 
+/// The exit for output that cannot be written: a reader that stopped reading (`seabus export |
+/// head`) ends the export quietly, as with any command-line filter; anything else is an error.
+fn write_failed(e: &std::io::Error) -> ExitCode {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        return ExitCode::SUCCESS;
+    }
+    eprintln!("seabus export: cannot write: {e}");
+    ExitCode::from(1)
+}
+
 /// Runs `seabus export`.
 pub fn export(args: ExportArgs) -> ExitCode {
     let usage = |what: String| {
@@ -161,7 +179,7 @@ pub fn export(args: ExportArgs) -> ExitCode {
     for path in &args.logs {
         let list = match files(path) {
             Ok(l) => l,
-            Err(e) => return usage(format!("{}: {e}", path.display())),
+            Err(e) => return usage(e),
         };
         for file in list {
             let mut reader = match Reader::open(&file) {
@@ -203,8 +221,7 @@ pub fn export(args: ExportArgs) -> ExitCode {
                     }
                 };
                 if let Err(e) = written {
-                    eprintln!("seabus export: cannot write: {e}");
-                    return ExitCode::from(1);
+                    return write_failed(&e);
                 }
                 exported += 1;
             }
@@ -216,8 +233,7 @@ pub fn export(args: ExportArgs) -> ExitCode {
             .try_for_each(|(f, _)| f.flush())
     });
     if let Err(e) = flushed {
-        eprintln!("seabus export: cannot write: {e}");
-        return ExitCode::from(1);
+        return write_failed(&e);
     }
     eprintln!("seabus export: {exported} events");
     if damaged {

@@ -90,13 +90,15 @@ enum Command {
     /// Record the traffic on a medium to an LCM event log, until Ctrl-C, SIGTERM or --for.
     ///
     /// The log is the file lcm-logger writes: one event per message, channel = topic, timestamp =
-    /// arrival, data = the payload's bytes (datamaps in the binary form, XML as text). Exit 0; 1 when
+    /// arrival, data = the payload's bytes (datamaps in the binary form, XML as text, each
+    /// channel's format said in a `seabus.log.format` event where it is not bytes). Exit 0; 1 when
     /// the file could not be written; 2 when the arguments, file or medium cannot be used.
     Record(record::RecordArgs),
     /// Publish the events of an LCM event log on a medium, paced by their timestamps.
     ///
-    /// Each event is sent as data: channel = topic, data = bytes payload; channels that are not
-    /// seabus topics are skipped and counted. Exit 0; 1 when the log is damaged (the events before
+    /// Each event is sent as data: channel = topic, payload = the data in the format the log
+    /// keeps for it (datamaps and XML from seabus's recordings, bytes otherwise); channels that
+    /// are not seabus topics are skipped and counted. A folder replays every log in it. Exit 0; 1 when the log is damaged (the events before
     /// the damage are sent, and its byte offset is shown); 2 when the arguments, file or medium
     /// cannot be used; 3 when the medium refused events.
     Replay(record::ReplayArgs),
