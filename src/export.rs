@@ -98,8 +98,10 @@ impl CsvFiles {
     fn row(&mut self, topic: &str, time: f64, map: &DataMap) -> std::io::Result<()> {
         if !self.files.contains_key(topic) {
             let columns: Vec<String> = map.iter().map(|(k, _)| k.to_string()).collect();
+            // (an LCM channel may hold a `/`: the file stays in the folder all the same)
+            let name = topic.replace(['/', '\\'], "_");
             let mut out = std::io::BufWriter::new(std::fs::File::create(
-                self.dir.join(format!("{topic}.csv")),
+                self.dir.join(format!("{name}.csv")),
             )?);
             writeln!(out, "time,{}", columns.join(","))?;
             self.files.insert(topic.to_string(), (out, columns));
@@ -200,7 +202,8 @@ pub fn export(args: ExportArgs) -> ExitCode {
                 if from.is_some_and(|f| t < f) || to.is_some_and(|e| t >= e) {
                     continue;
                 }
-                let Ok(topic) = Topic::new(&event.channel) else {
+                // every channel as it was logged, a name that is not a seabus topic too
+                let Ok(topic) = Topic::channel(&event.channel) else {
                     continue;
                 };
                 if !pattern.matches(&topic) {

@@ -320,7 +320,8 @@ fn due(clock0: Instant, log0: i64, timestamp: i64, speed: f64) -> Option<Instant
 struct Channel {
     /// Whether `--channels` lets it through.
     allowed: bool,
-    /// The topic, when the channel is a valid seabus topic.
+    /// The topic: the channel when it is a seabus topic, or when the medium takes channel names
+    /// that are not (LCM), the channel as it is.
     topic: Option<Topic>,
     /// Events sent.
     sent: u64,
@@ -370,6 +371,8 @@ struct Replay<'a> {
     file: &'a Path,
     /// The logs, in the order they are replayed.
     logs: Vec<PathBuf>,
+    /// Whether the medium takes channel names that are not seabus topics (LCM).
+    names_channels: bool,
     port: Interface,
     speed: Option<f64>,
     from_micros: i64,
@@ -385,7 +388,11 @@ impl Replay<'_> {
         if !self.channels.contains_key(name) {
             let channel = Channel {
                 allowed: self.filter.as_ref().is_none_or(|f| f.matches(name)),
-                topic: Topic::new(name).ok(),
+                topic: if self.names_channels {
+                    Topic::channel(name).ok()
+                } else {
+                    Topic::new(name).ok()
+                },
                 sent: 0,
             };
             self.channels.insert(name.into(), channel);
@@ -618,6 +625,7 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     let mut replay = Replay {
         file: &args.file,
         logs,
+        names_channels: medium.capabilities().names_channels(),
         port: medium.attach("replay"),
         speed,
         from_micros: from.as_micros().min(i64::MAX as u128) as i64,

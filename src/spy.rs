@@ -79,7 +79,8 @@ fn print_table(rows: &BTreeMap<Topic, Row>, types: &Types, out: &mut impl Write,
         let _ = writeln!(
             out,
             "{:<32} {:>8} {:>9.1}  {:<22} {}",
-            shorten(topic.to_string(), 32),
+            // a channel name that is not a topic (LCM's `with space`) quoted
+            shorten(topic.shown().into_owned(), 32),
             r.count,
             r.rate,
             shorten(r.last.origin().to_string(), 22),

@@ -208,6 +208,8 @@ pub struct RouteBridge {
     stats: Vec<LegStats>,
     counters: Counters,
     seen: Dedup,
+    /// Whether each side takes channel names that are not seabus topics (LCM).
+    names_channels: [bool; 2],
     /// When each rate-limited topic's next message is due.
     schedule: crate::rate::Schedule,
     report: Option<Duration>,
@@ -295,6 +297,7 @@ impl RouteBridge {
             types,
             problems: Tally::new(),
             echo: [0, 1].map(|i| (!caps[i].provenance).then(EchoMemory::default)),
+            names_channels: [0, 1].map(|i| caps[i].names_channels()),
         };
         Ok((bridge, decl))
     }
@@ -367,6 +370,11 @@ impl RouteBridge {
             return Verdict::Drop("hop limit");
         }
         let leg = &self.legs[i];
+        // a channel name that is not a seabus topic (from LCM) goes only where such names go
+        if !self.names_channels[leg.to] && !msg.topic.is_topic() {
+            self.counters.unrouted += 1;
+            return Verdict::Drop("not a seabus topic");
+        }
         let origin = &msg.provenance.origin;
         if &*origin.node == node && *origin.medium == *self.media[leg.to] {
             self.counters.returned += 1;
@@ -692,6 +700,35 @@ mod tests {
             !m.is_echo(&topic, &frame(&[1, 2])),
             "forgotten after the window"
         );
+    }
+
+    #[test]
+    fn an_lcm_channel_that_is_not_a_topic_crosses_only_to_lcm() {
+        let text = "<seabus><medium name=\"lcm\" url=\"udpm://239.255.76.67:7667\"/>\
+             <medium name=\"lcm2\" url=\"udpm://239.255.76.68:7667\"/>\
+             <medium name=\"net\" url=\"udp://239.1.1.1:5\"/>\
+             <bridge name=\"a\" media=\"lcm net\"><route topics=\"**\"/></bridge>\
+             <bridge name=\"b\" media=\"lcm lcm2\"><route topics=\"**\"/></bridge></seabus>";
+        let spec = SystemSpec::parse("t.xml", text).unwrap();
+        let mut built: Vec<RouteBridge> = spec
+            .bridges
+            .iter()
+            .map(|b| RouteBridge::new(b, &caps(b)).unwrap().0)
+            .collect();
+        let odd = |seq| Message {
+            topic: Topic::channel("with space").unwrap(),
+            payload: Payload::from(vec![1u8, 2]),
+            ..msg("x", "peer", "lcm", seq, 0)
+        };
+        assert!(matches!(
+            built[0].route("n", 0, odd(1)),
+            Verdict::Drop("not a seabus topic")
+        ));
+        assert_eq!(built[0].counters.unrouted, 1);
+        match built[1].route("n", 0, odd(1)) {
+            Verdict::Forward(1, m) => assert_eq!(m.topic.as_str(), "with space"),
+            _ => panic!("not forwarded from LCM to LCM"),
+        }
     }
 
     #[test]
