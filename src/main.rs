@@ -151,8 +151,8 @@ enum LayoutCommand {
 #[derive(Subcommand)]
 enum UserCommand {
     /// Add a user (or replace one of that name) to a users file, created when missing; the
-    /// password is asked for (read from stdin when it is not a terminal) and stored as an argon2id
-    /// hash.
+    /// password (at least 8 characters) is asked for (read from stdin when it is not a terminal)
+    /// and stored as an argon2id hash.
     Add {
         /// The users file.
         file: PathBuf,
@@ -503,11 +503,11 @@ fn check(file: &std::path::Path) -> ExitCode {
         Err(e) => file_error(&e),
         Ok(c) if c.report.warnings.is_empty() && c.warnings.is_empty() => {
             println!(
-                "{}: valid ({} media, {} modules, {} bridges)",
+                "{}: valid ({}, {}, {})",
                 spec.file,
-                spec.media.len(),
-                spec.modules.len(),
-                spec.bridges.len()
+                counted(spec.media.len(), "medium", "media"),
+                counted(spec.modules.len(), "module", "modules"),
+                counted(spec.bridges.len(), "bridge", "bridges")
             );
             ExitCode::SUCCESS
         }
@@ -543,11 +543,11 @@ fn layout_check(layout: &std::path::Path, system: &std::path::Path) -> ExitCode 
         eprintln!("{w}");
     }
     println!(
-        "{}: valid ({} widgets, {} commands, {} bindings)",
+        "{}: valid ({}, {}, {})",
         layout.file,
-        layout.widget_count(),
-        layout.commands.len(),
-        layout.bindings().len()
+        counted(layout.widget_count(), "widget", "widgets"),
+        counted(layout.commands.len(), "command", "commands"),
+        counted(layout.bindings().len(), "binding", "bindings")
     );
     ExitCode::SUCCESS
 }
@@ -657,22 +657,49 @@ impl Outgoing {
     }
 }
 
+/// `n` and the word for it: `one` when `n` is 1, else `many` (`1 medium`, `3 media`).
+pub(crate) fn counted(n: impl TryInto<u64>, one: &str, many: &str) -> String {
+    match n.try_into().unwrap_or(u64::MAX) {
+        1 => format!("1 {one}"),
+        n => format!("{n} {many}"),
+    }
+}
+
+/// `seabus types`: each list in columns as wide as their longest entry.
 fn types() {
     let reg = registry();
+    let width = |names: &mut dyn Iterator<Item = usize>| names.max().unwrap_or(0);
+    let modules: Vec<_> = reg.module_types().collect();
+    let (name_w, kind_w) = (
+        width(&mut modules.iter().map(|t| t.name.len())),
+        width(&mut modules.iter().map(|t| t.kind.name().len())),
+    );
     println!("module types:");
-    for t in reg.module_types() {
-        println!("  {:<14} {:<11} {}", t.name, t.kind.name(), t.summary);
+    for t in &modules {
+        println!(
+            "  {:<name_w$}  {:<kind_w$}  {}",
+            t.name,
+            t.kind.name(),
+            t.summary
+        );
     }
+    let bridges: Vec<_> = reg.bridge_types().collect();
+    let name_w = width(&mut bridges.iter().map(|t| t.name.len()));
     println!("bridge types:");
-    for t in reg.bridge_types() {
-        println!("  {:<14} {}", t.name, t.summary);
+    for t in &bridges {
+        println!("  {:<name_w$}  {}", t.name, t.summary);
     }
     println!("medium schemes: {}", media::schemes().names().join(", "));
     println!("standard datasets:");
-    for d in Catalogue::built_in().iter() {
+    let catalogue = Catalogue::built_in();
+    let (name_w, topic_w) = (
+        width(&mut catalogue.iter().map(|d| d.name.len())),
+        width(&mut catalogue.iter().map(|d| d.topic.len())),
+    );
+    for d in catalogue.iter() {
         let required: Vec<&str> = d.required().map(|f| f.name.as_str()).collect();
         println!(
-            "  {:<18} {:<14} required: {}",
+            "  {:<name_w$}  {:<topic_w$}  required: {}",
             d.name,
             d.topic,
             required.join(", ")

@@ -83,10 +83,7 @@ fn compile_channels(cmd: &str, regex: Option<&str>) -> Result<Option<ChannelRege
 
 /// `n` and `word`, in the plural unless `n` is 1 (`1 event`, `3 events`).
 fn count(n: impl Into<u64>, word: &str) -> String {
-    match n.into() {
-        1 => format!("1 {word}"),
-        n => format!("{n} {word}s"),
-    }
+    crate::counted(n.into(), word, &format!("{word}s"))
 }
 
 /// Microseconds since the Unix epoch, now.

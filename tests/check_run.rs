@@ -344,7 +344,7 @@ fn a_valid_console_is_accepted_by_both() {
     assert_eq!(
         String::from_utf8_lossy(&out.stdout),
         format!(
-            "{}: valid (1 media, 1 modules, 0 bridges)\n",
+            "{}: valid (1 medium, 1 module, 0 bridges)\n",
             dir.path().join("system.xml").display()
         )
     );
