@@ -15,12 +15,7 @@ fn spy_ended_by_sigterm_prints_its_table_as_on_ctrl_c() {
         ("SIGINT", interrupt),
     ] {
         let url = format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port());
-        let spy = seabus()
-            .args(["spy", &url, "--for", "20"])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spy starts");
+        let spy = spawn_spy(&url, &["--for", "20"]);
         std::thread::sleep(Duration::from_millis(500));
         let out = seabus()
             .args([

@@ -8,7 +8,6 @@
 
 mod common;
 use common::*;
-use std::io::BufRead;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -51,15 +50,7 @@ fn subscriber(peer: &Path, url: &str, secs: u32) -> (Running, std::sync::mpsc::R
             .spawn()
             .expect("the subscriber starts"),
     );
-    let (tx, rx) = std::sync::mpsc::channel();
-    let out = sub.0.stdout.take().expect("piped");
-    std::thread::spawn(move || {
-        for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if tx.send(line).is_err() {
-                return;
-            }
-        }
-    });
+    let rx = lines_of(sub.0.stdout.take().expect("piped"), Some);
     assert_eq!(
         rx.recv_timeout(Duration::from_secs(5)).as_deref(),
         Ok("ready"),
@@ -98,20 +89,8 @@ fn odd_lcm_channel_names_are_recorded_shown_and_replayed_as_they_came() {
     let peer = build_peer(dir.path());
     let url = lcm_url();
     let log = dir.path().join("odd.lcm");
-    let record = seabus()
-        .args(["record", &url])
-        .arg(&log)
-        .args(["--for", "3"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("record starts");
-    let spy = seabus()
-        .args(["spy", &url, "--for", "3"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spy starts");
+    let record = spawn_record(&url, &log, 3);
+    let spy = spawn_spy(&url, &["--for", "3"]);
     std::thread::sleep(Duration::from_millis(700));
     let out = Command::new(&peer)
         .arg("pub")

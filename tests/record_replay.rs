@@ -564,14 +564,7 @@ fn a_recording_exported_and_replayed_from_its_folder_gives_the_same_messages() {
     // `seabus record` to the README's name, while a simulated vehicle publishes datamaps and
     // `seabus pub` XML text
     let log = logs.join("dive.lcm");
-    let record = seabus()
-        .args(["record", &url])
-        .arg(&log)
-        .args(["--for", "4"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("record starts");
+    let record = spawn_record(&url, &log, 4);
     std::thread::sleep(Duration::from_millis(500));
     let system = format!(
         r#"<seabus node="rec-src">

@@ -249,7 +249,6 @@ pub fn wait_for_path(path: &Path, limit: Duration) -> bool {
 
 /// Starts `seabus spy URL --json --for SECS`; its messages arrive on the receiver as JSON values.
 pub fn spy_json(url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<serde_json::Value>) {
-    use std::io::BufRead;
     let mut spy = Running(
         seabus()
             .args(["spy", url, "--json", "--for", &secs.to_string()])
@@ -258,18 +257,52 @@ pub fn spy_json(url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<ser
             .spawn()
             .expect("spy starts"),
     );
-    let (tx, rx) = std::sync::mpsc::channel();
     let out = spy.0.stdout.take().expect("spy's output is piped");
+    (spy, lines_of(out, |l| serde_json::from_str(&l).ok()))
+}
+
+/// The lines a child writes to `out`, each made a `T` by `read` (those it gives `None` left out),
+/// on a receiver, read by a thread of their own until the child closes its output.
+pub fn lines_of<T: Send + 'static>(
+    out: impl std::io::Read + Send + 'static,
+    read: impl Fn(String) -> Option<T> + Send + 'static,
+) -> std::sync::mpsc::Receiver<T> {
+    use std::io::BufRead;
+    let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line)
+            if let Some(v) = read(line)
                 && tx.send(v).is_err()
             {
                 return;
             }
         }
     });
-    (spy, rx)
+    rx
+}
+
+/// Starts `seabus record URL FILE --for SECS`, its standard error captured (the summary).
+pub fn spawn_record(url: &str, file: &Path, secs: u32) -> Child {
+    seabus()
+        .args(["record", url])
+        .arg(file)
+        .args(["--for", &secs.to_string()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("record starts")
+}
+
+/// Starts `seabus spy URL ARGS…` (the table, unless ARGS say `--json`), its output captured.
+pub fn spawn_spy(url: &str, args: &[&str]) -> Child {
+    seabus()
+        .arg("spy")
+        .arg(url)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spy starts")
 }
 
 /// Waits for a spy line that `pred` accepts, at most `limit`; every line read is kept in `seen`.
