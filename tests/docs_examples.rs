@@ -59,20 +59,35 @@ fn examples(page: &Path) -> Vec<String> {
     out
 }
 
-/// A case's command line as a page would write it (arguments with spaces quoted).
-fn command_of(case: &Path) -> String {
+/// A case's command: the program and its arguments.
+fn command_of(case: &Path) -> Vec<String> {
     let text = std::fs::read_to_string(case).expect("the case reads");
     let doc: toml_like::Case = toml_like::parse(&text);
     std::iter::once("seabus".to_string())
-        .chain(doc.args.into_iter().map(|a| {
-            if a.contains(' ') {
-                format!("\"{a}\"")
-            } else {
-                a
+        .chain(doc.args)
+        .collect()
+}
+
+/// The words of a command line as a shell splits them: at spaces outside quotes, the quotes
+/// (`'…'`, `"…"`) taken off.
+fn words(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut word: Option<String> = None;
+    let mut quote: Option<char> = None;
+    for c in line.chars() {
+        match (quote, c) {
+            (Some(q), c) if c == q => quote = None,
+            (Some(_), c) => word.get_or_insert_with(String::new).push(c),
+            (None, '\'' | '"') => {
+                quote = Some(c);
+                word.get_or_insert_with(String::new);
             }
-        }))
-        .collect::<Vec<_>>()
-        .join(" ")
+            (None, c) if c.is_whitespace() => out.extend(word.take()),
+            (None, c) => word.get_or_insert_with(String::new).push(c),
+        }
+    }
+    out.extend(word);
+    out
 }
 
 /// Just enough of a case file to know its arguments: the `args = [ … ]` line.
@@ -109,14 +124,14 @@ fn every_example_of_the_pages_is_run_or_says_why_not() {
     }
     assert!(wanted.len() >= 40, "{wanted:?}");
 
-    let cases: BTreeSet<String> = std::fs::read_dir(root().join("tests/cmd"))
+    let cases: BTreeSet<Vec<String>> = std::fs::read_dir(root().join("tests/cmd"))
         .expect("tests/cmd")
         .map(|e| e.expect("an entry").path())
         .filter(|p| p.extension().is_some_and(|x| x == "toml"))
         .map(|p| command_of(&p))
         .collect();
     let not_run = std::fs::read_to_string(root().join("tests/cmd/not-run.txt")).expect("reasons");
-    let mut reasons: BTreeSet<String> = BTreeSet::new();
+    let mut reasons: BTreeSet<Vec<String>> = BTreeSet::new();
     for line in not_run
         .lines()
         .filter(|l| !l.starts_with('#') && !l.is_empty())
@@ -126,14 +141,14 @@ fn every_example_of_the_pages_is_run_or_says_why_not() {
             .unwrap_or_else(|| panic!("`{line}`: a command, a tab, and why it is not run"));
         assert!(!why.trim().is_empty(), "`{command}` says no reason");
         assert!(
-            !cases.contains(command),
+            !cases.contains(&words(command)),
             "`{command}` is run and said not to be"
         );
-        reasons.insert(command.to_string());
+        reasons.insert(words(command));
     }
     let missing: Vec<String> = wanted
         .iter()
-        .filter(|(c, _)| !cases.contains(c) && !reasons.contains(c))
+        .filter(|(c, _)| !cases.contains(&words(c)) && !reasons.contains(&words(c)))
         .map(|(c, page)| format!("{page}: {c}"))
         .collect();
     assert!(
@@ -141,11 +156,11 @@ fn every_example_of_the_pages_is_run_or_says_why_not() {
         "examples neither run (tests/cmd/*.toml) nor said not to be (tests/cmd/not-run.txt):\n{}",
         missing.join("\n")
     );
-    let on_pages: BTreeSet<&String> = wanted.iter().map(|(c, _)| c).collect();
-    let stale: Vec<&String> = cases
+    let on_pages: BTreeSet<Vec<String>> = wanted.iter().map(|(c, _)| words(c)).collect();
+    let stale: Vec<&Vec<String>> = cases
         .iter()
         .chain(&reasons)
-        .filter(|c| !on_pages.contains(c))
+        .filter(|c| !on_pages.contains(*c))
         .collect();
     assert!(
         stale.is_empty(),
