@@ -456,13 +456,7 @@ fn a_copy_of_the_demo_runs_with_its_files_and_is_refused_alike_without_them() {
     assert_eq!(out.status.code(), Some(0), "{out:?}");
     let mut running = spawn_run(&copy, &["--for", "20"]);
     let (password, url) = one_time_password(&mut running, "pilot");
-    let answer = http_login(&url, "pilot", &password);
-    assert!(
-        answer
-            .to_lowercase()
-            .contains("set-cookie: seabus_session="),
-        "{answer}"
-    );
+    assert_logs_in(&url, "pilot", &password);
     drop(running);
     // alone: both refuse it, naming the health rules file that did not travel
     let alone = tempfile::tempdir().expect("a temporary directory");

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{Running, group, http_login, one_time_password, seabus, spy_json, wait_for_line};
+use common::{Running, assert_logs_in, group, one_time_password, seabus, spy_json, wait_for_line};
 use fantoccini::{Client, ClientBuilder, Locator};
 use serde_json::{Value as Json, json};
 use std::io::{BufRead, Write};
@@ -886,13 +886,7 @@ fn only_a_loopback_console_makes_passwords_of_its_own_and_it_prints_them() {
             .expect("the demo starts"),
     );
     let (password, url) = one_time_password(&mut demo, "observer");
-    let answer = http_login(&url, "observer", &password);
-    assert!(
-        answer
-            .to_lowercase()
-            .contains("set-cookie: seabus_session="),
-        "{answer}"
-    );
+    assert_logs_in(&url, "observer", &password);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -508,6 +508,18 @@ pub fn one_time_password(run: &mut Running, name: &str) -> (String, String) {
     )
 }
 
+/// Logs in to the console at `url` (`http://ADDR`) as a browser's form does; fails unless the
+/// console answers with a session.
+pub fn assert_logs_in(url: &str, name: &str, password: &str) {
+    let answer = http_login(url, name, password);
+    assert!(
+        answer
+            .to_lowercase()
+            .contains("set-cookie: seabus_session="),
+        "{name} does not log in: {answer}"
+    );
+}
+
 /// Logs in to the console at `url` (`http://ADDR`) as a browser's form does; the whole answer.
 pub fn http_login(url: &str, name: &str, password: &str) -> String {
     use std::io::Write;
