@@ -25,7 +25,8 @@ const DEMO_FILES: [(&str, &str); 3] = [
     ),
 ];
 
-/// The demo's users: name and roles; their passwords are made at each start and printed.
+/// The one-time users of a console on a loopback address without a users file (the demo's):
+/// name and roles; their passwords are made at each start and printed.
 const DEMO_USERS: [(&str, &[&str]); 4] = [
     ("pilot", &["pilot", "designer"]),
     ("copilot", &["pilot"]),
@@ -49,6 +50,9 @@ pub async fn start(
         ..
     } in ready
     {
+        let Some(users) = users else {
+            return Err(cs.element.error("the console has no users").to_string());
+        };
         let Some(medium) = runtime.medium(&cs.medium) else {
             return Err(cs
                 .element
@@ -73,8 +77,12 @@ pub async fn start(
     Ok(out)
 }
 
-/// The demo's users with fresh passwords, printed.
-pub fn demo_users() -> Result<Users, String> {
+/// Gives the consoles without a users file (those on a loopback address) one-time users: the
+/// demo's names and roles with fresh passwords, made once for all of them, and printed.
+pub fn one_time_users(ready: &mut [console::Ready]) -> Result<(), String> {
+    if ready.iter().all(|r| r.users.is_some()) {
+        return Ok(());
+    }
     let passwords: Vec<String> = DEMO_USERS
         .iter()
         .map(|_| users::random_password())
@@ -84,12 +92,15 @@ pub fn demo_users() -> Result<Users, String> {
         .zip(&passwords)
         .map(|((name, roles), pw)| (*name, *roles, pw.as_str()))
         .collect();
-    let users = Users::with_passwords(&list)?;
+    let made = Users::with_passwords(&list)?;
     eprintln!("  The console's users for this run (name / password / roles):");
     for (name, roles, pw) in &list {
         eprintln!("    {name:<10} {pw}   {}", roles.join(", "));
     }
-    Ok(users)
+    for r in ready.iter_mut().filter(|r| r.users.is_none()) {
+        r.users = Some(made.clone());
+    }
+    Ok(())
 }
 
 /// `seabus user add FILE NAME --roles "…"`: asks for the password (twice on a terminal, once

@@ -11,8 +11,9 @@ use std::process::ExitCode;
 /// What `seabus export` was asked to do.
 #[derive(clap::Args)]
 pub struct ExportArgs {
-    /// Log files (LCM event logs or MCAP), or directories whose `.lcmlog` and `.mcap` files are
-    /// read (in name order).
+    /// Log files (LCM event logs or MCAP), or folders whose logs are read (in name order): every
+    /// file that is an LCM event log or MCAP file by its first bytes, whatever it is named; the
+    /// others are named as skipped.
     #[arg(required = true)]
     pub logs: Vec<PathBuf>,
     /// Only events from this time on: seconds since 1970, or RFC 3339 (2026-11-21T10:00:00Z).
@@ -43,17 +44,24 @@ fn parse_time(text: &str) -> Option<f64> {
     })
 }
 
-/// The files a path names.
-fn files(path: &Path) -> std::io::Result<Vec<PathBuf>> {
+/// The logs a path names: the file itself, or the logs in a folder (the others are said to be
+/// skipped); a folder without any is an error.
+fn files(path: &Path) -> Result<Vec<PathBuf>, String> {
     if !path.is_dir() {
         return Ok(vec![path.to_path_buf()]);
     }
-    let mut v: Vec<PathBuf> = std::fs::read_dir(path)?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|x| x == "lcmlog" || x == "mcap"))
-        .collect();
-    v.sort();
-    Ok(v)
+    let (logs, skipped) =
+        seabus_record::log::logs_in(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    for (file, why) in &skipped {
+        eprintln!("seabus export: skipped {}: {why}", file.display());
+    }
+    if logs.is_empty() {
+        return Err(format!(
+            "{}: no LCM event log or MCAP file in this folder",
+            path.display()
+        ));
+    }
+    Ok(logs)
 }
 
 /// An event's payload as a datamap: a datamap as it is, bytes that are a binary datamap decoded,
@@ -90,8 +98,10 @@ impl CsvFiles {
     fn row(&mut self, topic: &str, time: f64, map: &DataMap) -> std::io::Result<()> {
         if !self.files.contains_key(topic) {
             let columns: Vec<String> = map.iter().map(|(k, _)| k.to_string()).collect();
+            // (an LCM channel may hold a `/`: the file stays in the folder all the same)
+            let name = topic.replace(['/', '\\'], "_");
             let mut out = std::io::BufWriter::new(std::fs::File::create(
-                self.dir.join(format!("{topic}.csv")),
+                self.dir.join(format!("{name}.csv")),
             )?);
             writeln!(out, "time,{}", columns.join(","))?;
             self.files.insert(topic.to_string(), (out, columns));
@@ -108,6 +118,16 @@ impl CsvFiles {
         }
         writeln!(out, "{row}")
     }
+}
+
+/// The exit for output that cannot be written: a reader that stopped reading (`seabus export |
+/// head`) ends the export quietly, as with any command-line filter; anything else is an error.
+fn write_failed(e: &std::io::Error) -> ExitCode {
+    if e.kind() == std::io::ErrorKind::BrokenPipe {
+        return ExitCode::SUCCESS;
+    }
+    eprintln!("seabus export: cannot write: {e}");
+    ExitCode::from(1)
 }
 
 /// Runs `seabus export`.
@@ -161,7 +181,7 @@ pub fn export(args: ExportArgs) -> ExitCode {
     for path in &args.logs {
         let list = match files(path) {
             Ok(l) => l,
-            Err(e) => return usage(format!("{}: {e}", path.display())),
+            Err(e) => return usage(e),
         };
         for file in list {
             let mut reader = match Reader::open(&file) {
@@ -182,7 +202,8 @@ pub fn export(args: ExportArgs) -> ExitCode {
                 if from.is_some_and(|f| t < f) || to.is_some_and(|e| t >= e) {
                     continue;
                 }
-                let Ok(topic) = Topic::new(&event.channel) else {
+                // every channel as it was logged, a name that is not a seabus topic too
+                let Ok(topic) = Topic::channel(&event.channel) else {
                     continue;
                 };
                 if !pattern.matches(&topic) {
@@ -203,8 +224,7 @@ pub fn export(args: ExportArgs) -> ExitCode {
                     }
                 };
                 if let Err(e) = written {
-                    eprintln!("seabus export: cannot write: {e}");
-                    return ExitCode::from(1);
+                    return write_failed(&e);
                 }
                 exported += 1;
             }
@@ -216,8 +236,7 @@ pub fn export(args: ExportArgs) -> ExitCode {
             .try_for_each(|(f, _)| f.flush())
     });
     if let Err(e) = flushed {
-        eprintln!("seabus export: cannot write: {e}");
-        return ExitCode::from(1);
+        return write_failed(&e);
     }
     eprintln!("seabus export: {exported} events");
     if damaged {

@@ -94,13 +94,15 @@ enum Command {
     /// Record the traffic on a medium to an LCM event log, until Ctrl-C, SIGTERM or --for.
     ///
     /// The log is the file lcm-logger writes: one event per message, channel = topic, timestamp =
-    /// arrival, data = the payload's bytes (datamaps in the binary form, XML as text). Exit 0; 1 when
+    /// arrival, data = the payload's bytes (datamaps in the binary form, XML as text, each
+    /// channel's format said in a `seabus.log.format` event where it is not bytes). Exit 0; 1 when
     /// the file could not be written; 2 when the arguments, file or medium cannot be used.
     Record(record::RecordArgs),
     /// Publish the events of an LCM event log on a medium, paced by their timestamps.
     ///
-    /// Each event is sent as data: channel = topic, data = bytes payload; channels that are not
-    /// seabus topics are skipped and counted. Exit 0; 1 when the log is damaged (the events before
+    /// Each event is sent as data: channel = topic, payload = the data in the format the log
+    /// keeps for it (datamaps and XML from seabus's recordings, bytes otherwise); channels that
+    /// are not seabus topics are skipped and counted. A folder replays every log in it. Exit 0; 1 when the log is damaged (the events before
     /// the damage are sent, and its byte offset is shown); 2 when the arguments, file or medium
     /// cannot be used; 3 when the medium refused events.
     Replay(record::ReplayArgs),
@@ -153,8 +155,8 @@ enum LayoutCommand {
 #[derive(Subcommand)]
 enum UserCommand {
     /// Add a user (or replace one of that name) to a users file, created when missing; the
-    /// password is asked for (read from stdin when it is not a terminal) and stored as an argon2id
-    /// hash.
+    /// password (at least 8 characters) is asked for (read from stdin when it is not a terminal)
+    /// and stored as an argon2id hash.
     Add {
         /// The users file.
         file: PathBuf,
@@ -460,7 +462,7 @@ fn seconds(value: Option<f64>) -> Result<Option<Duration>, ExitCode> {
 }
 
 /// Runs a system until Ctrl-C, SIGTERM or `duration`; `demo_dir` is the demo's own directory
-/// (its consoles get the demo's users; it is removed at the end). Nothing starts unless the system
+/// (removed at the end). Nothing starts unless the system
 /// passes the same validation as `seabus check`; its warnings are logged.
 async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>) -> ExitCode {
     let duration = match seconds(duration) {
@@ -469,20 +471,17 @@ async fn run(spec: SystemSpec, duration: Option<f64>, demo_dir: Option<PathBuf>)
     };
     let registry = registry();
     let catalogue = Catalogue::built_in();
-    let given = match demo_dir.as_ref().map(|_| console::demo_users()).transpose() {
-        Ok(users) => users,
-        Err(e) => {
-            eprintln!("seabus demo: {e}");
-            return ExitCode::from(2);
-        }
-    };
-    let checked = match seabus_ui::console::check(&spec, &registry, &catalogue, given.as_ref()) {
+    let mut checked = match seabus_ui::console::check(&spec, &registry, &catalogue) {
         Ok(c) => c,
         Err(e) => return file_error(&e),
     };
     // the system's own warnings are logged by the runtime as it starts
     for w in &checked.warnings {
         tracing::warn!("{w}");
+    }
+    if let Err(e) = console::one_time_users(&mut checked.consoles) {
+        eprintln!("seabus: {e}");
+        return ExitCode::from(2);
     }
     let runtime = match Runtime::start(&spec, &registry, catalogue).await {
         Ok(r) => r,
@@ -555,16 +554,16 @@ fn check(file: &std::path::Path) -> ExitCode {
         Ok(s) => s,
         Err(e) => return file_error(&e),
     };
-    let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in(), None);
+    let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in());
     match checked {
         Err(e) => file_error(&e),
         Ok(c) if c.report.warnings.is_empty() && c.warnings.is_empty() => {
             println!(
-                "{}: valid ({} media, {} modules, {} bridges)",
+                "{}: valid ({}, {}, {})",
                 spec.file,
-                spec.media.len(),
-                spec.modules.len(),
-                spec.bridges.len()
+                counted(spec.media.len(), "medium", "media"),
+                counted(spec.modules.len(), "module", "modules"),
+                counted(spec.bridges.len(), "bridge", "bridges")
             );
             ExitCode::SUCCESS
         }
@@ -600,11 +599,11 @@ fn layout_check(layout: &std::path::Path, system: &std::path::Path) -> ExitCode 
         eprintln!("{w}");
     }
     println!(
-        "{}: valid ({} widgets, {} commands, {} bindings)",
+        "{}: valid ({}, {}, {})",
         layout.file,
-        layout.widget_count(),
-        layout.commands.len(),
-        layout.bindings().len()
+        counted(layout.widget_count(), "widget", "widgets"),
+        counted(layout.commands.len(), "command", "commands"),
+        counted(layout.bindings().len(), "binding", "bindings")
     );
     ExitCode::SUCCESS
 }
@@ -731,22 +730,49 @@ impl Outgoing {
     }
 }
 
+/// `n` and the word for it: `one` when `n` is 1, else `many` (`1 medium`, `3 media`).
+pub(crate) fn counted(n: impl TryInto<u64>, one: &str, many: &str) -> String {
+    match n.try_into().unwrap_or(u64::MAX) {
+        1 => format!("1 {one}"),
+        n => format!("{n} {many}"),
+    }
+}
+
+/// `seabus types`: each list in columns as wide as their longest entry.
 fn types() {
     let reg = registry();
+    let width = |names: &mut dyn Iterator<Item = usize>| names.max().unwrap_or(0);
+    let modules: Vec<_> = reg.module_types().collect();
+    let (name_w, kind_w) = (
+        width(&mut modules.iter().map(|t| t.name.len())),
+        width(&mut modules.iter().map(|t| t.kind.name().len())),
+    );
     println!("module types:");
-    for t in reg.module_types() {
-        println!("  {:<14} {:<11} {}", t.name, t.kind.name(), t.summary);
+    for t in &modules {
+        println!(
+            "  {:<name_w$}  {:<kind_w$}  {}",
+            t.name,
+            t.kind.name(),
+            t.summary
+        );
     }
+    let bridges: Vec<_> = reg.bridge_types().collect();
+    let name_w = width(&mut bridges.iter().map(|t| t.name.len()));
     println!("bridge types:");
-    for t in reg.bridge_types() {
-        println!("  {:<14} {}", t.name, t.summary);
+    for t in &bridges {
+        println!("  {:<name_w$}  {}", t.name, t.summary);
     }
     println!("medium schemes: {}", media::schemes().names().join(", "));
     println!("standard datasets:");
-    for d in Catalogue::built_in().iter() {
+    let catalogue = Catalogue::built_in();
+    let (name_w, topic_w) = (
+        width(&mut catalogue.iter().map(|d| d.name.len())),
+        width(&mut catalogue.iter().map(|d| d.topic.len())),
+    );
+    for d in catalogue.iter() {
         let required: Vec<&str> = d.required().map(|f| f.name.as_str()).collect();
         println!(
-            "  {:<18} {:<14} required: {}",
+            "  {:<name_w$}  {:<topic_w$}  required: {}",
             d.name,
             d.topic,
             required.join(", ")
@@ -763,10 +789,7 @@ mod tests {
         // as `seabus demo` runs it: from its own directory, with its built-in files and users
         let (dir, file) = console::write_demo(DEMO).unwrap();
         let spec = SystemSpec::load(&file).unwrap();
-        let users =
-            seabus_ui::users::Users::with_passwords(&[("pilot", &["pilot"], "pw")]).unwrap();
-        let checked =
-            seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in(), Some(&users));
+        let checked = seabus_ui::console::check(&spec, &registry(), &Catalogue::built_in());
         std::fs::remove_dir_all(dir).unwrap();
         let checked = checked.unwrap();
         assert!(
@@ -777,5 +800,7 @@ mod tests {
         assert!(checked.warnings.is_empty(), "{:?}", checked.warnings);
         assert_eq!(checked.consoles.len(), 1);
         assert_eq!(checked.consoles[0].layouts.len(), 2);
+        // a console on 127.0.0.1 without a users file: its users are made as it starts
+        assert!(checked.consoles[0].users.is_none());
     }
 }

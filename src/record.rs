@@ -6,7 +6,9 @@
 //! timestamp is when `seabus record` received the message (microseconds since the Unix epoch, never
 //! going back, as `lcm-logger` stamps events on arrival), and the data is the payload's bytes: a
 //! byte payload as it is (on an LCM medium, the LCM message), a datamap in seabus's binary form,
-//! XML as its text. Kind (data or command) and provenance are not kept: a log has no room for them.
+//! XML as its text; a channel whose payloads are not bytes has its format said in a
+//! [`FORMAT_CHANNEL`](seabus_record::log::FORMAT_CHANNEL) event. Kind (data or command) and
+//! provenance are not kept: a log has no room for them.
 //!
 //! Recording to MCAP (a file named `.mcap`, or `--format mcap`) writes one channel per topic with
 //! its JSON Schema, datamaps as JSON, log time = when it was received, publish time = the message's
@@ -14,8 +16,9 @@
 //! is closed, so a recording cut short by a crash reads up to there.
 //!
 //! Replaying publishes each event as data — never as a command, whatever it was recorded as — the
-//! channel as topic, paced by the log's timestamps: an LCM event's data as a byte payload, an MCAP
-//! message by its encoding (JSON as a datamap, other encodings as bytes).
+//! channel as topic, paced by the log's timestamps: an LCM event's data in the format its log
+//! says (bytes unless a format event says otherwise), an MCAP message by its encoding (JSON as a
+//! datamap, other encodings as bytes).
 
 use seabus_medium::ChannelRegex;
 use seabus_medium::{Interface, Kind, Message, Node, SendError, Stamp, Topic};
@@ -80,10 +83,7 @@ fn compile_channels(cmd: &str, regex: Option<&str>) -> Result<Option<ChannelRege
 
 /// `n` and `word`, in the plural unless `n` is 1 (`1 event`, `3 events`).
 fn count(n: impl Into<u64>, word: &str) -> String {
-    match n.into() {
-        1 => format!("1 {word}"),
-        n => format!("{n} {word}s"),
-    }
+    crate::counted(n.into(), word, &format!("{word}s"))
 }
 
 /// Microseconds since the Unix epoch, now.
@@ -259,7 +259,9 @@ impl Recording {
 #[derive(clap::Args)]
 pub struct ReplayArgs {
     /// The log file: an LCM event log (seabus record, lcm-logger, any LCM event-log writer) or an
-    /// MCAP file (seabus record, Foxglove, ROS 2, Python's mcap), told apart by its first bytes.
+    /// MCAP file (seabus record, Foxglove, ROS 2, Python's mcap), told apart by its first bytes; or
+    /// a folder, whose logs (its files that are either, whatever they are named) are replayed one
+    /// after another in name order.
     pub file: PathBuf,
     /// The medium, for example udp://239.255.42.1:47800.
     pub url: String,
@@ -315,7 +317,8 @@ fn due(clock0: Instant, log0: i64, timestamp: i64, speed: f64) -> Option<Instant
 struct Channel {
     /// Whether `--channels` lets it through.
     allowed: bool,
-    /// The topic, when the channel is a valid seabus topic.
+    /// The topic: the channel when it is a seabus topic, or when the medium takes channel names
+    /// that are not (LCM), the channel as it is.
     topic: Option<Topic>,
     /// Events sent.
     sent: u64,
@@ -343,17 +346,30 @@ enum PassEnd {
     Done,
     /// Ctrl-C or SIGTERM.
     Stopped,
-    /// The log is damaged.
-    Damaged(Damage),
-    /// The log could not be opened.
-    Unreadable(std::io::Error),
+    /// A log is damaged.
+    Damaged(PathBuf, Damage),
+    /// A log could not be opened.
+    Unreadable(PathBuf, std::io::Error),
     /// The medium was closed.
     Closed,
 }
 
+/// Where pacing counts from in a pass: its first event's log time, the log time and clock time of
+/// the event pacing started again from, and the last event's log time.
+struct Pacing {
+    first: Option<i64>,
+    base: Option<(i64, Instant)>,
+    previous: i64,
+}
+
 /// Replays a log: options checked, pacing and counts kept across passes.
 struct Replay<'a> {
+    /// What was given: a log or a folder.
     file: &'a Path,
+    /// The logs, in the order they are replayed.
+    logs: Vec<PathBuf>,
+    /// Whether the medium takes channel names that are not seabus topics (LCM).
+    names_channels: bool,
     port: Interface,
     speed: Option<f64>,
     from_micros: i64,
@@ -369,7 +385,11 @@ impl Replay<'_> {
         if !self.channels.contains_key(name) {
             let channel = Channel {
                 allowed: self.filter.as_ref().is_none_or(|f| f.matches(name)),
-                topic: Topic::new(name).ok(),
+                topic: if self.names_channels {
+                    Topic::channel(name).ok()
+                } else {
+                    Topic::new(name).ok()
+                },
                 sent: 0,
             };
             self.channels.insert(name.into(), channel);
@@ -380,26 +400,48 @@ impl Replay<'_> {
             .unwrap_or_else(|| unreachable!("channel {name} was just inserted"))
     }
 
-    /// One pass over the log.
+    /// One pass over the logs: one after another, paced as one.
     async fn pass(&mut self, stop: &mut (impl Future<Output = ()> + Unpin)) -> PassEnd {
-        let mut reader = match Reader::open(self.file) {
-            Ok(r) => r,
-            Err(e) => return PassEnd::Unreadable(e),
-        };
         self.tally.passes += 1;
+        let mut pacing = Pacing {
+            first: None,
+            base: None,
+            previous: i64::MIN,
+        };
+        for log in self.logs.clone() {
+            match self.pass_one(&log, &mut pacing, stop).await {
+                PassEnd::Done => {}
+                end => return end,
+            }
+        }
+        PassEnd::Done
+    }
+
+    /// One log of a pass.
+    async fn pass_one(
+        &mut self,
+        log: &Path,
+        pacing: &mut Pacing,
+        stop: &mut (impl Future<Output = ()> + Unpin),
+    ) -> PassEnd {
+        let mut reader = match Reader::open(log) {
+            Ok(r) => r,
+            Err(e) => return PassEnd::Unreadable(log.to_path_buf(), e),
+        };
         self.bar.set_length(reader.size().unwrap_or(0));
         self.bar.set_position(0);
-        let mut first: Option<i64> = None;
-        // the log time and the clock time pacing counts from
-        let mut base: Option<(i64, Instant)> = None;
-        let mut previous = i64::MIN;
+        let Pacing {
+            first,
+            base,
+            previous,
+        } = pacing;
         let mut shown = Instant::now();
         loop {
             let (timestamp, topic, payload) = {
                 let event = match reader.next_event() {
                     Ok(Some(e)) => e,
                     Ok(None) => return PassEnd::Done,
-                    Err(d) => return PassEnd::Damaged(d),
+                    Err(d) => return PassEnd::Damaged(log.to_path_buf(), d),
                 };
                 let start = *first.get_or_insert(event.micros);
                 if event.micros < start.saturating_add(self.from_micros) {
@@ -421,10 +463,10 @@ impl Replay<'_> {
             if let Some(speed) = self.speed {
                 // a timestamp going back starts the pacing again from this event
                 let (log0, clock0) = match base {
-                    Some(b) if timestamp >= previous => b,
+                    Some(b) if timestamp >= *previous => *b,
                     _ => *base.insert((timestamp, Instant::now())),
                 };
-                previous = timestamp;
+                *previous = timestamp;
                 match due(clock0, log0, timestamp, speed) {
                     Some(at) if at <= Instant::now() => {}
                     // waiting beyond any clock: until stopped
@@ -536,10 +578,29 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
         Ok(c) => c,
         Err(code) => return code,
     };
-    // the file must be readable before anything is sent
-    if let Err(e) = std::fs::File::open(&args.file) {
-        return usage(format!("{}: cannot open: {e}", args.file.display()));
-    }
+    // the logs must be there before anything is sent
+    let logs = if args.file.is_dir() {
+        match seabus_record::log::logs_in(&args.file) {
+            Err(e) => return usage(format!("{}: {e}", args.file.display())),
+            Ok((logs, skipped)) => {
+                for (file, why) in &skipped {
+                    eprintln!("seabus replay: skipped {}: {why}", file.display());
+                }
+                if logs.is_empty() {
+                    return usage(format!(
+                        "{}: no LCM event log or MCAP file in this folder",
+                        args.file.display()
+                    ));
+                }
+                logs
+            }
+        }
+    } else {
+        if let Err(e) = std::fs::File::open(&args.file) {
+            return usage(format!("{}: cannot open: {e}", args.file.display()));
+        }
+        vec![args.file.clone()]
+    };
     let node = Node::new(&format!("replay-{}", std::process::id()));
     let medium = match crate::media::schemes().open("replay", &args.url, &node) {
         Ok(m) => m,
@@ -560,6 +621,8 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     };
     let mut replay = Replay {
         file: &args.file,
+        logs,
+        names_channels: medium.capabilities().names_channels(),
         port: medium.attach("replay"),
         speed,
         from_micros: from.as_micros().min(i64::MAX as u128) as i64,
@@ -582,16 +645,16 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     };
     replay.bar.finish_and_clear();
     eprintln!("{}", replay.summary(started.elapsed()));
-    let file = args.file.display();
     match end {
-        PassEnd::Damaged(d) => {
+        PassEnd::Damaged(file, d) => {
             eprintln!(
-                "seabus replay: {file}: damaged at {d}; the events before it were replayed, nothing after it"
+                "seabus replay: {}: damaged at {d}; the events before it were replayed, nothing after it",
+                file.display()
             );
             ExitCode::from(DAMAGED)
         }
-        PassEnd::Unreadable(e) => {
-            eprintln!("seabus replay: {file}: cannot open: {e}");
+        PassEnd::Unreadable(file, e) => {
+            eprintln!("seabus replay: {}: cannot open: {e}", file.display());
             ExitCode::from(USAGE)
         }
         PassEnd::Closed => {

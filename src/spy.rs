@@ -79,7 +79,8 @@ fn print_table(rows: &BTreeMap<Topic, Row>, types: &Types, out: &mut impl Write,
         let _ = writeln!(
             out,
             "{:<32} {:>8} {:>9.1}  {:<22} {}",
-            shorten(topic.to_string(), 32),
+            // a channel name that is not a topic (LCM's `with space`) quoted
+            shorten(topic.shown().into_owned(), 32),
             r.count,
             r.rate,
             shorten(r.last.origin().to_string(), 22),
@@ -207,7 +208,7 @@ impl N2k {
     }
 }
 
-/// Runs the spy until `duration` passes (or Ctrl-C). LCM messages of the built-in types or those
+/// Runs the spy until `duration` passes (or Ctrl-C or SIGTERM). LCM messages of the built-in types or those
 /// of `lcm_types` are shown decoded. With `stats`, the medium's counters are printed to stderr
 /// ([`stats_line`]) every [`STATS_EVERY`] (under the table at each refresh when it is drawn live)
 /// and when the spy ends. With `n2k` (and canboat's database file, when given), CAN frames are
@@ -248,11 +249,12 @@ pub async fn spy(
     let mut last_refresh = Instant::now();
     let mut stats_every = tokio::time::interval_at(started + STATS_EVERY, STATS_EVERY);
     let stdout = std::io::stdout();
-    let ctrl_c = tokio::signal::ctrl_c();
-    tokio::pin!(ctrl_c);
+    // Ctrl-C and SIGTERM (`timeout`, a service manager) both end it with the table printed
+    let stop = crate::terminated();
+    tokio::pin!(stop);
     loop {
         tokio::select! {
-            _ = &mut ctrl_c => break,
+            _ = &mut stop => break,
             _ = async {
                 match deadline {
                     Some(d) => tokio::time::sleep_until(d).await,

@@ -140,9 +140,9 @@ fn judge(case: &Case, dir: &Path, check: &Output, run: &Output) -> Option<String
     ))
 }
 
-const NEEDS_USERS: &str = "{dir}/system.xml:4:3: a console needs `users`, a users file with password \
-     hashes (`seabus user add FILE NAME --roles pilot` writes one); only `seabus demo` makes its \
-     own users";
+const NEEDS_USERS: &str = "{dir}/system.xml:4:3: a console listening on 0.0.0.0:0 needs `users`, a \
+     users file with password hashes (`seabus user add FILE NAME --roles pilot` writes one): only a \
+     console on a loopback address (such as 127.0.0.1) makes one-time users of its own";
 
 /// Broken consoles and layouts, each with what both commands must say.
 fn cases() -> Vec<Case> {
@@ -155,8 +155,11 @@ fn cases() -> Vec<Case> {
     };
     vec![
         error(
-            "no users file",
-            &[(r#" users="users.xml""#, "")],
+            "no users file on an address beyond this machine",
+            &[
+                (r#" users="users.xml""#, ""),
+                (r#"listen="127.0.0.1:0""#, r#"listen="0.0.0.0:0""#),
+            ],
             &[],
             &[],
             NEEDS_USERS,
@@ -341,7 +344,7 @@ fn a_valid_console_is_accepted_by_both() {
     assert_eq!(
         String::from_utf8_lossy(&out.stdout),
         format!(
-            "{}: valid (1 media, 1 modules, 0 bridges)\n",
+            "{}: valid (1 medium, 1 module, 0 bridges)\n",
             dir.path().join("system.xml").display()
         )
     );
@@ -350,4 +353,123 @@ fn a_valid_console_is_accepted_by_both() {
     assert_eq!(out.status.code(), Some(0), "{err}");
     assert!(err.contains("Console: http://127.0.0.1:"), "{err}");
     assert!(!err.contains("warning:"), "{err}");
+}
+
+/// The system files among `dir`'s XML files (root element `<seabus>`), sorted.
+fn system_files(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut out: Vec<_> = std::fs::read_dir(dir)
+        .expect("the directory reads")
+        .map(|e| e.expect("an entry").path())
+        .filter(|p| p.extension().is_some_and(|x| x == "xml"))
+        .filter(|p| {
+            std::fs::read_to_string(p)
+                .expect("the file reads")
+                .contains("\n<seabus ")
+        })
+        .collect();
+    out.sort();
+    out
+}
+
+/// How `check` and `run` disagree on `file`, if they do: what `check` refuses (exit 2), `run`
+/// refuses with the same message; what `check` accepts (0 or 1), `run` runs (exit 0).
+fn disagreement(file: &Path) -> Option<String> {
+    let (c, r) = (check(file), run(file));
+    let text = |o: &Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    let agree = match c.status.code() {
+        Some(2) => r.status.code() == Some(2) && text(&c) == text(&r),
+        Some(0 | 1) => r.status.code() == Some(0),
+        _ => false,
+    };
+    (!agree).then(|| {
+        format!(
+            "{}: check exits {:?}, run {:?}\n  check: {}\n  run: {}",
+            file.display(),
+            c.status.code(),
+            r.status.code(),
+            text(&c),
+            text(&r)
+        )
+    })
+}
+
+#[test]
+fn check_and_run_agree_on_every_example_system() {
+    let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let files: Vec<_> = system_files(&configs)
+        .into_iter()
+        .chain(system_files(&configs.join("fleet")))
+        .collect();
+    assert!(files.len() >= 10, "{files:?}");
+    let wrong: Vec<String> = files.iter().filter_map(|f| disagreement(f)).collect();
+    assert!(wrong.is_empty(), "{}", wrong.join("\n\n"));
+    // the demo's system, as docs/console.md runs it: its console on 127.0.0.1 makes its own users
+    let demo = check(&configs.join("demo.xml"));
+    assert_eq!(demo.status.code(), Some(0), "{demo:?}");
+}
+
+/// A copy of `configs/demo.xml` in `dir` without its helm (the README's step 3), with the files
+/// that travel with it when `companions`; its console and Foxglove server on any free port.
+fn demo_copy(dir: &Path, companions: bool) -> std::path::PathBuf {
+    let configs = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let text = std::fs::read_to_string(configs.join("demo.xml")).expect("the demo reads");
+    let helm = text
+        .lines()
+        .find(|l| l.contains(r#"<module name="helm""#))
+        .expect("the demo has a helm");
+    // (on any free ports, so that it runs beside other programs that use the demo's)
+    let text = text
+        .replacen(helm, "", 1)
+        .replacen(
+            r#"<console medium="bus""#,
+            r#"<console listen="127.0.0.1:0" medium="bus""#,
+            1,
+        )
+        .replacen(
+            r#"<foxglove medium="bus""#,
+            r#"<foxglove listen="127.0.0.1:0" medium="bus""#,
+            1,
+        );
+    let path = dir.join("demo.xml");
+    std::fs::write(&path, text).expect("the copy is written");
+    if companions {
+        std::fs::create_dir(dir.join("console")).expect("a console folder");
+        for rel in [
+            "demo-health.xml",
+            "console/pilot.xml",
+            "console/scientist.xml",
+        ] {
+            std::fs::copy(configs.join(rel), dir.join(rel)).expect("copied");
+        }
+    }
+    path
+}
+
+#[test]
+fn a_copy_of_the_demo_runs_with_its_files_and_is_refused_alike_without_them() {
+    // with the files the README says travel with it: both accept it, and the console's one-time
+    // users log in
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let copy = demo_copy(dir.path(), true);
+    assert_eq!(disagreement(&copy), None);
+    let out = check(&copy);
+    assert_eq!(out.status.code(), Some(0), "{out:?}");
+    let mut running = spawn_run(&copy, &["--for", "20"]);
+    let (password, url) = one_time_password(&mut running, "pilot");
+    assert_logs_in(&url, "pilot", &password);
+    drop(running);
+    // alone: both refuse it, naming the health rules file that did not travel
+    let alone = tempfile::tempdir().expect("a temporary directory");
+    let copy = demo_copy(alone.path(), false);
+    assert_eq!(disagreement(&copy), None);
+    let out = check(&copy);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains(&format!(
+            "parameter `rules`: `{}` does not exist",
+            alone.path().join("demo-health.xml").display()
+        )),
+        "{err}"
+    );
 }

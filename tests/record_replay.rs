@@ -196,6 +196,16 @@ for e in lcm.EventLog(sys.argv[1], "r"):
     let events = read(&all);
     let depth = binary::encode(&DataMap::new().with("depth", Value::Int(4))).unwrap();
     let xml = br#"<datamap><int name="a">1</int></datamap>"#.to_vec();
+    // before a channel's first datamap and first XML, an event says the format of what follows
+    let said = |channel: &str, format: &str| {
+        binary::encode(
+            &DataMap::new()
+                .with("channel", channel)
+                .with("format", format),
+        )
+        .unwrap()
+    };
+    let (said_map, said_xml) = (said("nav.depth", "map"), said("doc.x", "xml"));
     let got: Vec<(i64, &str, &[u8])> = events
         .iter()
         .map(|(n, _, c, d)| (*n, c.as_str(), d.as_slice()))
@@ -203,10 +213,12 @@ for e in lcm.EventLog(sys.argv[1], "r"):
     assert_eq!(
         got,
         [
-            (0, "nav.depth", &depth[..]),
+            (0, "seabus.log.format", &said_map[..]),
             (1, "nav.depth", &depth[..]),
             (2, "nav.depth", &depth[..]),
-            (3, "doc.x", &xml[..]),
+            (3, "nav.depth", &depth[..]),
+            (4, "seabus.log.format", &said_xml[..]),
+            (5, "doc.x", &xml[..]),
         ]
     );
     let since_epoch = |t: std::time::SystemTime| {
@@ -216,8 +228,13 @@ for e in lcm.EventLog(sys.argv[1], "r"):
         since_epoch(before),
         since_epoch(std::time::SystemTime::now()),
     );
+    // (a format event is logged at the time of the event it comes before)
     for pair in events.windows(2) {
-        assert!(pair[0].1 < pair[1].1, "timestamps increase: {events:?}");
+        let format_event = pair[0].2 == "seabus.log.format";
+        assert!(
+            pair[0].1 < pair[1].1 || (format_event && pair[0].1 == pair[1].1),
+            "timestamps increase: {events:?}"
+        );
     }
     for (_, t, _, _) in &events {
         assert!(
@@ -226,8 +243,8 @@ for e in lcm.EventLog(sys.argv[1], "r"):
         );
     }
     let nav_events = read(&nav);
-    assert_eq!(nav_events.len(), 3, "{nav_events:?}");
-    assert!(nav_events.iter().all(|e| e.2 == "nav.depth"));
+    assert_eq!(nav_events.len(), 4, "{nav_events:?}");
+    assert!(nav_events[1..].iter().all(|e| e.2 == "nav.depth"));
 }
 
 #[test]
@@ -520,4 +537,163 @@ fn speed_scales_the_logged_spacing() {
     let out = replay(&dir.path().join("missing.lcm"), &udp_url(), &[]);
     assert_eq!(out.status.code(), Some(2));
     assert!(stderr(&out).contains("missing.lcm: cannot open"));
+}
+
+/// What a spy printed, as (topic, format, payload) in order.
+fn spied(rx: &std::sync::mpsc::Receiver<serde_json::Value>) -> Vec<(String, String, String)> {
+    rx.try_iter()
+        .map(|m| {
+            (
+                m["topic"].as_str().expect("a topic").to_string(),
+                m["format"].as_str().expect("a format").to_string(),
+                m["payload"].to_string(),
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn a_recording_exported_and_replayed_from_its_folder_gives_the_same_messages() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let logs = dir.path().join("logs");
+    std::fs::create_dir(&logs).expect("a folder");
+    std::fs::write(logs.join("notes.txt"), "dive 3, calm sea\n").expect("a note");
+    let url = udp_url();
+    // the traffic as a spy on the medium sees it
+    let (live_spy, live) = spy_json(&url, 12);
+    // `seabus record` to the README's name, while a simulated vehicle publishes datamaps and
+    // `seabus pub` XML text
+    let log = logs.join("dive.lcm");
+    let record = spawn_record(&url, &log, 4);
+    std::thread::sleep(Duration::from_millis(500));
+    let system = format!(
+        r#"<seabus node="rec-src">
+  <medium name="net" url="{}"/>
+  <module name="vehicle" type="vehicle-sim" medium="net" tick="5Hz"/>
+</seabus>
+"#,
+        url.replace('&', "&amp;")
+    );
+    let (_sys_dir, system) = system_file("src.xml", &system);
+    let mut run = spawn_run(&system, &["--for", "2"]);
+    let xml = seabus()
+        .args(["pub", &url, "note.text", "text=\"hello\"", "depth=3.5"])
+        .args(["--format", "xml", "--count", "3", "--rate", "5"])
+        .output()
+        .expect("pub runs");
+    assert!(xml.status.success(), "{}", stderr(&xml));
+    assert!(wait_for(&mut run, Duration::from_secs(10)).is_some());
+    let recorded = finish(record);
+    assert_eq!(recorded.status.code(), Some(0), "{}", stderr(&recorded));
+    let events: usize = stderr(&recorded)
+        .split_whitespace()
+        .nth(2)
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("record says how many events: {}", stderr(&recorded)));
+    assert!(events >= 10, "{}", stderr(&recorded));
+    drop(live_spy);
+    let live = spied(&live);
+
+    // export of the folder: the log, whatever its name; the note is named as skipped
+    let out = seabus()
+        .arg("export")
+        .arg(&logs)
+        .output()
+        .expect("export runs");
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    assert!(
+        err.contains(&format!(
+            "skipped {}: not an LCM event log or MCAP file",
+            logs.join("notes.txt").display()
+        )),
+        "{err}"
+    );
+    assert!(err.contains(&format!("{events} events")), "{err}");
+    let exported: Vec<serde_json::Value> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("a JSON line"))
+        .collect();
+    assert_eq!(exported.len(), events);
+
+    // replay of the folder to a spy: the same topics, formats and values as the live spy saw
+    let again = udp_url();
+    let (replay_spy, replayed) = spy_json(&again, 15);
+    std::thread::sleep(Duration::from_millis(400));
+    let out = replay(&logs, &again, &["--speed", "max"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&format!("skipped {}", logs.join("notes.txt").display())),
+        "{}",
+        stderr(&out)
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    drop(replay_spy);
+    let replayed = spied(&replayed);
+    assert_eq!(replayed.len(), events, "{}", stderr(&out));
+    for m in &replayed {
+        assert!(
+            live.contains(m),
+            "replayed {m:?}, which the live spy never saw"
+        );
+    }
+    let formats: std::collections::BTreeSet<&str> =
+        replayed.iter().map(|(_, f, _)| f.as_str()).collect();
+    assert_eq!(formats, ["map", "xml"].into());
+    assert!(
+        replayed.contains(&(
+            "note.text".to_string(),
+            "xml".to_string(),
+            live.iter()
+                .find(|(t, _, _)| t == "note.text")
+                .map(|(_, _, p)| p.clone())
+                .expect("the live spy saw the XML"),
+        ))
+    );
+    // and the export has the same topics in the same order, datamaps as their fields
+    let topics = |v: &[(String, String, String)]| v.iter().map(|m| m.0.clone()).collect::<Vec<_>>();
+    let exported_topics: Vec<String> = exported
+        .iter()
+        .map(|e| e["topic"].as_str().expect("a topic").to_string())
+        .collect();
+    assert_eq!(exported_topics, topics(&replayed));
+    let (first_map, _) = replayed
+        .iter()
+        .zip(&exported)
+        .find(|((_, f, _), _)| f == "map")
+        .expect("a datamap");
+    let i = replayed.iter().position(|m| m == first_map).expect("there");
+    assert_eq!(
+        exported[i]["payload"],
+        serde_json::from_str::<serde_json::Value>(&first_map.2).expect("JSON")
+    );
+}
+
+#[test]
+fn a_folder_without_logs_is_refused_by_export_and_replay() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    std::fs::write(dir.path().join("notes.txt"), "nothing recorded\n").expect("a note");
+    std::fs::write(dir.path().join("empty.lcm"), "").expect("an empty file");
+    let want = format!(
+        "{}: no LCM event log or MCAP file in this folder",
+        dir.path().display()
+    );
+    let out = seabus()
+        .arg("export")
+        .arg(dir.path())
+        .output()
+        .expect("export runs");
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains(&want), "{}", stderr(&out));
+    assert!(
+        stderr(&out).contains(&format!(
+            "skipped {}: empty",
+            dir.path().join("empty.lcm").display()
+        )),
+        "{}",
+        stderr(&out)
+    );
+    let out = replay(dir.path(), &udp_url(), &[]);
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains(&want), "{}", stderr(&out));
 }

@@ -20,6 +20,7 @@ pub mod lcm;
 #[cfg(not(feature = "lcm"))]
 #[path = "lcm_off.rs"]
 pub mod lcm;
+pub mod rate;
 pub mod route;
 
 use seabus_modules::Registry;

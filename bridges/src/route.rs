@@ -46,8 +46,6 @@ use seabus_modules::module::{
 };
 use seabus_modules::registry::{BridgeType, Built};
 use seabus_modules::system::{BridgeSpec, RouteSpec};
-use std::collections::HashMap;
-use std::collections::hash_map::Entry;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::time::Instant;
@@ -215,7 +213,10 @@ pub struct RouteBridge {
     stats: Vec<LegStats>,
     counters: Counters,
     seen: Dedup,
-    last_sent: HashMap<(usize, Topic), Instant>,
+    /// Whether each side takes channel names that are not seabus topics (LCM).
+    names_channels: [bool; 2],
+    /// When each rate-limited topic's next message is due.
+    schedule: crate::rate::Schedule,
     report: Option<Duration>,
     report_topic: Topic,
     /// The ports reports go out on: those whose medium carries datamaps as they are.
@@ -298,7 +299,7 @@ impl RouteBridge {
             legs,
             counters: Counters::default(),
             seen: Dedup::new(),
-            last_sent: HashMap::new(),
+            schedule: crate::rate::Schedule::default(),
             report: (!report.is_zero()).then_some(report),
             report_topic,
             report_ports: (0..2).filter(|&i| caps[i].carries_datamaps()).collect(),
@@ -307,6 +308,7 @@ impl RouteBridge {
             types,
             problems: Tally::new(),
             echo: [0, 1].map(|i| (!caps[i].provenance).then(EchoMemory::default)),
+            names_channels: [0, 1].map(|i| caps[i].names_channels()),
         };
         Ok((bridge, decl))
     }
@@ -379,6 +381,11 @@ impl RouteBridge {
             return Verdict::Drop("hop limit");
         }
         let leg = &self.legs[i];
+        // a channel name that is not a seabus topic (from LCM) goes only where such names go
+        if !self.names_channels[leg.to] && !msg.topic.is_topic() {
+            self.counters.unrouted += 1;
+            return Verdict::Drop("not a seabus topic");
+        }
         let origin = &msg.provenance.origin;
         if &*origin.node == node && *origin.medium == *self.media[leg.to] {
             self.counters.returned += 1;
@@ -401,23 +408,18 @@ impl RouteBridge {
                 }
             }
         };
-        if let (Some(gap), Kind::Data) = (leg.min_interval, msg.kind) {
+        if let (Some(period), Kind::Data) = (leg.min_interval, msg.kind) {
             let now = Instant::now();
-            match self.last_sent.entry((i, topic.clone())) {
-                Entry::Occupied(e) if now.duration_since(*e.get()) < gap => {
-                    self.stats[i].rate_limited += 1;
-                    return Verdict::Drop("rate limit");
-                }
-                Entry::Occupied(mut e) => *e.get_mut() = now,
-                Entry::Vacant(e) => {
-                    e.insert(now);
-                }
+            if !self.schedule.admit(i, &topic, period, now) {
+                self.stats[i].rate_limited += 1;
+                return Verdict::Drop("rate limit");
             }
-            if self.last_sent.len() > MAX_RATE_ENTRIES {
-                prune_rate_limits(&mut self.last_sent, &self.legs);
-                if self.last_sent.len() > MAX_RATE_ENTRIES {
+            if self.schedule.len() > MAX_RATE_ENTRIES {
+                let legs = &self.legs;
+                self.schedule.prune(now, |i| legs[i].min_interval);
+                if self.schedule.len() > MAX_RATE_ENTRIES {
                     // a flood of distinct topics: start over rather than grow without bound
-                    self.last_sent.clear();
+                    self.schedule.clear();
                 }
             }
         }
@@ -510,16 +512,6 @@ impl RouteBridge {
         }
         map
     }
-}
-
-/// Forgets rate-limit entries whose interval has passed: they no longer hold anything back.
-fn prune_rate_limits(last_sent: &mut HashMap<(usize, Topic), Instant>, legs: &[Leg]) {
-    let now = Instant::now();
-    last_sent.retain(|(i, _), last| {
-        legs[*i]
-            .min_interval
-            .is_some_and(|gap| now.duration_since(*last) < gap)
-    });
 }
 
 /// Carries a payload across a route with an LCM type: decoded from LCM bytes read on `from`, field
@@ -676,7 +668,9 @@ impl Module for RouteBridge {
                 }
             }
         }
-        prune_rate_limits(&mut self.last_sent, &self.legs);
+        let legs = &self.legs;
+        self.schedule
+            .prune(Instant::now(), |i| legs[i].min_interval);
         Ok(())
     }
 }
@@ -746,6 +740,35 @@ mod tests {
             !m.is_echo(&topic, &frame(&[1, 2])),
             "forgotten after the window"
         );
+    }
+
+    #[test]
+    fn an_lcm_channel_that_is_not_a_topic_crosses_only_to_lcm() {
+        let text = "<seabus><medium name=\"lcm\" url=\"udpm://239.255.76.67:7667\"/>\
+             <medium name=\"lcm2\" url=\"udpm://239.255.76.68:7667\"/>\
+             <medium name=\"net\" url=\"udp://239.1.1.1:5\"/>\
+             <bridge name=\"a\" media=\"lcm net\"><route topics=\"**\"/></bridge>\
+             <bridge name=\"b\" media=\"lcm lcm2\"><route topics=\"**\"/></bridge></seabus>";
+        let spec = SystemSpec::parse("t.xml", text).unwrap();
+        let mut built: Vec<RouteBridge> = spec
+            .bridges
+            .iter()
+            .map(|b| RouteBridge::new(b, &caps(b)).unwrap().0)
+            .collect();
+        let odd = |seq| Message {
+            topic: Topic::channel("with space").unwrap(),
+            payload: Payload::from(vec![1u8, 2]),
+            ..msg("x", "peer", "lcm", seq, 0)
+        };
+        assert!(matches!(
+            built[0].route("n", 0, odd(1)),
+            Verdict::Drop("not a seabus topic")
+        ));
+        assert_eq!(built[0].counters.unrouted, 1);
+        match built[1].route("n", 0, odd(1)) {
+            Verdict::Forward(1, m) => assert_eq!(m.topic.as_str(), "with space"),
+            _ => panic!("not forwarded from LCM to LCM"),
+        }
     }
 
     #[test]

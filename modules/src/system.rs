@@ -51,7 +51,8 @@ pub struct RouteSpec {
     pub topics: Pattern,
     /// New topic on the far side, filled from the pattern's wildcards.
     pub rename: Option<Pattern>,
-    /// Least time between two messages of one topic (data only), from the route's `rate`.
+    /// The period of the route's `rate` (data only): one message of a topic per period, on
+    /// average, from a faster source.
     pub min_interval: Option<std::time::Duration>,
     /// Payload format on the far side.
     pub format: Option<Format>,

@@ -249,7 +249,6 @@ pub fn wait_for_path(path: &Path, limit: Duration) -> bool {
 
 /// Starts `seabus spy URL --json --for SECS`; its messages arrive on the receiver as JSON values.
 pub fn spy_json(url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<serde_json::Value>) {
-    use std::io::BufRead;
     let mut spy = Running(
         seabus()
             .args(["spy", url, "--json", "--for", &secs.to_string()])
@@ -258,18 +257,52 @@ pub fn spy_json(url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<ser
             .spawn()
             .expect("spy starts"),
     );
-    let (tx, rx) = std::sync::mpsc::channel();
     let out = spy.0.stdout.take().expect("spy's output is piped");
+    (spy, lines_of(out, |l| serde_json::from_str(&l).ok()))
+}
+
+/// The lines a child writes to `out`, each made a `T` by `read` (those it gives `None` left out),
+/// on a receiver, read by a thread of their own until the child closes its output.
+pub fn lines_of<T: Send + 'static>(
+    out: impl std::io::Read + Send + 'static,
+    read: impl Fn(String) -> Option<T> + Send + 'static,
+) -> std::sync::mpsc::Receiver<T> {
+    use std::io::BufRead;
+    let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         for line in std::io::BufReader::new(out).lines().map_while(Result::ok) {
-            if let Ok(v) = serde_json::from_str::<serde_json::Value>(&line)
+            if let Some(v) = read(line)
                 && tx.send(v).is_err()
             {
                 return;
             }
         }
     });
-    (spy, rx)
+    rx
+}
+
+/// Starts `seabus record URL FILE --for SECS`, its standard error captured (the summary).
+pub fn spawn_record(url: &str, file: &Path, secs: u32) -> Child {
+    seabus()
+        .args(["record", url])
+        .arg(file)
+        .args(["--for", &secs.to_string()])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("record starts")
+}
+
+/// Starts `seabus spy URL ARGS…` (the table, unless ARGS say `--json`), its output captured.
+pub fn spawn_spy(url: &str, args: &[&str]) -> Child {
+    seabus()
+        .arg("spy")
+        .arg(url)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spy starts")
 }
 
 /// Waits for a spy line that `pred` accepts, at most `limit`; every line read is kept in `seen`.
@@ -579,4 +612,60 @@ pub fn ended(mut run: Running, limit: Duration) -> (Option<std::process::ExitSta
         let _ = err.read_to_string(&mut stderr);
     }
     (status, stderr)
+}
+
+/// Reads a running system's stderr up to its console's address: the one-time password it printed
+/// for user `name` and the console's URL (`http://ADDR`). The rest of stderr is drained.
+pub fn one_time_password(run: &mut Running, name: &str) -> (String, String) {
+    use std::io::BufRead;
+    let err = run.0.stderr.take().expect("stderr piped");
+    let mut lines = std::io::BufReader::new(err).lines();
+    let mut password = None;
+    let mut url = None;
+    for line in lines.by_ref().take(200).map_while(Result::ok) {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        if words.first() == Some(&name) && words.len() >= 3 {
+            password = Some(words[1].to_string());
+        }
+        if let Some(u) = line.trim().strip_prefix("Console: ") {
+            url = Some(u.to_string());
+            break;
+        }
+    }
+    std::thread::spawn(move || for _ in lines {});
+    (
+        password.unwrap_or_else(|| panic!("no password printed for {name}")),
+        url.expect("the console's address is printed"),
+    )
+}
+
+/// Logs in to the console at `url` (`http://ADDR`) as a browser's form does; fails unless the
+/// console answers with a session.
+pub fn assert_logs_in(url: &str, name: &str, password: &str) {
+    let answer = http_login(url, name, password);
+    assert!(
+        answer
+            .to_lowercase()
+            .contains("set-cookie: seabus_session="),
+        "{name} does not log in: {answer}"
+    );
+}
+
+/// Logs in to the console at `url` (`http://ADDR`) as a browser's form does; the whole answer.
+pub fn http_login(url: &str, name: &str, password: &str) -> String {
+    use std::io::Write;
+    let addr = url.trim_start_matches("http://");
+    let body = format!("name={name}&password={password}");
+    let mut s = std::net::TcpStream::connect(addr).expect("the console listens");
+    s.set_read_timeout(Some(Duration::from_secs(30)))
+        .expect("a timeout");
+    write!(
+        s,
+        "POST /login HTTP/1.1\r\nHost: {addr}\r\nContent-Type: application/x-www-form-urlencoded\r\nContent-Length: {}\r\nConnection: close\r\n\r\n{body}",
+        body.len()
+    )
+    .expect("sent");
+    let mut answer = String::new();
+    std::io::Read::read_to_string(&mut s, &mut answer).expect("answer");
+    answer
 }

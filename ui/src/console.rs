@@ -35,7 +35,7 @@ pub const WATCH_EVERY: Duration = Duration::from_millis(50);
 pub struct ConsoleSpec {
     /// The medium it reads and commands on.
     pub medium: String,
-    /// The users file (required except where users are given in code).
+    /// The users file; without one, a console on a loopback address makes one-time users.
     pub users: Option<PathBuf>,
     /// The session file: attribute `sessions`, else beside the users file
     /// ([`sessions_beside`](crate::auth::sessions_beside)); none: sessions end with the console.
@@ -151,17 +151,20 @@ pub fn specs(spec: &SystemSpec) -> Result<Vec<ConsoleSpec>, FileError> {
     Ok(out)
 }
 
-/// What a console without a `users` attribute is told.
-const NEEDS_USERS: &str = "a console needs `users`, a users file with password hashes (`seabus user \
-     add FILE NAME --roles pilot` writes one); only `seabus demo` makes its own users";
+/// What a console without a `users` attribute that listens beyond this machine is told.
+const NEEDS_USERS: &str = "needs `users`, a users file with password hashes (`seabus user add FILE \
+     NAME --roles pilot` writes one): only a console on a loopback address (such as 127.0.0.1) makes \
+     one-time users of its own";
 
 /// A console ready to start: its element read, its users and its layouts loaded.
 #[derive(Debug, Clone)]
 pub struct Ready {
     /// The `<console>` element, read.
     pub spec: ConsoleSpec,
-    /// Who may log in.
-    pub users: Users,
+    /// Who may log in: the users file's users, or `None` for a console on a loopback address
+    /// without a users file, which gets one-time users (made with fresh passwords at each start,
+    /// and printed).
+    pub users: Option<Users>,
     /// Its layouts, read with their variables' defaults.
     pub layouts: Vec<Layout>,
 }
@@ -182,8 +185,9 @@ pub struct Checked {
 /// system itself ([`system::check`]); every `<console>` element ([`specs`]: attributes, medium);
 /// two consoles on one port; then for each console its users file (it must exist and read, each
 /// user well formed) and each layout file (it must exist, read and expand). A layout that reads is
-/// compared with the system ([`Layout::check_on`]): what it finds are warnings. `given` are users
-/// made in code (the demo's), given to every console instead of a users file.
+/// compared with the system ([`Layout::check_on`]): what it finds are warnings. A console without
+/// a users file is accepted on a loopback address only (its users are made when it starts, see
+/// [`Ready::users`]).
 ///
 /// What only the running system can tell is not checked: a medium that cannot be opened, an
 /// address already in use.
@@ -191,7 +195,6 @@ pub fn check(
     spec: &SystemSpec,
     registry: &Registry,
     catalogue: &Catalogue,
-    given: Option<&Users>,
 ) -> Result<Checked, FileError> {
     let report = system::check(spec, registry, catalogue)?;
     let foxgloves = crate::foxglove::specs(spec)?;
@@ -201,10 +204,7 @@ pub fn check(
     let mut consoles = Vec::new();
     let mut warnings = Vec::new();
     for cs in specs {
-        let users = match given {
-            Some(u) => u.clone(),
-            None => users_of(&cs)?,
-        };
+        let users = users_of(&cs)?;
         let attr = cs.element.required("layouts")?;
         let mut layouts = Vec::new();
         for path in &cs.settings.layouts {
@@ -247,13 +247,20 @@ pub fn check(
     })
 }
 
-/// The users of a console: its `users` file, which must exist and read.
-fn users_of(cs: &ConsoleSpec) -> Result<Users, FileError> {
+/// The users of a console: its `users` file, which must exist and read; none (one-time users)
+/// for a console on a loopback address without one.
+fn users_of(cs: &ConsoleSpec) -> Result<Option<Users>, FileError> {
     let (Some(path), Some(attr)) = (&cs.users, cs.element.attr("users")) else {
-        return Err(cs.element.error(NEEDS_USERS));
+        let listen = cs.settings.listen;
+        if listen.ip().is_loopback() {
+            return Ok(None);
+        }
+        return Err(cs
+            .element
+            .error(format!("a console listening on {listen} {NEEDS_USERS}")));
     };
     readable(attr, path, "users file")?;
-    Users::load(path)
+    Users::load(path).map(Some)
 }
 
 /// Refuses a file named by `attr` that cannot be opened; the error is placed at the attribute.

@@ -80,6 +80,13 @@ impl Capabilities {
         lists: true,
     };
 
+    /// Whether the wire names messages by channels of its own that need not be seabus topics
+    /// (LCM: any channel liblcm sends, `POSE.` or `with space` too), which it delivers as
+    /// [`Topic::channel`](crate::Topic::channel)s and takes back as they were.
+    pub fn names_channels(&self) -> bool {
+        self.native == Some("lcm")
+    }
+
     /// Whether a datamap can be sent here (a report, a standard dataset) as it is.
     pub fn carries_datamaps(&self) -> bool {
         self.carries != Carries::Bytes && self.native.is_none()

@@ -74,6 +74,38 @@ impl Topic {
         Ok(Topic(Arc::from(name)))
     }
 
+    /// A medium's own name for a message, kept as it came even when it is not a seabus topic: an
+    /// LCM channel such as `POSE.`, `.POSE`, `a..b`, `cam*` or `with space`, which a recording
+    /// keeps and a replay sends back to that medium as it was. A valid topic name gives the same
+    /// topic as [`Topic::new`]. Refused: the empty name, one longer than [`MAX_TOPIC_LEN`], a NUL.
+    pub fn channel(name: &str) -> Result<Topic, TopicError> {
+        if name.is_empty() {
+            return Err(TopicError::Empty);
+        }
+        if name.len() > MAX_TOPIC_LEN {
+            return Err(TopicError::TooLong(name.len()));
+        }
+        if name.contains('\0') {
+            return Err(TopicError::BadChar(name.to_string(), '\0'));
+        }
+        Ok(Topic(Arc::from(name)))
+    }
+
+    /// Whether the name is a seabus topic; only a [`Topic::channel`] may not be.
+    pub fn is_topic(&self) -> bool {
+        check(&self.0, false).is_ok()
+    }
+
+    /// The name as shown to people: a topic as it is, a channel name that is not a topic quoted
+    /// (`"with space"`, `"a..b"`), so that its dots and spaces show.
+    pub fn shown(&self) -> std::borrow::Cow<'_, str> {
+        if self.is_topic() {
+            std::borrow::Cow::Borrowed(&self.0)
+        } else {
+            std::borrow::Cow::Owned(format!("{:?}", &*self.0))
+        }
+    }
+
     /// The name as text.
     pub fn as_str(&self) -> &str {
         &self.0
@@ -542,5 +574,23 @@ mod tests {
         let r = ChannelRegex::new("A|B").unwrap();
         assert!(r.matches("A") && r.matches("B") && !r.matches("AB"));
         assert!(ChannelRegex::new("(").is_err());
+    }
+
+    #[test]
+    fn channel_names_are_kept_as_they_came_and_shown_quoted() {
+        for name in ["POSE.", ".POSE", "a..b", "cam*", "with space"] {
+            assert!(Topic::new(name).is_err(), "{name}");
+            let t = Topic::channel(name).unwrap();
+            assert_eq!(t.as_str(), name);
+            assert!(!t.is_topic());
+            assert_eq!(t.shown(), format!("{name:?}"));
+        }
+        let t = Topic::channel("nav.depth").unwrap();
+        assert!(t.is_topic());
+        assert_eq!(t, Topic::new("nav.depth").unwrap());
+        assert_eq!(t.shown(), "nav.depth");
+        assert_eq!(Topic::channel(""), Err(TopicError::Empty));
+        assert!(Topic::channel("a\0b").is_err());
+        assert!(Topic::channel(&"x".repeat(MAX_TOPIC_LEN + 1)).is_err());
     }
 }

@@ -13,10 +13,12 @@
 //! channel must match to be received), `frag_timeout` (how long a partial message waits for its next
 //! fragment, default 2s), `frag_mem` (bytes partial messages may hold, default 300 MiB).
 //!
-//! The channel is the topic; the payload is the LCM message's bytes. Messages this medium sent are
-//! not received back. liblcm's self-test packets are ignored. Packets that do not read, channels
-//! that are not topics, and partial messages given up (timeout, memory cap, too many, overlap) are
-//! counted in the medium's rejected counters by reason.
+//! The channel is the topic; the payload is the LCM message's bytes. A channel that is not a
+//! seabus topic (`POSE.`, `a..b`, `with space`) is delivered as it came
+//! ([`Topic::channel`](seabus_medium::Topic::channel)), so that spy and record see it and a replay
+//! sends it back as it was. Messages this medium sent are not received back. liblcm's self-test
+//! packets are ignored. Packets that do not read and partial messages given up (timeout, memory
+//! cap, too many, overlap) are counted in the medium's rejected counters by reason.
 //!
 //! A large message's fragments go out together, even when several local publishers send at once
 //! (liblcm up to 1.4 keeps one partial message per sender). A sender's sequence number jumping
@@ -710,15 +712,16 @@ impl Receiver {
                 if self.topics.len() >= MAX_REMEMBERED {
                     self.topics.clear();
                 }
-                let t = Topic::new(channel).ok();
+                // every channel liblcm sends, as it came (`POSE.`, `with space` too)
+                let t = Topic::channel(channel).ok();
                 self.topics.insert(channel.into(), t.clone());
                 t
             }
         };
         let Some(topic) = topic else {
             self.ingress.reject(
-                "lcm-channel-not-topic",
-                format_args!("channel {channel:?} from {from} is not a seabus topic"),
+                "lcm-bad-channel",
+                format_args!("channel {channel:?} from {from} is empty or too long"),
             );
             return true;
         };

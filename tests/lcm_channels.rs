@@ -1,0 +1,172 @@
+//! LCM channel names that are not seabus topics (`POSE.`, `.POSE`, `a..b`, `cam*`, `with space`):
+//! a liblcm program publishes them, `seabus record` keeps them in its log as they came and `seabus
+//! spy` shows them quoted; `lcm-logplayer` of that log, and `seabus replay` of it onto LCM, reach
+//! a liblcm subscriber on those very channels.
+//!
+//! The C program `tests/peers/lcm_channels.c` is built here against liblcm (`liblcm-dev`, which
+//! `./scripts/test` installs).
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// The odd names, and one that is a topic.
+const CHANNELS: [&str; 6] = ["POSE.", ".POSE", "a..b", "cam*", "with space", "nav.depth"];
+
+/// Builds the C peer in `dir`.
+fn build_peer(dir: &Path) -> PathBuf {
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/lcm_channels.c");
+    let program = dir.join("lcm_channels");
+    let out = Command::new("cc")
+        .arg("-Wall")
+        .arg("-o")
+        .arg(&program)
+        .arg(&source)
+        .arg("-llcm")
+        .output()
+        .expect("cc runs");
+    assert!(
+        out.status.success(),
+        "the C peer builds against liblcm (./scripts/test installs liblcm-dev): {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    program
+}
+
+/// A loopback LCM group of the test's own.
+fn lcm_url() -> String {
+    format!("udpm://{}:{}?ttl=0", group(), free_port())
+}
+
+/// A liblcm subscriber to every channel of `url` for `secs`, once it says it is subscribed.
+fn subscriber(peer: &Path, url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<String>) {
+    let mut sub = Running(
+        Command::new(peer)
+            .args(["sub", url, &secs.to_string()])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("the subscriber starts"),
+    );
+    let rx = lines_of(sub.0.stdout.take().expect("piped"), Some);
+    assert_eq!(
+        rx.recv_timeout(Duration::from_secs(5)).as_deref(),
+        Ok("ready"),
+        "the subscriber subscribes"
+    );
+    (sub, rx)
+}
+
+/// The (channel, data) lines a subscriber printed within `limit`, until it has `want` of them.
+fn received(
+    rx: &std::sync::mpsc::Receiver<String>,
+    want: usize,
+    limit: Duration,
+) -> Vec<(String, String)> {
+    let deadline = Instant::now() + limit;
+    let mut got = Vec::new();
+    while got.len() < want && Instant::now() < deadline {
+        if let Ok(line) = rx.recv_timeout(Duration::from_millis(100)) {
+            let (channel, data) = line.split_once('\t').expect("CHANNEL<TAB>DATA");
+            got.push((channel.to_string(), data.to_string()));
+        }
+    }
+    got
+}
+
+/// Every channel three times, each with its own name as data, in the order published.
+fn published() -> Vec<(String, String)> {
+    (0..3)
+        .flat_map(|_| CHANNELS.iter().map(|c| (c.to_string(), c.to_string())))
+        .collect()
+}
+
+#[test]
+fn odd_lcm_channel_names_are_recorded_shown_and_replayed_as_they_came() {
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let peer = build_peer(dir.path());
+    let url = lcm_url();
+    let log = dir.path().join("odd.lcm");
+    let record = spawn_record(&url, &log, 3);
+    let spy = spawn_spy(&url, &["--for", "3"]);
+    std::thread::sleep(Duration::from_millis(700));
+    let out = Command::new(&peer)
+        .arg("pub")
+        .arg(&url)
+        .args(CHANNELS)
+        .output()
+        .expect("the publisher runs");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let recorded = finish(record);
+    assert_eq!(recorded.status.code(), Some(0), "{}", stderr(&recorded));
+    assert!(
+        stderr(&recorded).contains("18 events") && stderr(&recorded).contains("6 channels"),
+        "{}",
+        stderr(&recorded)
+    );
+
+    // the log holds every channel as it came, each event's data as sent
+    let mut reader = seabus_medium::eventlog::Reader::open(&log).expect("the log opens");
+    let mut events = Vec::new();
+    for _ in 0..100 {
+        match reader.next_event() {
+            Ok(Some(e)) => events.push((
+                e.channel.to_string(),
+                String::from_utf8_lossy(e.data).into_owned(),
+            )),
+            Ok(None) => break,
+            Err(d) => panic!("{}: {d}", log.display()),
+        }
+    }
+    assert_eq!(events, published());
+
+    // spy's table names them quoted, a topic as it is
+    let shown = finish(spy);
+    let table = String::from_utf8_lossy(&shown.stdout);
+    for name in &CHANNELS[..5] {
+        assert!(
+            table.lines().any(|l| l.starts_with(&format!("{name:?} "))),
+            "{name:?} in\n{table}"
+        );
+    }
+    assert!(
+        table.lines().any(|l| l.starts_with("nav.depth ")),
+        "{table}"
+    );
+
+    // lcm-logplayer of seabus's log reaches a liblcm subscriber on those channels
+    let again = lcm_url();
+    let (_sub, rx) = subscriber(&peer, &again, 10);
+    let played = Command::new("lcm-logplayer")
+        .arg(format!("--lcm-url={again}"))
+        .arg("--speed=4")
+        .arg(&log)
+        .output()
+        .expect("lcm-logplayer runs (./scripts/test installs it: pip install lcm)");
+    assert!(played.status.success(), "{}", stderr(&played));
+    assert_eq!(received(&rx, 18, Duration::from_secs(5)), published());
+
+    // and so does `seabus replay` onto LCM
+    let third = lcm_url();
+    let (_sub, rx) = subscriber(&peer, &third, 10);
+    let replayed = seabus()
+        .arg("replay")
+        .arg(&log)
+        .arg(&third)
+        .args(["--speed", "4"])
+        .output()
+        .expect("replay runs");
+    assert_eq!(replayed.status.code(), Some(0), "{}", stderr(&replayed));
+    assert!(
+        stderr(&replayed).contains("18 events sent on 6 channels"),
+        "{}",
+        stderr(&replayed)
+    );
+    assert_eq!(received(&rx, 18, Duration::from_secs(5)), published());
+}

@@ -1,0 +1,61 @@
+/* A liblcm program for seabus's tests of LCM channel names that are not seabus topics.
+ *
+ *   lcm_channels pub URL CHANNEL...   publishes each channel three times, 50 ms apart; the data
+ *                                     is the channel's name
+ *   lcm_channels sub URL SECS         prints "CHANNEL<TAB>DATA" for every message for SECS seconds,
+ *                                     after a line "ready" once it is subscribed
+ */
+#include <lcm/lcm.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/time.h>
+#include <unistd.h>
+
+static void handler(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
+{
+    (void)user;
+    printf("%s\t%.*s\n", channel, (int)rbuf->data_size, (const char *)rbuf->data);
+    fflush(stdout);
+}
+
+static double now(void)
+{
+    struct timeval tv;
+    gettimeofday(&tv, NULL);
+    return tv.tv_sec + tv.tv_usec / 1e6;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 4) {
+        fprintf(stderr, "usage: %s pub URL CHANNEL... | sub URL SECS\n", argv[0]);
+        return 2;
+    }
+    lcm_t *lcm = lcm_create(argv[2]);
+    if (!lcm) {
+        fprintf(stderr, "cannot open %s\n", argv[2]);
+        return 1;
+    }
+    if (strcmp(argv[1], "pub") == 0) {
+        for (int round = 0; round < 3; round++) {
+            for (int i = 3; i < argc; i++) {
+                if (lcm_publish(lcm, argv[i], argv[i], (unsigned)strlen(argv[i])) != 0) {
+                    fprintf(stderr, "cannot publish on %s\n", argv[i]);
+                    return 1;
+                }
+            }
+            usleep(50000);
+        }
+    } else {
+        double until = now() + atof(argv[3]);
+        lcm_subscribe(lcm, ".*", handler, NULL);
+        printf("ready\n");
+        fflush(stdout);
+        while (now() < until) {
+            lcm_handle_timeout(lcm, 100);
+        }
+    }
+    lcm_destroy(lcm);
+    return 0;
+}
