@@ -184,7 +184,7 @@ fn spy_shows_an_ardusub_vehicle_and_pub_arms_it() {
         (&json!(191), &json!(6), &json!(8))
     );
 
-    // a command without a field is refused, naming the field
+    // a command without a field is refused by the medium (exit 3), naming the field
     let to = format!("mavlink://udpout:127.0.0.1:{vehicle_port}");
     let refused = seabus()
         .args(["pub", &to, "mavlink.1.COMMAND_LONG"])
@@ -192,7 +192,7 @@ fn spy_shows_an_ardusub_vehicle_and_pub_arms_it() {
         .arg("--command")
         .output()
         .expect("seabus pub runs");
-    assert_eq!(refused.status.code(), Some(2));
+    assert_eq!(refused.status.code(), Some(3));
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(
         said.contains("COMMAND_LONG: missing field `param7`"),
