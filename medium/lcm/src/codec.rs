@@ -1196,9 +1196,7 @@ impl<'t> Encoder<'t> {
                 };
                 // the bytes it was read from, when they were not UTF-8 and it is still their text
                 let raw = next_raw(&mut self.raws).and_then(|raw| match raw {
-                    Value::Bytes(raw)
-                        if !raw.contains(&0) && String::from_utf8_lossy(raw) == text.as_ref() =>
-                    {
+                    Value::Bytes(raw) if String::from_utf8_lossy(raw) == text.as_ref() => {
                         Some(raw.as_slice())
                     }
                     _ => None,
@@ -2398,6 +2396,22 @@ mod tests {
             (3, 2, 0)
         );
         assert!(!lenient.is_exact());
+    }
+
+    #[test]
+    fn a_string_not_utf8_with_a_nul_inside_is_sent_back_as_it_came() {
+        let t = types("struct s_t { string s; }");
+        // `c\xfc`, a NUL, `f`: liblcm hands over all four bytes
+        let body = [0, 0, 0, 5, b'c', 0xfc, 0, b'f', 0];
+        let (map, lenient) = dec_lenient(&t, "s_t", &body).unwrap();
+        assert_eq!(map.get_str("s"), Some("c\u{fffd}\0f"));
+        assert_eq!(
+            map.get("s.raw"),
+            Some(&Value::Bytes(vec![b'c', 0xfc, 0, b'f']))
+        );
+        assert_eq!(lenient.strings, 1);
+        let again = enc(&t, "s_t", &map).unwrap();
+        assert_eq!(again.get(8..), Some(&body[..]));
     }
 
     #[test]
