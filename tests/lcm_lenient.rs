@@ -1,7 +1,7 @@
 //! What liblcm reads, a seabus bridge reads too: a C program (lcm-gen's C types, liblcm) sends a
 //! boolean of 4, a Latin-1 string and a message with bytes after it; seabus bridges them to a
-//! second LCM group, where a C subscriber receives what a C subscriber on the first group got
-//! (the boolean as 1: true, as it was), and each case is counted.
+//! second LCM group, where a C subscriber receives exactly what a C subscriber on the first group
+//! got (the boolean's byte 4 too), and each case is counted.
 
 mod common;
 use common::*;
@@ -72,11 +72,11 @@ fn a_bridge_carries_what_liblcm_reads_and_counts_each_case() {
     assert_eq!(
         bridged,
         [
-            "utime=1 valid=1 label=6f6b depth=3ff8000000000000(1.5)",
+            "utime=1 valid=4 label=6f6b depth=3ff8000000000000(1.5)",
             "utime=2 valid=1 label=636166e9 depth=4004000000000000(2.5)",
             "utime=3 valid=0 label=78 depth=400c000000000000(3.5)",
         ],
-        "what arrives across the bridge: the same, the boolean true as 1"
+        "what arrives across the bridge: the same, the boolean's byte 4 too"
     );
 
     let status = wait_for(&mut run, Duration::from_secs(15)).expect("seabus run --for 6 ends");

@@ -165,7 +165,7 @@ fn lcm_codec_types() -> &'static ResolvedTypes {
 }
 
 /// The LCM message codec: any bytes decode or are refused without a panic, and every message that
-/// decodes encodes back to the same bytes.
+/// decodes encodes back to the same bytes (but for any after its end).
 ///
 /// Input: the first byte picks the type (`b % 5` in [`LCM_CODEC_PICKS`]); when below 0x80 the
 /// message is that type's fingerprint followed by the rest of the input, else the rest of the
@@ -189,17 +189,23 @@ pub fn lcm_codec(data: &[u8]) -> bool {
     let map = match codec::decode(types, ty, &message) {
         Ok((map, lenient)) if lenient.is_exact() => map,
         Ok((map, first)) => {
-            // read as liblcm reads it: encoded again, its booleans are 0 or 1, nothing follows
-            // it, its strings are the bytes they were, and it reads the same
+            // read as liblcm reads it: encoded again, its booleans and strings are the bytes
+            // they were, nothing follows it, and it reads the same
             let bytes = codec::encode(types, ty, &map)
                 .unwrap_or_else(|e| panic!("a decoded {name} does not encode: {e}"));
             let (again, lenient) = codec::decode(types, ty, &bytes)
                 .unwrap_or_else(|e| panic!("a re-encoded {name} does not decode: {e}"));
             assert!(
-                lenient.bools == 0 && lenient.trailing == 0 && lenient.strings == first.strings,
+                lenient.trailing == 0
+                    && (lenient.bools, lenient.first_bool) == (first.bools, first.first_bool)
+                    && lenient.strings == first.strings,
                 "{name} re-encoded: {lenient:?} after {first:?}"
             );
             assert!(again == map, "{name} re-encoded reads otherwise");
+            assert!(
+                message.get(..first.end) == Some(&bytes[..]),
+                "{name} re-encoded is not the bytes of the message it was read from"
+            );
             return true;
         }
         Err(e) => {

@@ -33,14 +33,17 @@
 //! Decoding is as lenient as liblcm's generated decoders, and no more: it refuses a string whose
 //! length does not count its terminating NUL or that does not end with one, a negative array size,
 //! a message cut short. What liblcm reads, it reads too, and says so ([`Leniency`]): a boolean
-//! byte other than 0 and 1 is `true`; a string that is not UTF-8 is decoded lossily (U+FFFD for
-//! what is not UTF-8) and its bytes kept beside it, under the member's name and `.raw`
-//! ([`RAW_SUFFIX`]: `name.raw`, bytes; for an array of strings, the same shape of lists, every
-//! element's bytes); bytes left after the message are ignored. Decoding errors name the field and
-//! the byte offset where it starts, from the start of the message. Encoding writes a string's kept
-//! bytes in place of its text as long as the text is still what they decode to, so a message
-//! decoded and encoded again is the same bytes, but for a boolean (written 1) and what followed
-//! the message (left out).
+//! byte other than 0 and 1 is `true`, and its byte is kept beside it, under the member's name and
+//! `.raw` ([`RAW_SUFFIX`]: `name.raw`, an int; for an array of booleans, the same shape of lists,
+//! every element's byte); a string that is not UTF-8 is decoded lossily (U+FFFD for what is not
+//! UTF-8) and its bytes kept the same way (`name.raw`, bytes; for an array of strings, the same
+//! shape of lists, every element's bytes); bytes left after the message are ignored. A member
+//! whose values were all exact has no `name.raw`. Decoding errors name the field and the byte
+//! offset where it starts, from the start of the message. Encoding writes a kept byte in place of
+//! a boolean as long as the boolean is still `true`, and a string's kept bytes in place of its
+//! text as long as the text is still what they decode to (a value changed since is written as it
+//! is now), so a message decoded and encoded again is the same bytes, but for what followed the
+//! message (left out).
 //!
 //! Both ways, lists and maps nest at most [`MAX_DEPTH`] deep (counted together, as every payload
 //! form counts them), so that a recursive type nested deeper is an error rather than a deep
@@ -67,14 +70,15 @@ pub const FREE_ELEMENTS: usize = 4096;
 /// Bytes of the fingerprint that starts every message.
 const FINGERPRINT_LEN: usize = 8;
 
-/// Appended to a string member's name for the bytes of a string that is not UTF-8.
+/// Appended to a boolean or string member's name for the bytes of a boolean neither 0 nor 1 or of
+/// a string that is not UTF-8.
 pub const RAW_SUFFIX: &str = ".raw";
 
 /// What a decoded message had that liblcm reads but an exact encoding would not have: each
 /// counted, with where the first was.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Leniency {
-    /// Booleans of a byte other than 0 and 1, read as `true`.
+    /// Booleans of a byte other than 0 and 1, read as `true` with their bytes kept.
     pub bools: u32,
     /// The first of them: its byte offset and value.
     pub first_bool: Option<(usize, u8)>,
@@ -101,8 +105,8 @@ impl Leniency {
             out.push((
                 "lcm-bool-not-0-1",
                 format!(
-                    "{} boolean(s) neither 0 nor 1 read as true, as liblcm reads them (the first \
-                     at byte {offset}: {value})",
+                    "{} boolean(s) neither 0 nor 1 read as true, as liblcm reads them, their \
+                     bytes kept (the first at byte {offset}: {value})",
                     self.bools
                 ),
             ));
@@ -775,9 +779,17 @@ struct Encoder<'t> {
     sizes: Vec<Option<SizeValue>>,
     /// Array elements written so far.
     elements: usize,
-    /// The bytes kept for the strings of the member being written, in order, when it has them
-    /// (`name.raw`), and how many of its strings were written.
-    raws: (Vec<Vec<u8>>, usize),
+    /// What was kept for the booleans or strings of the member being written (`name.raw`), one
+    /// value for each of them in order, and how many of them were written.
+    raws: (Vec<Value>, usize),
+}
+
+/// What was kept for the next boolean or string of the member being written (`raws`, an
+/// [`Encoder`]'s), if anything.
+fn next_raw((kept, n): &mut (Vec<Value>, usize)) -> Option<&Value> {
+    let raw = kept.get(*n);
+    *n += 1;
+    raw
 }
 
 /// The value of member `name` in `map`: looked for first at the next entry of `entries` (the map's
@@ -888,7 +900,7 @@ impl<'t> Encoder<'t> {
             let value = lookup(map, &mut entries, &m.name);
             let size = self.sizes.get(base + i).copied().flatten();
             let kept = match (&m.ty, map) {
-                (MemberType::Primitive(Primitive::String), Some(map)) => {
+                (MemberType::Primitive(Primitive::String | Primitive::Boolean), Some(map)) => {
                     map.get(&format!("{}{RAW_SUFFIX}", m.name))
                 }
                 _ => None,
@@ -897,7 +909,7 @@ impl<'t> Encoder<'t> {
             if let Some(kept) = kept {
                 raw_leaves(kept, &mut raws);
             }
-            self.raws = (raws.into_iter().map(<[u8]>::to_vec).collect(), 0);
+            self.raws = (raws, 0);
             let written = match (size, &m.ty) {
                 (Some(size), MemberType::Primitive(p)) => {
                     self.put_int(*p, size.n);
@@ -1147,7 +1159,12 @@ impl<'t> Encoder<'t> {
                     }
                     other => return Err(wrong(other)),
                 };
-                self.out.push(u8::from(b));
+                // the byte it was read from, when it was neither 0 nor 1 and it is still true
+                let kept = next_raw(&mut self.raws).and_then(|raw| match raw {
+                    Value::Int(byte) if b => u8::try_from(*byte).ok().filter(|&byte| byte != 0),
+                    _ => None,
+                });
+                self.out.push(kept.unwrap_or(u8::from(b)));
             }
             (Primitive::Float, Some(value)) => {
                 let x = match value {
@@ -1178,12 +1195,13 @@ impl<'t> Encoder<'t> {
                     return Err(wrong(value));
                 };
                 // the bytes it was read from, when they were not UTF-8 and it is still their text
-                let (kept, n) = &mut self.raws;
-                let raw = kept.get(*n).filter(|raw| {
-                    !raw.contains(&0) && String::from_utf8_lossy(raw) == text.as_ref()
+                let raw = next_raw(&mut self.raws).and_then(|raw| match raw {
+                    Value::Bytes(raw) if String::from_utf8_lossy(raw) == text.as_ref() => {
+                        Some(raw.as_slice())
+                    }
+                    _ => None,
                 });
-                *n += 1;
-                let s: &[u8] = raw.map_or(text.as_bytes(), Vec::as_slice);
+                let s: &[u8] = raw.unwrap_or(text.as_bytes());
                 let Some(len) = i32::try_from(s.len()).ok().and_then(|n| n.checked_add(1)) else {
                     return Err(fail(CodecError::OutOfRange {
                         path: String::new(),
@@ -1276,30 +1294,31 @@ struct Decoder<'t, 'b> {
     free: usize,
     /// What was read leniently.
     lenient: Leniency,
-    /// The strings read, in order, while a member is read: the bytes of those not UTF-8.
-    raws: Vec<Option<Vec<u8>>>,
+    /// The booleans and strings read, in order, while a member is read: the byte of a boolean
+    /// neither 0 nor 1 (an int), the bytes of a string not UTF-8.
+    raws: Vec<Option<Value>>,
 }
 
-/// `value` with each string in it replaced by its bytes: those kept in `raws` (in order) or its
-/// own.
-fn raw_shadow(value: &Value, raws: &mut impl Iterator<Item = Option<Vec<u8>>>) -> Value {
-    match value {
-        Value::List(items) => Value::List(items.iter().map(|v| raw_shadow(v, raws)).collect()),
-        Value::Str(s) => Value::Bytes(
-            raws.next()
-                .flatten()
-                .unwrap_or_else(|| s.as_bytes().to_vec()),
-        ),
-        other => other.clone(),
-    }
+/// `value` with each boolean in it replaced by its byte (an int) and each string by its bytes:
+/// those kept in `raws` (in order) or its own.
+fn raw_shadow(value: &Value, raws: &mut impl Iterator<Item = Option<Value>>) -> Value {
+    let own = match value {
+        Value::List(items) => {
+            return Value::List(items.iter().map(|v| raw_shadow(v, raws)).collect());
+        }
+        Value::Bool(b) => Value::Int(i64::from(*b)),
+        Value::Str(s) => Value::Bytes(s.as_bytes().to_vec()),
+        other => return other.clone(),
+    };
+    raws.next().flatten().unwrap_or(own)
 }
 
-/// The strings in `value` (a string member's value) in order, as the kept bytes they stand for.
-fn raw_leaves<'v>(value: &'v Value, out: &mut Vec<&'v [u8]>) {
+/// The values kept in `value` (the `name.raw` of a boolean or string member), in order: one for
+/// each boolean or string of the member.
+fn raw_leaves(value: &Value, out: &mut Vec<Value>) {
     match value {
         Value::List(items) => items.iter().for_each(|v| raw_leaves(v, out)),
-        Value::Bytes(b) => out.push(b),
-        _ => {}
+        leaf => out.push(leaf.clone()),
     }
 }
 
@@ -1479,12 +1498,15 @@ impl<'t> Decoder<'t, '_> {
             Primitive::Int64 => Value::Int(i64::from_be_bytes(self.take_array()?)),
             Primitive::Byte => Value::Int(u8::from_be_bytes(self.take_array()?).into()),
             Primitive::Boolean => match self.take_array::<1>()? {
-                [0] => Value::Bool(false),
-                [1] => Value::Bool(true),
-                [value] => {
-                    // liblcm's decoders read any other byte as true
+                [byte @ (0 | 1)] => {
+                    self.raws.push(None);
+                    Value::Bool(byte == 1)
+                }
+                [byte] => {
+                    // liblcm's decoders read any other byte as true, and hand it over as it is
                     self.lenient.bools += 1;
-                    self.lenient.first_bool.get_or_insert((offset, value));
+                    self.lenient.first_bool.get_or_insert((offset, byte));
+                    self.raws.push(Some(Value::Int(byte.into())));
                     Value::Bool(true)
                 }
             },
@@ -1518,7 +1540,7 @@ impl<'t> Decoder<'t, '_> {
                             (String::from_utf8_lossy(text).into_owned(), text.to_vec());
                         self.lenient.strings += 1;
                         self.lenient.first_string.get_or_insert(offset);
-                        self.raws.push(Some(raw));
+                        self.raws.push(Some(Value::Bytes(raw)));
                         Value::Str(Cow::Owned(lossy))
                     }
                 }
@@ -2272,22 +2294,34 @@ mod tests {
     fn what_liblcm_reads_is_read_and_said_and_encodes_back_as_it_came() {
         let t = types(
             "struct leaf_t { int32_t num; boolean ok; }\n\
-             struct node_t { int16_t n; leaf_t children[n]; string name; string tags[2]; double v; }\n",
+             struct node_t { int16_t n; leaf_t children[n]; string name; string tags[2]; double v;\n\
+                             boolean flags[2][2]; }\n",
         );
         let ty = get(&t, "node_t");
         // children[1].ok holds 2 (at byte 19), name is Latin-1 `caf\xe9` (at 20), tags[1] is
-        // `\xff` (at 35), and two bytes follow the message (at 49)
+        // `\xff` (at 35), flags[0][0] holds 4 (at 49) and flags[1][1] 255 (at 52), and two bytes
+        // follow the message (at 53)
         let mut body = vec![0, 2, 0, 0, 0, 1, 1, 0, 0, 0, 2, 2];
         body.extend_from_slice(&[0, 0, 0, 5, b'c', b'a', b'f', 0xe9, 0]);
         body.extend_from_slice(&[0, 0, 0, 2, b'a', 0, 0, 0, 0, 2, 0xff, 0]);
         body.extend_from_slice(&1.0f64.to_be_bytes());
+        body.extend_from_slice(&[4, 0, 1, 255]);
         let exact_len = 8 + body.len();
         body.extend_from_slice(&[1, 2]);
         let (map, lenient) = dec_lenient(&t, "node_t", &body).unwrap();
         let children = map.get("children").and_then(Value::as_list).unwrap();
+        let child = |i: usize| children[i].as_map().unwrap();
+        assert_eq!(child(1).get("ok"), Some(&Value::Bool(true)));
+        assert_eq!(child(1).get("ok.raw"), Some(&Value::Int(2)));
+        assert_eq!(child(0).get("ok"), Some(&Value::Bool(true)));
+        assert_eq!(child(0).get("ok.raw"), None, "a boolean of 1 keeps nothing");
         assert_eq!(
-            children[1].as_map().unwrap().get("ok"),
-            Some(&Value::Bool(true))
+            map.get("flags"),
+            Some(&list([list([true, false]), list([true, true])]))
+        );
+        assert_eq!(
+            map.get("flags.raw"),
+            Some(&list([list([4i64, 0]), list([1i64, 255])]))
         );
         assert_eq!(map.get_str("name"), Some("caf\u{fffd}"));
         assert_eq!(
@@ -2304,7 +2338,7 @@ mod tests {
         assert_eq!(
             lenient,
             Leniency {
-                bools: 1,
+                bools: 3,
                 first_bool: Some((19, 2)),
                 strings: 2,
                 first_string: Some(20),
@@ -2321,11 +2355,11 @@ mod tests {
                 "lcm-trailing-bytes"
             ]
         );
-        // encoded again: the bytes liblcm would have had, the boolean as 1, nothing after
+        // encoded again: the bytes liblcm would have had, booleans and strings as they came,
+        // nothing after
         let again = encode(&t, ty, &map).unwrap();
         let mut want = ty.fingerprint().to_be_bytes().to_vec();
         want.extend_from_slice(&body[..exact_len - 8]);
-        want[8 + 11] = 1;
         assert_eq!(again, want);
         // text changed since is written as it is now
         let mut changed = map.clone();
@@ -2335,14 +2369,73 @@ mod tests {
             dec(&t, "node_t", &bytes[8..]).unwrap().get_str("name"),
             Some("tea")
         );
-        // read again: the same map, its strings still the bytes they were
+        // a boolean made false since is written 0, its kept byte left; one still true (as a bool
+        // or as the int 1) keeps its byte
+        let mut changed = map.clone();
+        changed.insert("flags", list([list([false, false]), list([true, true])]));
+        let mut leaf = child(1).clone();
+        leaf.insert("ok", false);
+        let mut first = child(0).clone();
+        first.insert("ok", 1i64);
+        changed.insert("children", list([first.clone(), leaf]));
+        let bytes = encode(&t, ty, &changed).unwrap();
+        let mut want_changed = want.clone();
+        want_changed[8 + 11] = 0;
+        want_changed[8 + 41] = 0;
+        assert_eq!(bytes, want_changed);
+        let mut leaf = child(1).clone();
+        leaf.insert("ok", 1i64);
+        changed.insert("children", list([first, leaf]));
+        changed.insert("flags", list([list([1i64, 0]), list([true, true])]));
+        assert_eq!(encode(&t, ty, &changed).unwrap(), want);
+        // read again: the same map, its booleans and strings still the bytes they were
         let (back, lenient) = dec_lenient(&t, "node_t", &again[8..]).unwrap();
         assert_eq!(back, map);
         assert_eq!(
             (lenient.bools, lenient.strings, lenient.trailing),
-            (0, 2, 0)
+            (3, 2, 0)
         );
         assert!(!lenient.is_exact());
+    }
+
+    #[test]
+    fn a_string_not_utf8_with_a_nul_inside_is_sent_back_as_it_came() {
+        let t = types("struct s_t { string s; }");
+        // `c\xfc`, a NUL, `f`: liblcm hands over all four bytes
+        let body = [0, 0, 0, 5, b'c', 0xfc, 0, b'f', 0];
+        let (map, lenient) = dec_lenient(&t, "s_t", &body).unwrap();
+        assert_eq!(map.get_str("s"), Some("c\u{fffd}\0f"));
+        assert_eq!(
+            map.get("s.raw"),
+            Some(&Value::Bytes(vec![b'c', 0xfc, 0, b'f']))
+        );
+        assert_eq!(lenient.strings, 1);
+        let again = enc(&t, "s_t", &map).unwrap();
+        assert_eq!(again.get(8..), Some(&body[..]));
+    }
+
+    #[test]
+    fn kept_bytes_that_cannot_stand_for_the_value_are_left() {
+        let t = types("struct b_t { boolean ok; boolean on[2]; string s; }");
+        let exact = enc(
+            &t,
+            "b_t",
+            &DataMap::new()
+                .and("ok", true)
+                .and("on", list([true, true]))
+                .and("s", "x"),
+        )
+        .unwrap();
+        // a kept 0 would read as false, 256 is no byte, a string's bytes are no boolean's, and
+        // text bytes that do not decode to the text are not the string's
+        let map = DataMap::new()
+            .and("ok", true)
+            .and("ok.raw", 0i64)
+            .and("on", list([true, true]))
+            .and("on.raw", list([Value::Int(256), Value::Bytes(vec![7])]))
+            .and("s", "x")
+            .and("s.raw", Value::Bytes(b"y".to_vec()));
+        assert_eq!(enc(&t, "b_t", &map).unwrap(), exact);
     }
 
     #[test]
