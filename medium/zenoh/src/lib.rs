@@ -377,6 +377,8 @@ pub struct Outlet {
     /// whether it is one of the medium's kept outlets (past [`MAX_PUBLISHERS`], messages are put
     /// without a publisher of their own)
     kept: bool,
+    /// the samples its publisher keeps for subscribers that missed some (data only)
+    history: usize,
     publisher: tokio::sync::OnceCell<Publishing>,
 }
 
@@ -442,6 +444,9 @@ impl SendQos {
 /// The qualities of service declared for topics, in the order declared.
 type Overrides = Vec<(Pattern, Option<Kind>, Qos)>;
 
+/// Samples a command-status publisher keeps, so that a subscriber that missed some (a link lost
+/// and made again) gets them back in order: a command's `pending` as well as its outcome.
+const STATUS_HISTORY: usize = 32;
 /// Publishers kept per key and kind; beyond this many, messages are put without one.
 const MAX_PUBLISHERS: usize = 4096;
 /// How soon after a data sample its publisher says how many it sent, so that a subscriber
@@ -470,7 +475,8 @@ pub struct ZenohTransport {
 }
 
 /// Declares the publisher of outlet `o`: for data, one that keeps its latest sample for late
-/// joiners and numbers its samples; for commands, a plain one.
+/// joiners (command statuses their last [`STATUS_HISTORY`], for subscribers that missed some)
+/// and numbers its samples; for commands, a plain one.
 async fn declare(session: &Session, o: &Outlet) -> zenoh::Result<Publishing> {
     let builder = session
         .declare_publisher(o.key.clone())
@@ -482,7 +488,7 @@ async fn declare(session: &Session, o: &Outlet) -> zenoh::Result<Publishing> {
     } else {
         Publishing::Data(
             builder
-                .cache(CacheConfig::default().max_samples(1))
+                .cache(CacheConfig::default().max_samples(o.history))
                 .sample_miss_detection(MissDetectionConfig::default().sporadic_heartbeat(HEARTBEAT))
                 .publisher_detection()
                 .await?,
@@ -789,6 +795,11 @@ impl ZenohTransport {
             command,
             qos,
             kept,
+            history: if answers_commands(topic) {
+                STATUS_HISTORY
+            } else {
+                1
+            },
             publisher: tokio::sync::OnceCell::new(),
         });
         if kept {

@@ -954,47 +954,14 @@ impl Drop for Relay {
 async fn messages_lost_on_an_unreliable_link_are_counted_missed_by_topic() {
     const BURST: u32 = 60;
     const TOPIC: &str = "auv1.test.burst";
-    // every fourth message, none of the last few (so that the burst ends with one that arrives)
-    let chosen: std::collections::BTreeSet<u32> = (0..BURST - 4).filter(|i| i % 4 == 3).collect();
-    let listener = free_udp_port();
-    let vehicle = open(
-        "fleet",
-        "auv1",
-        &format!("zenoh://?listen=udp/127.0.0.1:{listener}&prefix=fleet/auv1&scout=false"),
-    );
-    let relay = Relay::start(listener, chosen.clone()).await;
-    let shore = open(
-        "fleet",
-        "shore",
-        &format!(
-            "zenoh://?connect=udp/127.0.0.1:{}&listen=tcp/127.0.0.1:0&prefix=fleet&scout=false",
-            relay.port
-        ),
-    );
-    wait_link(&vehicle, true).await;
-    wait_link(&shore, true).await;
-    let mut heard = shore.attach("watch").subscribed(TOPIC).unwrap();
-    let tx = vehicle.attach("gen");
-    // the shore's subscription reaches the vehicle, which then publishes to it
-    let mut warm = 0u32;
-    let mut reached = false;
-    for _ in 0..100 {
-        warm += 1;
-        let text = format!("<<warm:{warm:04}>>");
-        tx.send("test.burst", Payload::from(text.into_bytes()))
-            .await
-            .unwrap();
-        if let Ok(Some(_)) = timeout(Duration::from_millis(100), heard.recv()).await {
-            reached = true;
-            break;
-        }
-    }
-    assert!(reached, "the shore hears the vehicle");
-    assert_eq!(
-        shore.stats().missed,
-        Default::default(),
-        "nothing missed yet"
-    );
+    let chosen = every_fourth(BURST);
+    let Lossy {
+        vehicle,
+        shore,
+        relay,
+        mut heard,
+        tx,
+    } = Lossy::start("test.burst", TOPIC, chosen.clone()).await;
     // the burst, paced as a sensor would send it
     for i in 0..BURST {
         let text = format!("<<miss:{i:04}>>");
@@ -1042,6 +1009,119 @@ async fn messages_lost_on_an_unreliable_link_are_counted_missed_by_topic() {
     let by_topic = shown.get("missed").and_then(Value::as_map).unwrap();
     assert_eq!(by_topic.get_i64(TOPIC), Some(counted as i64));
     assert!(stats.has_losses());
+    vehicle.close();
+    shore.close();
+}
+
+/// Every fourth message of a burst of `burst`, none of the last few (so that the burst ends with
+/// one that arrives).
+fn every_fourth(burst: u32) -> std::collections::BTreeSet<u32> {
+    (0..burst - 4).filter(|i| i % 4 == 3).collect()
+}
+
+/// Two seabus nodes joined by a Zenoh `udp/` link through a [`Relay`] dropping `chosen` on the
+/// way to the shore, the shore's interface subscribed to `heard` and hearing the vehicle's
+/// `topic` (bytes with a marker, sent until one arrives).
+struct Lossy {
+    vehicle: Medium,
+    shore: Medium,
+    relay: Relay,
+    heard: seabus_medium::Interface,
+    tx: seabus_medium::Interface,
+}
+
+impl Lossy {
+    async fn start(topic: &str, heard: &str, chosen: std::collections::BTreeSet<u32>) -> Lossy {
+        let listener = free_udp_port();
+        let vehicle = open(
+            "fleet",
+            "auv1",
+            &format!("zenoh://?listen=udp/127.0.0.1:{listener}&prefix=fleet/auv1&scout=false"),
+        );
+        let relay = Relay::start(listener, chosen).await;
+        let shore = open(
+            "fleet",
+            "shore",
+            &format!(
+                "zenoh://?connect=udp/127.0.0.1:{}&listen=tcp/127.0.0.1:0&prefix=fleet&scout=false",
+                relay.port
+            ),
+        );
+        wait_link(&vehicle, true).await;
+        wait_link(&shore, true).await;
+        let mut watch = shore.attach("watch").subscribed(heard).unwrap();
+        let tx = vehicle.attach("gen");
+        // the shore's subscription reaches the vehicle, which then publishes to it
+        let mut reached = false;
+        for warm in 0..100 {
+            let text = format!("<<warm:{warm:04}>>");
+            tx.send(topic, Payload::from(text.into_bytes()))
+                .await
+                .unwrap();
+            if let Ok(Some(_)) = timeout(Duration::from_millis(100), watch.recv()).await {
+                reached = true;
+                break;
+            }
+        }
+        assert!(reached, "the shore hears the vehicle");
+        assert_eq!(
+            shore.stats().missed,
+            Default::default(),
+            "nothing missed yet"
+        );
+        Lossy {
+            vehicle,
+            shore,
+            relay,
+            heard: watch,
+            tx,
+        }
+    }
+}
+
+/// Command statuses over the same lossy link: the publisher keeps its last ones, so every status
+/// a relay dropped comes back, in order, and none is counted missed (a console sees a command's
+/// `pending` as well as its outcome).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn command_statuses_lost_on_an_unreliable_link_come_back_in_order() {
+    const BURST: u32 = 24;
+    const TOPIC: &str = "auv1.cmd.status";
+    let chosen = every_fourth(BURST);
+    let Lossy {
+        vehicle,
+        shore,
+        relay,
+        mut heard,
+        tx,
+    } = Lossy::start("cmd.status", TOPIC, chosen.clone()).await;
+    for i in 0..BURST {
+        let text = format!("<<miss:{i:04}>>");
+        tx.send("cmd.status", Payload::from(text.into_bytes()))
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
+    let mut arrived = Vec::new();
+    // (each round takes a message or 100 ms: at most 30 s of waiting)
+    for _ in 0..BURST + 300 {
+        if arrived.len() >= BURST as usize {
+            break;
+        }
+        if let Ok(Some(m)) = timeout(Duration::from_millis(100), heard.recv()).await {
+            arrived.extend(markers(m.payload.as_bytes().expect("bytes")));
+        }
+    }
+    let dropped = relay.dropped.lock().unwrap().clone();
+    assert!(
+        dropped.is_superset(&chosen),
+        "the relay dropped each chosen status: {dropped:?}"
+    );
+    assert_eq!(
+        arrived,
+        (0..BURST).collect::<Vec<_>>(),
+        "dropped {dropped:?}"
+    );
+    assert_eq!(shore.stats().missed, Default::default());
     vehicle.close();
     shore.close();
 }
