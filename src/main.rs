@@ -784,7 +784,9 @@ fn types() {
 mod tests {
     use super::*;
 
+    /// (The demo's system has an LCM medium: a build without LCM refuses it, as it should.)
     #[test]
+    #[cfg(feature = "lcm")]
     fn the_demo_system_is_valid() {
         // as `seabus demo` runs it: from its own directory, with its built-in files and users
         let (dir, file) = console::write_demo(DEMO).unwrap();
