@@ -3,23 +3,12 @@
 
 mod common;
 use common::*;
-use std::process::Stdio;
 use std::time::Duration;
-
-fn start_spy(url: &str, extra: &[&str]) -> std::process::Child {
-    seabus()
-        .args(["spy", url, "--for", "2.5"])
-        .args(extra)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spy starts")
-}
 
 #[test]
 fn published_fields_arrive_typed_and_counted() {
     let url = format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port());
-    let spy = start_spy(&url, &["--json"]);
+    let spy = spawn_spy(&url, &["--for", "2.5", "--json"]);
     std::thread::sleep(Duration::from_millis(400));
     let out = seabus()
         .args([
@@ -93,7 +82,7 @@ fn published_fields_arrive_typed_and_counted() {
 #[test]
 fn the_table_lists_topics_with_counts_and_origins() {
     let url = format!("udp://{}:{}?ttl=0&iface=127.0.0.1", group(), free_port());
-    let spy = start_spy(&url, &[]);
+    let spy = spawn_spy(&url, &["--for", "2.5"]);
     std::thread::sleep(Duration::from_millis(400));
     let out = seabus()
         .args([

@@ -58,12 +58,7 @@ fn read_log(path: &Path) -> Vec<OwnedEvent> {
 
 /// Starts `seabus spy URL --json` and waits until it has joined the group.
 fn start_spy(url: &str) -> Child {
-    let spy = seabus()
-        .args(["spy", url, "--json", "--for", "30"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spy starts");
+    let spy = spawn_spy(url, &["--json", "--for", "30"]);
     std::thread::sleep(Duration::from_millis(400));
     spy
 }

@@ -963,13 +963,7 @@ async fn messages_lost_on_an_unreliable_link_are_counted_missed_by_topic() {
         tx,
     } = Lossy::start("test.burst", TOPIC, chosen.clone()).await;
     // the burst, paced as a sensor would send it
-    for i in 0..BURST {
-        let text = format!("<<miss:{i:04}>>");
-        tx.send("test.burst", Payload::from(text.into_bytes()))
-            .await
-            .unwrap();
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    send_burst(&tx, "test.burst", BURST).await;
     // what arrives, until every message of the burst has arrived or been counted missed
     let mut arrived = std::collections::BTreeSet::new();
     let missed = |m: &Medium| m.stats().missed.get(TOPIC).copied().unwrap_or(0);
@@ -1094,13 +1088,7 @@ async fn command_statuses_lost_on_an_unreliable_link_come_back_in_order() {
         mut heard,
         tx,
     } = Lossy::start("cmd.status", TOPIC, chosen.clone()).await;
-    for i in 0..BURST {
-        let text = format!("<<miss:{i:04}>>");
-        tx.send("cmd.status", Payload::from(text.into_bytes()))
-            .await
-            .unwrap();
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
+    send_burst(&tx, "cmd.status", BURST).await;
     let mut arrived = Vec::new();
     // (each round takes a message or 100 ms: at most 30 s of waiting)
     for _ in 0..BURST + 300 {
@@ -1124,6 +1112,18 @@ async fn command_statuses_lost_on_an_unreliable_link_come_back_in_order() {
     assert_eq!(shore.stats().missed, Default::default());
     vehicle.close();
     shore.close();
+}
+
+/// Sends a burst of `burst` messages on `topic`, each bytes with its marker, paced as a sensor
+/// would send them.
+async fn send_burst(tx: &seabus_medium::Interface, topic: &str, burst: u32) {
+    for i in 0..burst {
+        let text = format!("<<miss:{i:04}>>");
+        tx.send(topic, Payload::from(text.into_bytes()))
+            .await
+            .unwrap();
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
 }
 
 fn free_udp_port() -> u16 {
