@@ -33,7 +33,7 @@
 
 use foxglove::schemas::{FrameTransform, LocationFix, Log, Quaternion, Timestamp, Vector3};
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Status};
-use foxglove::{Channel, ChannelBuilder, Context, PartialMetadata, RawChannel, Schema};
+use foxglove::{ChannelBuilder, Context, Encode, PartialMetadata, RawChannel, Schema};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::{Element, FileError};
 use seabus_medium::{DataMap, Interface, Kind, Medium, Message, Pattern, Payload, Stamp, Topic};
@@ -254,15 +254,36 @@ struct Feed {
     topics: Vec<Pattern>,
     unadvertise: Duration,
     served: HashMap<Topic, Served>,
-    fix: Option<Channel<LocationFix>>,
-    tf: Option<Channel<FrameTransform>>,
+    fix: Option<Arc<RawChannel>>,
+    tf: Option<Arc<RawChannel>>,
     /// The latest heading, degrees.
     heading: Option<f64>,
     /// The latest local position, metres north, east, down.
     local: Option<[f64; 3]>,
-    log: Option<Channel<Log>>,
+    log: Option<Arc<RawChannel>>,
     node: String,
     scratch: Vec<u8>,
+}
+
+/// The channel of one of Foxglove's own schemas, `T`, on `topic`.
+fn typed<T: Encode>(ctx: &Arc<Context>, topic: &str) -> Arc<RawChannel> {
+    ChannelBuilder::new(topic)
+        .context(ctx)
+        .build::<T>()
+        .into_inner()
+}
+
+/// Encodes `msg` into `scratch` and logs it on `channel`, when a client listens. (The SDK's own
+/// typed `log` encodes into a 256 kB buffer on the stack, which every worker thread would then
+/// keep resident.)
+fn send<T: Encode>(channel: &RawChannel, msg: &T, scratch: &mut Vec<u8>, meta: PartialMetadata) {
+    if !channel.has_sinks() {
+        return;
+    }
+    scratch.clear();
+    if msg.encode(scratch).is_ok() {
+        channel.log_with_meta(scratch, meta);
+    }
 }
 
 fn timestamp(s: Stamp) -> Timestamp {
@@ -367,13 +388,14 @@ impl Feed {
                     return;
                 };
                 self.heading = Some(yaw);
-                let ctx = self.ctx.clone();
-                let tf = self.tf.get_or_insert_with(|| {
-                    ChannelBuilder::new("foxglove/tf").context(&ctx).build()
-                });
+                let ctx = &self.ctx;
+                let tf = self
+                    .tf
+                    .get_or_insert_with(|| typed::<FrameTransform>(ctx, "foxglove/tf"));
                 // north-east-down as Foxglove's x-y-z: the vehicle seen from above
                 let [n, e, d] = self.local.unwrap_or([0.0; 3]);
-                tf.log_with_meta(
+                send(
+                    tf,
                     &FrameTransform {
                         timestamp: Some(timestamp(msg.stamp)),
                         parent_frame_id: "world".into(),
@@ -381,6 +403,7 @@ impl Feed {
                         translation: Some(Vector3 { x: n, y: e, z: d }),
                         rotation: Some(quaternion(yaw, pitch, roll)),
                     },
+                    &mut self.scratch,
                     meta,
                 );
             }
@@ -388,13 +411,12 @@ impl Feed {
                 let (Some(lat), Some(lon)) = (map.get_f64("lat"), map.get_f64("lon")) else {
                     return;
                 };
-                let ctx = self.ctx.clone();
-                let fix = self.fix.get_or_insert_with(|| {
-                    ChannelBuilder::new("foxglove/nav.position")
-                        .context(&ctx)
-                        .build()
-                });
-                fix.log_with_meta(
+                let ctx = &self.ctx;
+                let fix = self
+                    .fix
+                    .get_or_insert_with(|| typed::<LocationFix>(ctx, "foxglove/nav.position"));
+                send(
+                    fix,
                     &LocationFix {
                         timestamp: Some(timestamp(msg.stamp)),
                         frame_id: "vehicle".into(),
@@ -406,6 +428,7 @@ impl Feed {
                         heading: self.heading.map(f64::to_radians),
                         ..Default::default()
                     },
+                    &mut self.scratch,
                     meta,
                 );
             }
@@ -422,12 +445,13 @@ impl Feed {
             tracing::Level::INFO => L::Info,
             _ => L::Debug,
         };
-        let ctx = self.ctx.clone();
+        let ctx = &self.ctx;
         let channel = self
             .log
-            .get_or_insert_with(|| ChannelBuilder::new("foxglove/log").context(&ctx).build());
+            .get_or_insert_with(|| typed::<Log>(ctx, "foxglove/log"));
         let (file, line) = rec.file.unwrap_or(("", 0));
-        channel.log_with_meta(
+        send(
+            channel,
             &Log {
                 timestamp: Some(timestamp(rec.time)),
                 level: level as i32,
@@ -436,6 +460,7 @@ impl Feed {
                 file: file.to_string(),
                 line,
             },
+            &mut self.scratch,
             PartialMetadata {
                 log_time: u64::try_from(rec.time.0).ok(),
             },

@@ -353,8 +353,10 @@ async fn connection(hub: Arc<Hub>, key: Key, session: Session, socket: WebSocket
                 if hub.sessions.find(&key).is_none() {
                     break;
                 }
-                if let Some(data) = hub.data_for(&mut client) {
-                    out.push(data);
+                if let Some(data) = hub.data_for(&mut client)
+                    && !put(&mut sink, Message::Text(data.into())).await
+                {
+                    break;
                 }
             }
         }

@@ -6,6 +6,7 @@ use crate::auth::Session;
 use crate::layout::Layout;
 use seabus_medium::xml::FileError;
 use seabus_medium::{DataMap, Pattern, Topic};
+use serde::ser::{Serialize, SerializeMap, Serializer};
 use serde_json::{Map, Value as Json, json};
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -177,8 +178,10 @@ impl Hub {
             .collect()
     }
 
-    /// The `data` message with what changed since the client's last one, if anything did.
-    pub fn data_for(&self, client: &mut Client) -> Option<Json> {
+    /// The `data` message with what changed since the client's last one, if anything did, as
+    /// JSON text. Written straight from the latest values under the hub's lock: no copy of a
+    /// value is made for a page, however many pages there are.
+    pub fn data_for(&self, client: &mut Client) -> Option<String> {
         if client.interest.is_empty() {
             return None;
         }
@@ -186,46 +189,117 @@ impl Hub {
         if st.version == client.seen {
             return None;
         }
-        let mut topics = Map::new();
-        for (topic, latest) in &st.latest {
-            if latest.version <= client.seen {
-                continue;
-            }
-            if let Some(fields) = wanted(&client.interest, topic, &latest.map) {
-                topics.insert(
-                    topic.to_string(),
-                    json!({"stamp": latest.stamp, "fields": fields}),
-                );
-            }
-        }
+        let topics: Vec<TopicData<'_>> = st
+            .latest
+            .iter()
+            .filter(|(_, latest)| latest.version > client.seen)
+            .filter_map(|(topic, latest)| {
+                Some(TopicData {
+                    topic,
+                    stamp: latest.stamp,
+                    fields: wanted(&client.interest, topic, &latest.map)?,
+                })
+            })
+            .collect();
         client.seen = st.version;
-        (!topics.is_empty()).then(|| json!({"type": "data", "topics": topics, "now": now_s()}))
+        if topics.is_empty() {
+            return None;
+        }
+        serde_json::to_string(&Data {
+            topics,
+            now: now_s(),
+        })
+        .ok()
     }
 }
 
-/// The fields of `map` (the latest message of `topic`) that `interest` wants, if it wants any.
-fn wanted(interest: &Interest, topic: &Topic, map: &DataMap) -> Option<DataMap> {
-    let mut wanted: Option<DataMap> = None;
+/// A `data` message: `{"type": "data", "topics": {TOPIC: {"stamp", "fields"}}, "now"}`.
+struct Data<'a> {
+    topics: Vec<TopicData<'a>>,
+    now: f64,
+}
+
+/// One topic's entry of a `data` message.
+struct TopicData<'a> {
+    topic: &'a Topic,
+    stamp: f64,
+    fields: Fields<'a>,
+}
+
+/// The fields of a topic's latest message a page wants.
+enum Fields<'a> {
+    All(&'a DataMap),
+    These(Vec<(&'a str, &'a seabus_medium::Value)>),
+}
+
+impl Serialize for Data<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        struct Topics<'b>(&'b [TopicData<'b>]);
+        impl Serialize for Topics<'_> {
+            fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+                let mut m = s.serialize_map(Some(self.0.len()))?;
+                for t in self.0 {
+                    m.serialize_entry(t.topic.as_str(), t)?;
+                }
+                m.end()
+            }
+        }
+        let mut m = s.serialize_map(Some(3))?;
+        m.serialize_entry("type", "data")?;
+        m.serialize_entry("topics", &Topics(&self.topics))?;
+        m.serialize_entry("now", &self.now)?;
+        m.end()
+    }
+}
+
+impl Serialize for TopicData<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let mut m = s.serialize_map(Some(2))?;
+        m.serialize_entry("stamp", &self.stamp)?;
+        m.serialize_entry("fields", &self.fields)?;
+        m.end()
+    }
+}
+
+impl Serialize for Fields<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Fields::All(map) => map.serialize(s),
+            Fields::These(these) => {
+                let mut m = s.serialize_map(Some(these.len()))?;
+                for (k, v) in these {
+                    m.serialize_entry(k, v)?;
+                }
+                m.end()
+            }
+        }
+    }
+}
+
+/// The fields of `map` (the latest message of `topic`) that `interest` wants, if it wants any:
+/// all of them when a pattern binding the whole message matches, else each field a matching
+/// pattern names, once, in the order first named.
+fn wanted<'a>(interest: &'a Interest, topic: &Topic, map: &'a DataMap) -> Option<Fields<'a>> {
+    let mut wanted: Option<Vec<(&'a str, &'a seabus_medium::Value)>> = None;
     for (p, fields) in interest {
         if !p.matches(topic.as_str()) {
             continue;
         }
-        let out = wanted.get_or_insert_with(DataMap::new);
+        let out = wanted.get_or_insert_with(Vec::new);
         match fields {
-            None => {
-                *out = map.clone();
-                break;
-            }
+            None => return Some(Fields::All(map)),
             Some(list) => {
                 for f in list {
-                    if let Some(v) = map.get(f) {
-                        out.insert(f.clone(), v.clone());
+                    if let Some(v) = map.get(f)
+                        && !out.iter().any(|(k, _)| *k == f.as_str())
+                    {
+                        out.push((f.as_str(), v));
                     }
                 }
             }
         }
     }
-    wanted
+    wanted.map(Fields::These)
 }
 
 #[cfg(test)]
@@ -278,7 +352,7 @@ mod tests {
         let depth = Topic::new("nav.depth").unwrap();
         let reading = DataMap::new().with("depth", 3.5).with("temperature", 9);
         f.hub.observe(&depth, Stamp(10_000_000_000), &reading);
-        let data = f.hub.data_for(&mut ana).unwrap();
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ana).unwrap()).unwrap();
         assert_eq!(
             data["topics"],
             json!({"nav.depth": {"stamp": 10.0, "fields": {"depth": 3.5}}})
@@ -287,6 +361,41 @@ mod tests {
         let elsewhere = Topic::new("nav.speed").unwrap();
         f.hub.observe(&elsewhere, Stamp(11_000_000_000), &reading);
         assert_eq!(f.hub.data_for(&mut ana), None);
+    }
+
+    #[test]
+    fn a_field_bound_twice_is_sent_once_beside_the_other_fields_of_its_topics() {
+        let twice = r#"<layout name="twice" roles="observer">
+            <readout bind="nav.depth.depth"/><readout bind="nav.depth.depth"/>
+            <plot><series bind="nav.depth.depth"/></plot>
+            <readout bind="nav.speed.knots"/><readout bind="nav.speed.metres"/>
+        </layout>"#;
+        let f = Fixture::with_layouts(&[("twice.xml", twice)]);
+        let mut ivo = f.hub.connect(f.session("ivo"));
+        let opened = f.hub.open(&mut ivo, "twice", &BTreeMap::new());
+        assert_eq!(opened["type"], "layout", "{opened}");
+        let reading = DataMap::new().with("depth", 3.5).with("temperature", 9);
+        f.hub.observe(
+            &Topic::new("nav.depth").unwrap(),
+            Stamp(1_000_000_000),
+            &reading,
+        );
+        let speed = DataMap::new().with("metres", 1.5).with("knots", 2.9);
+        f.hub.observe(
+            &Topic::new("nav.speed").unwrap(),
+            Stamp(2_000_000_000),
+            &speed,
+        );
+        let text = f.hub.data_for(&mut ivo).unwrap();
+        assert_eq!(text.matches(r#""depth":3.5"#).count(), 1, "{text}");
+        let data: Json = serde_json::from_str(&text).unwrap();
+        assert_eq!(data["type"], "data");
+        assert_eq!(
+            data["topics"],
+            json!({"nav.depth": {"stamp": 1.0, "fields": {"depth": 3.5}},
+                   "nav.speed": {"stamp": 2.0, "fields": {"knots": 2.9, "metres": 1.5}}})
+        );
+        assert!(data["now"].as_f64().unwrap() > 1.7e9, "{text}");
     }
 
     #[test]
@@ -309,7 +418,7 @@ mod tests {
             .with("media", DataMap::new().with("gps-line", lossy.to_map()));
         let health = Topic::new("vehicle.health").unwrap();
         f.hub.observe(&health, Stamp(5_000_000_000), &snapshot);
-        let data = f.hub.data_for(&mut ivo).unwrap();
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
         let line = &data["topics"]["vehicle.health"]["fields"]["media"]["gps-line"];
         assert_eq!(line["queue_dropped"], json!({"gps": 412}), "{data}");
         assert_eq!(line["rejected"], json!({"garbage": 2}), "{data}");
@@ -374,7 +483,7 @@ mod tests {
         let battery = Topic::new("auv2.power.battery").unwrap();
         let charge = DataMap::new().with("percent", 81.0).with("voltage", 15.1);
         f.hub.observe(&battery, Stamp(2_000_000_000), &charge);
-        let data = f.hub.data_for(&mut ivo).unwrap();
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
         let nodes = &data["topics"]["seabus.fleet"]["fields"];
         let names: Vec<&String> = nodes.as_object().unwrap().keys().collect();
         assert_eq!(names, ["auv1", "auv2", "shore"], "{data}");
@@ -390,7 +499,7 @@ mod tests {
         // auv1 goes: its row stays, offline
         f.hub
             .observe(&fleet, Stamp(3_000_000_000), &said("auv1", false));
-        let data = f.hub.data_for(&mut ivo).unwrap();
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
         let nodes = &data["topics"]["seabus.fleet"]["fields"];
         assert_eq!(
             (&nodes["auv1"]["online"], &nodes["auv2"]["online"]),
