@@ -20,16 +20,22 @@ const PORT: u16 = 47800;
 /// Longer than the running system's interval between giving free memory back (10 s).
 const SETTLE: Duration = Duration::from_secs(11);
 
-/// A process's resident memory (bytes) and CPU time (seconds, user + system).
-fn sample(pid: u32) -> Option<(u64, f64)> {
+/// A field of a process's `/proc/PID/status` given in kB, as bytes.
+fn status_bytes(pid: u32, field: &str) -> Option<u64> {
     let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
     let kb: u64 = status
         .lines()
-        .find_map(|l| l.strip_prefix("VmRSS:"))?
+        .find_map(|l| l.strip_prefix(field)?.strip_prefix(':'))?
         .split_whitespace()
         .next()?
         .parse()
         .ok()?;
+    Some(kb * 1024)
+}
+
+/// A process's resident memory (bytes) and CPU time (seconds, user + system).
+fn sample(pid: u32) -> Option<(u64, f64)> {
+    let rss = status_bytes(pid, "VmRSS")?;
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // fields after the command's closing parenthesis: utime and stime are the 12th and 13th
     let rest = stat.rsplit_once(')')?.1;
@@ -37,7 +43,7 @@ fn sample(pid: u32) -> Option<(u64, f64)> {
     let ticks: f64 = f.get(11)?.parse::<f64>().ok()? + f.get(12)?.parse::<f64>().ok()?;
     // SAFETY: sysconf only reads a system constant
     let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) } as f64;
-    Some((kb * 1024, ticks / hz))
+    Some((rss, ticks / hz))
 }
 
 /// One HTTP exchange on a fresh connection: the response's head (status line and headers).
@@ -191,6 +197,9 @@ fn main() {
     };
     let (_, cpu_idle_from) = at(early / 2);
     let (idle_end, cpu_idle_to) = at(early);
+    // what the program holds itself, and the pages of its code and libraries it has run
+    let own = status_bytes(pid, "RssAnon").expect("the demo runs");
+    let code = status_bytes(pid, "RssFile").expect("the demo runs");
     let idle_cpu = (cpu_idle_to - cpu_idle_from) / (early - early / 2) as f64;
     let mut cookie = String::new();
     for _ in 0..10 {
@@ -216,6 +225,12 @@ fn main() {
         mb(connected),
         mb(end),
         late.max(after + 10)
+    );
+    println!(
+        "  idle at {early} s: {:.1} MB the program's own memory, {:.1} MB pages of its code and \
+         libraries",
+        mb(own),
+        mb(code)
     );
     println!(
         "  CPU: {:.1} % of one core idle, {:.1} % over the rest of the run (the simulated vehicle, \

@@ -10,6 +10,11 @@ use std::net::{Ipv4Addr, SocketAddr, SocketAddrV4};
 pub const MAX_DATAGRAM: usize = 65_507;
 /// Default socket receive buffer.
 pub const DEFAULT_RECV_BUF: usize = 4 << 20;
+/// Bytes of received datagrams a medium gathers in one allocation, the payloads cut from it
+/// sharing it: one allocation per chunk rather than per datagram. A chunk is given back once every
+/// payload cut from it is dropped, so a quiet medium holds at most about this much in a chunk
+/// filling slowly; at the allocator's threshold for mapped blocks, it goes back to the system.
+pub const RECV_CHUNK: usize = 256 << 10;
 
 /// How a UDP endpoint reaches its peers.
 #[derive(Debug, Clone, PartialEq, Eq)]

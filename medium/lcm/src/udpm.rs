@@ -33,6 +33,7 @@ use seabus_medium::medium::{
     BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport,
 };
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
+use seabus_medium::net::RECV_CHUNK;
 use seabus_medium::payload::{Format, Payload};
 use seabus_medium::topic::{ChannelRegex, Pattern, Topic};
 use seabus_medium::url::{MediumUrl, UrlError};
@@ -524,8 +525,6 @@ struct Receiver {
     dropped: Vec<Dropped>,
 }
 
-/// Bytes of received messages gathered in one allocation (shared by the payloads cut from it).
-const RECV_CHUNK: usize = 1 << 20;
 /// Datagrams taken from the socket in one recvmmsg(2) call.
 const RECV_BATCH: usize = 32;
 /// Room for the largest UDP datagram.

@@ -20,7 +20,7 @@
 use bytes::{Bytes, BytesMut};
 use seabus_medium::caps::{Capabilities, Carries, Framing};
 use seabus_medium::datagram as wire;
-use seabus_medium::net::{self, MAX_DATAGRAM, UdpEndpoint};
+use seabus_medium::net::{self, MAX_DATAGRAM, RECV_CHUNK, UdpEndpoint};
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{
     BoxFuture, Ingress, LinkState, Message, OpenError, Opened, Opening, Scheme, Schemes, SendError,
@@ -222,8 +222,6 @@ impl Transport for UdpTransport {
         self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 }
-
-const RECV_CHUNK: usize = 1 << 20;
 
 async fn receive(socket: Arc<UdpSocket>, me: u64, ingress: Ingress) {
     let mut buf = BytesMut::with_capacity(RECV_CHUNK);
