@@ -19,18 +19,14 @@ const CHANNELS: [&str; 6] = ["POSE.", ".POSE", "a..b", "cam*", "with space", "na
 fn build_peer(dir: &Path) -> PathBuf {
     let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/lcm_channels.c");
     let program = dir.join("lcm_channels");
-    let out = Command::new("cc")
-        .arg("-Wall")
-        .arg("-o")
-        .arg(&program)
-        .arg(&source)
-        .arg("-llcm")
-        .output()
-        .expect("cc runs");
-    assert!(
-        out.status.success(),
-        "the C peer builds against liblcm (./scripts/test installs liblcm-dev): {}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        Command::new("cc")
+            .arg("-Wall")
+            .arg("-o")
+            .arg(&program)
+            .arg(&source)
+            .arg("-llcm"),
+        "cc building the C peer against liblcm (./scripts/test installs liblcm-dev)",
     );
     program
 }

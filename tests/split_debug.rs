@@ -2,6 +2,8 @@
 //! (the last step of `scripts/dist`): a panic's backtrace names the functions and their files and
 //! lines while the `.debug` file sits beside the program, and none without it.
 
+mod common;
+use common::succeeds;
 use std::path::Path;
 use std::process::Command;
 
@@ -33,27 +35,19 @@ fn a_stripped_programs_backtrace_reads_names_and_lines_from_the_file_beside_it()
     let source = dir.path().join("crash.rs");
     std::fs::write(&source, CRASH).unwrap();
     let built = dir.path().join("crash");
-    let rustc = Command::new("rustc")
-        .args(["-C", "debuginfo=line-tables-only", "-C", "strip=none", "-o"])
-        .arg(&built)
-        .arg(&source)
-        .output()
-        .expect("rustc runs");
-    assert!(
-        rustc.status.success(),
-        "{}",
-        String::from_utf8_lossy(&rustc.stderr)
+    succeeds(
+        Command::new("rustc")
+            .args(["-C", "debuginfo=line-tables-only", "-C", "strip=none", "-o"])
+            .arg(&built)
+            .arg(&source),
+        "rustc",
     );
     let vehicle = dir.path().join("vehicle");
-    let split = Command::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/split-debug"))
-        .arg(&built)
-        .arg(&vehicle)
-        .output()
-        .expect("scripts/split-debug runs");
-    assert!(
-        split.status.success(),
-        "{}",
-        String::from_utf8_lossy(&split.stderr)
+    succeeds(
+        Command::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/split-debug"))
+            .arg(&built)
+            .arg(&vehicle),
+        "scripts/split-debug",
     );
     let program = vehicle.join("crash");
     let debug = vehicle.join("crash.debug");

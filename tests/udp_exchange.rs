@@ -53,14 +53,9 @@ fn two_processes_exchange_over_udp_and_a_third_sees_it() {
     }
     let mut a = spawn_run(&alpha, &[]);
     let mut b = spawn_run(&bravo, &[]);
-    let spy = seabus()
-        .args(["spy", &spy_url, "--json", "--for", "4"])
-        .output()
-        .expect("spy runs");
-    assert!(
-        spy.status.success(),
-        "{}",
-        String::from_utf8_lossy(&spy.stderr)
+    let spy = succeeds(
+        seabus().args(["spy", &spy_url, "--json", "--for", "4"]),
+        "seabus spy",
     );
 
     let lines: Vec<serde_json::Value> = String::from_utf8_lossy(&spy.stdout)

@@ -325,19 +325,29 @@ pub fn wait_for_line(
     panic!("no {what} within {limit:?}");
 }
 
-/// Runs a Python script with arguments and environment; fails the test when it fails.
-pub fn python(script: &str, args: &[&str], env: &[(&str, &str)]) -> String {
-    let out = Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .args(args)
-        .envs(env.iter().copied())
+/// Runs `cmd` to its end, `what` naming it; fails the test, with what it wrote to stderr, unless
+/// it ran and succeeded.
+pub fn succeeds(cmd: &mut Command, what: &str) -> Output {
+    let out = cmd
         .output()
-        .expect("python3 runs");
+        .unwrap_or_else(|e| panic!("{what} does not run: {e}"));
     assert!(
         out.status.success(),
-        "python3 failed: {}",
+        "{what} failed: {}",
         String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// Runs a Python script with arguments and environment; fails the test when it fails.
+pub fn python(script: &str, args: &[&str], env: &[(&str, &str)]) -> String {
+    let out = succeeds(
+        Command::new("python3")
+            .arg("-c")
+            .arg(script)
+            .args(args)
+            .envs(env.iter().copied()),
+        "python3",
     );
     String::from_utf8_lossy(&out.stdout).into_owned()
 }
@@ -515,17 +525,9 @@ pub fn lcm_c_peer(dir: &Path) -> PathBuf {
         std::fs::copy(peers.join(file), dir.join(file)).expect("the peer's files are copied");
     }
     let run = |program: &str, args: &[&str]| {
-        let out = Command::new(program)
-            .args(args)
-            .current_dir(dir)
-            .output()
-            .unwrap_or_else(|e| {
-                panic!("{program} runs (install liblcm-bin and liblcm-dev: ./scripts/test): {e}")
-            });
-        assert!(
-            out.status.success(),
-            "{program} {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
+        succeeds(
+            Command::new(program).args(args).current_dir(dir),
+            &format!("{program} {args:?} (./scripts/test installs liblcm-bin and liblcm-dev)"),
         );
     };
     // lcm-gen of the same release as the C library

@@ -954,16 +954,14 @@ impl Drop for Relay {
 async fn messages_lost_on_an_unreliable_link_are_counted_missed_by_topic() {
     const BURST: u32 = 60;
     const TOPIC: &str = "auv1.test.burst";
-    let chosen = every_fourth(BURST);
     let Lossy {
         vehicle,
         shore,
         relay,
+        chosen,
         mut heard,
-        tx,
-    } = Lossy::start("test.burst", TOPIC, chosen.clone()).await;
-    // the burst, paced as a sensor would send it
-    send_burst(&tx, "test.burst", BURST).await;
+        tx: _tx,
+    } = Lossy::burst("test.burst", BURST).await;
     // what arrives, until every message of the burst has arrived or been counted missed
     let mut arrived = std::collections::BTreeSet::new();
     let missed = |m: &Medium| m.stats().missed.get(TOPIC).copied().unwrap_or(0);
@@ -1007,32 +1005,33 @@ async fn messages_lost_on_an_unreliable_link_are_counted_missed_by_topic() {
     shore.close();
 }
 
-/// Every fourth message of a burst of `burst`, none of the last few (so that the burst ends with
-/// one that arrives).
-fn every_fourth(burst: u32) -> std::collections::BTreeSet<u32> {
-    (0..burst - 4).filter(|i| i % 4 == 3).collect()
-}
-
-/// Two seabus nodes joined by a Zenoh `udp/` link through a [`Relay`] dropping `chosen` on the
-/// way to the shore, the shore's interface subscribed to `heard` and hearing the vehicle's
-/// `topic` (bytes with a marker, sent until one arrives).
+/// Two seabus nodes, a vehicle (`auv1`) and the shore, joined by a Zenoh `udp/` link through a
+/// [`Relay`] that drops `chosen` on the way to the shore, after a burst on one of the vehicle's
+/// topics; the shore's interface `heard` subscribed to it, the vehicle's `tx` that sent it.
 struct Lossy {
     vehicle: Medium,
     shore: Medium,
     relay: Relay,
+    /// The burst's messages the relay drops: every fourth, none of the last few (so that the
+    /// burst ends with one that arrives).
+    chosen: std::collections::BTreeSet<u32>,
     heard: seabus_medium::Interface,
     tx: seabus_medium::Interface,
 }
 
 impl Lossy {
-    async fn start(topic: &str, heard: &str, chosen: std::collections::BTreeSet<u32>) -> Lossy {
+    /// The link made and heard (bytes with a marker sent on `topic` until one arrives), then a
+    /// burst of `burst` messages on it, paced as a sensor would send them.
+    async fn burst(topic: &str, burst: u32) -> Lossy {
+        let chosen: std::collections::BTreeSet<u32> =
+            (0..burst - 4).filter(|i| i % 4 == 3).collect();
         let listener = free_udp_port();
         let vehicle = open(
             "fleet",
             "auv1",
             &format!("zenoh://?listen=udp/127.0.0.1:{listener}&prefix=fleet/auv1&scout=false"),
         );
-        let relay = Relay::start(listener, chosen).await;
+        let relay = Relay::start(listener, chosen.clone()).await;
         let shore = open(
             "fleet",
             "shore",
@@ -1043,7 +1042,10 @@ impl Lossy {
         );
         wait_link(&vehicle, true).await;
         wait_link(&shore, true).await;
-        let mut watch = shore.attach("watch").subscribed(heard).unwrap();
+        let mut heard = shore
+            .attach("watch")
+            .subscribed(&format!("auv1.{topic}"))
+            .unwrap();
         let tx = vehicle.attach("gen");
         // the shore's subscription reaches the vehicle, which then publishes to it
         let mut reached = false;
@@ -1052,7 +1054,7 @@ impl Lossy {
             tx.send(topic, Payload::from(text.into_bytes()))
                 .await
                 .unwrap();
-            if let Ok(Some(_)) = timeout(Duration::from_millis(100), watch.recv()).await {
+            if let Ok(Some(_)) = timeout(Duration::from_millis(100), heard.recv()).await {
                 reached = true;
                 break;
             }
@@ -1063,11 +1065,19 @@ impl Lossy {
             Default::default(),
             "nothing missed yet"
         );
+        for i in 0..burst {
+            let text = format!("<<miss:{i:04}>>");
+            tx.send(topic, Payload::from(text.into_bytes()))
+                .await
+                .unwrap();
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
         Lossy {
             vehicle,
             shore,
             relay,
-            heard: watch,
+            chosen,
+            heard,
             tx,
         }
     }
@@ -1079,16 +1089,14 @@ impl Lossy {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn command_statuses_lost_on_an_unreliable_link_come_back_in_order() {
     const BURST: u32 = 24;
-    const TOPIC: &str = "auv1.cmd.status";
-    let chosen = every_fourth(BURST);
     let Lossy {
         vehicle,
         shore,
         relay,
+        chosen,
         mut heard,
-        tx,
-    } = Lossy::start("cmd.status", TOPIC, chosen.clone()).await;
-    send_burst(&tx, "cmd.status", BURST).await;
+        tx: _tx,
+    } = Lossy::burst("cmd.status", BURST).await;
     let mut arrived = Vec::new();
     // (each round takes a message or 100 ms: at most 30 s of waiting)
     for _ in 0..BURST + 300 {
@@ -1112,18 +1120,6 @@ async fn command_statuses_lost_on_an_unreliable_link_come_back_in_order() {
     assert_eq!(shore.stats().missed, Default::default());
     vehicle.close();
     shore.close();
-}
-
-/// Sends a burst of `burst` messages on `topic`, each bytes with its marker, paced as a sensor
-/// would send them.
-async fn send_burst(tx: &seabus_medium::Interface, topic: &str, burst: u32) {
-    for i in 0..burst {
-        let text = format!("<<miss:{i:04}>>");
-        tx.send(topic, Payload::from(text.into_bytes()))
-            .await
-            .unwrap();
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
 }
 
 fn free_udp_port() -> u16 {
