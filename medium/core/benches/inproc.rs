@@ -121,8 +121,9 @@ fn main() {
             &format!("in-process 1 -> {subs} / broadcast"),
             ours / bare,
             0.8,
-            "each delivery takes the receiver queue's lock, checks its duplicate window and wakes \
-             the receiver, where broadcast writes a slot of its ring",
+            "a publication costs about 100 ns before any delivery (its stamp and number, the \
+             subscriptions looked up) and each delivery takes the receiver queue's lock, where \
+             broadcast writes a slot of its ring",
         );
     }
     goals.finish();

@@ -199,7 +199,7 @@ impl Faults {
         for d in delays {
             if d.is_zero() {
                 let r = inner
-                    .dispatch(msg.clone(), frame.clone(), Some(from), wait)
+                    .dispatch(msg.clone(), frame.clone(), Some(from), wait, false)
                     .await;
                 if result.is_ok() {
                     result = r;
@@ -255,7 +255,7 @@ async fn run_later(inner: Weak<Inner>, mut rx: mpsc::UnboundedReceiver<Scheduled
                 while heap.peek().is_some_and(|Reverse(s)| s.due <= now) {
                     let Some(Reverse(s)) = heap.pop() else { break };
                     let Some(inner) = inner.upgrade() else { return };
-                    if let Err(e) = inner.dispatch(s.msg, s.frame, Some(s.from), s.wait).await {
+                    if let Err(e) = inner.dispatch(s.msg, s.frame, Some(s.from), s.wait, false).await {
                         tracing::debug!("delayed message not sent: {e}");
                     }
                 }

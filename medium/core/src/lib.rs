@@ -24,8 +24,9 @@
 //!   `register(&mut Schemes)`; the in-process medium (`inproc://`) is built in.
 //! - Shared machinery of the medium crates: [`link`] (one reconnect loop with back-off and link
 //!   state), [`wire`] (one error type for input a wire delivered), [`datagram`] (a whole message
-//!   with its provenance in bytes, as the UDP and Zenoh media carry it), [`net`] (UDP endpoints and
-//!   socket options), [`framing`] (NMEA, line, COBS and SLIP framing of byte streams), [`url`]
+//!   with its provenance in bytes, as the UDP and Zenoh media carry it), [`net`] (UDP endpoints,
+//!   socket options, datagrams received in batches), [`outbox`] (datagrams sent at once or in
+//!   batches), [`framing`] (NMEA, line, COBS and SLIP framing of byte streams), [`url`]
 //!   (medium URLs), [`tally`] (rate-limited counting of rejected input).
 //! - Files: [`csv`] (table cells), [`xml`] (a small positioned XML tree for the files users write: every error names file,
 //!   line and column), [`fs`] (atomic writes), [`eventlog`] (LCM event logs, seabus's recording
@@ -49,6 +50,7 @@ pub mod loss;
 pub mod medium;
 pub mod message;
 pub mod net;
+pub mod outbox;
 pub mod parse;
 pub mod payload;
 pub mod qos;

@@ -15,11 +15,12 @@ use crate::loss::Losses;
 use crate::message::{Kind, Message, Origin, Provenance, Stamp};
 use crate::payload::{ConvertError, Format, Payload};
 use crate::qos::Qos;
-use crate::queue::{DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queue};
+use crate::queue::{Check, DEFAULT_COMMAND_CAPACITY, DEFAULT_DATA_CAPACITY, Pushed, Queue};
 use crate::subindex::{Scratch, SubIndex};
 use crate::tally::Tally;
 use crate::topic::{Pattern, Topic, TopicError};
 use crate::url::{MediumUrl, UrlError};
+use arc_swap::ArcSwap;
 use bytes::Bytes;
 use std::any::Any;
 use std::collections::{BTreeMap, VecDeque};
@@ -27,7 +28,7 @@ use std::fmt;
 use std::future::Future;
 use std::pin::Pin;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::{Arc, Mutex, OnceLock, RwLock, Weak};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 use std::task::{Context, Poll};
 use thiserror::Error;
 use tokio::sync::watch;
@@ -387,12 +388,18 @@ pub(crate) struct Inner {
     origin: Arc<Origin>,
     node: Node,
     seq: AtomicU64,
-    subs: RwLock<Arc<Subs>>,
+    /// read on every message without a lock; replaced whole under `subs_changing`
+    subs: ArcSwap<Subs>,
+    subs_changing: Mutex<()>,
     next_id: AtomicU64,
     transport: OnceLock<Arc<dyn Wire>>,
     faults: Option<Faults>,
     counters: Counters,
     rejected: Tally,
+    /// sends that failed after the sender was told they were on their way (an [`Outbox`]'s)
+    ///
+    /// [`Outbox`]: crate::outbox::Outbox
+    send_failures: Mutex<crate::tally::Limiter>,
     /// Messages receivers' full queues dropped and characters the device lost.
     losses: Arc<Losses>,
     link: watch::Sender<LinkState>,
@@ -494,7 +501,8 @@ impl Builder {
             url: self.url,
             node: self.node,
             seq: AtomicU64::new(0),
-            subs: RwLock::new(Arc::new(Subs::default())),
+            subs: ArcSwap::from_pointee(Subs::default()),
+            subs_changing: Mutex::new(()),
             next_id: AtomicU64::new(1),
             transport: OnceLock::new(),
             faults: self.faults.map(Faults::new),
@@ -504,6 +512,7 @@ impl Builder {
             } else {
                 Tally::new()
             },
+            send_failures: Mutex::new(crate::tally::Limiter::default()),
             link,
             tasks: Mutex::new(Vec::new()),
             closed: AtomicBool::new(false),
@@ -857,13 +866,15 @@ impl MediumStats {
 }
 
 impl Inner {
-    fn snapshot(&self) -> Arc<Subs> {
-        self.subs.read().unwrap_or_else(|p| p.into_inner()).clone()
+    fn snapshot(&self) -> arc_swap::Guard<Arc<Subs>> {
+        self.subs.load()
     }
 
     fn update_subs(&self, f: impl FnOnce(&mut Vec<Sub>)) {
-        let mut guard = self.subs.write().unwrap_or_else(|p| p.into_inner());
-        let mut subs: Vec<Sub> = guard
+        let _changing = self.subs_changing.lock().unwrap_or_else(|p| p.into_inner());
+        let mut subs: Vec<Sub> = self
+            .subs
+            .load()
             .list
             .iter()
             .map(|s| Sub {
@@ -873,7 +884,7 @@ impl Inner {
             })
             .collect();
         f(&mut subs);
-        *guard = Arc::new(Subs::new(subs));
+        self.subs.store(Arc::new(Subs::new(subs)));
     }
 
     /// Registers a task so that closing the medium stops it (at once when already closed).
@@ -896,9 +907,26 @@ impl Inner {
 
     /// Sends a message from a local interface (`from`), through the fault stage when there is one.
     /// With `wait`, a full command queue holds the sender back; without, the command is refused.
-    async fn send(self: &Arc<Self>, msg: Message, from: u64, wait: bool) -> Result<(), SendError> {
+    /// `fresh`: this medium has just numbered the message (a publication, not a forwarded one).
+    async fn send(
+        self: &Arc<Self>,
+        msg: Message,
+        from: u64,
+        wait: bool,
+        fresh: bool,
+    ) -> Result<(), SendError> {
         if self.closed.load(Ordering::Acquire) {
             return Err(self.closed_error());
+        }
+        if self.faults.is_none() && self.transport.get().is_none() {
+            // in-process: handed out at once, waiting only for room in full command queues
+            self.counters.published.fetch_add(1, Ordering::Relaxed);
+            let check = self.check(&msg, fresh);
+            let blocked = self.fan_out(msg, Some(from), wait, check);
+            if !blocked.is_empty() {
+                self.wait_for_room(blocked, check).await;
+            }
+            return Ok(());
         }
         let (msg, frame) = match self.transport.get() {
             Some(t) => {
@@ -917,28 +945,48 @@ impl Inner {
         self.counters.published.fetch_add(1, Ordering::Relaxed);
         match &self.faults {
             Some(f) => f.apply(self, msg, frame, from, wait).await,
-            None => self.dispatch(msg, frame, Some(from), wait).await,
+            None => self.dispatch(msg, frame, Some(from), wait, fresh).await,
         }
     }
 
     /// Whether any local interface but `from` subscribes to anything.
     fn others_subscribe(&self, from: u64) -> bool {
         self.subs
-            .read()
-            .unwrap_or_else(|p| p.into_inner())
+            .load()
             .list
             .iter()
             .any(|s| s.id != from && !s.patterns.is_empty())
     }
 
+    /// How the queues check `msg` for duplicates. One this medium has just numbered (`fresh`)
+    /// cannot be one. Without a fault stage (which may hand a message out twice, or late), every
+    /// message of this medium's own numbering was handed out when it was numbered, so a later
+    /// sighting — back through a bridge, or from the wire — is one. Any other goes through the
+    /// queues' windows.
+    fn check(&self, msg: &Message, fresh: bool) -> Check {
+        if fresh {
+            Check::Fresh
+        } else if self.faults.is_none() && msg.provenance.origin.id == self.origin.id {
+            Check::Echo
+        } else {
+            Check::Window
+        }
+    }
+
     /// Puts a message into the queue of every matching local interface but `from`, without
     /// waiting. Commands that met a full queue are handed back when the sender may `wait` for
     /// room, and refused and counted otherwise (forwarded, or read from the wire).
-    fn fan_out(&self, msg: Message, from: Option<u64>, wait: bool) -> Vec<(Arc<Queue>, Message)> {
+    fn fan_out(
+        &self,
+        msg: Message,
+        from: Option<u64>,
+        wait: bool,
+        check: Check,
+    ) -> Vec<(Arc<Queue>, Message)> {
         let subs = self.snapshot();
         let mut blocked = Vec::new();
         let mut delivered = 0u64;
-        let mut put = |s: &Sub, m: Message| match s.queue.push(m) {
+        let mut put = |s: &Sub, m: Message| match s.queue.push(m, check) {
             Pushed::Queued | Pushed::DroppedOldest => delivered += 1,
             Pushed::Closed | Pushed::Duplicate => {}
             Pushed::Full(m) if wait => blocked.push((s.queue.clone(), m)),
@@ -990,10 +1038,21 @@ impl Inner {
         if let Some(last) = previous {
             put(last, msg);
         }
-        self.counters
-            .delivered
-            .fetch_add(delivered, Ordering::Relaxed);
+        if delivered > 0 {
+            self.counters
+                .delivered
+                .fetch_add(delivered, Ordering::Relaxed);
+        }
         blocked
+    }
+
+    /// Puts commands that met full queues into them as room is made.
+    async fn wait_for_room(&self, blocked: Vec<(Arc<Queue>, Message)>, check: Check) {
+        for (queue, m) in blocked {
+            if let Pushed::Queued = queue.push_wait(m, check).await {
+                self.counters.delivered.fetch_add(1, Ordering::Relaxed);
+            }
+        }
     }
 
     /// Hands the local copy of a message, if any, to local interfaces (all but `from`) and the frame
@@ -1005,16 +1064,15 @@ impl Inner {
         frame: Option<Frame>,
         from: Option<u64>,
         wait: bool,
+        fresh: bool,
     ) -> Result<(), SendError> {
         if self.closed.load(Ordering::Acquire) {
             return Err(self.closed_error());
         }
         if let Some(msg) = msg {
-            for (queue, m) in self.fan_out(msg, from, wait) {
-                if let Pushed::Queued = queue.push_wait(m).await {
-                    self.counters.delivered.fetch_add(1, Ordering::Relaxed);
-                }
-            }
+            let check = self.check(&msg, fresh);
+            let blocked = self.fan_out(msg, from, wait, check);
+            self.wait_for_room(blocked, check).await;
         }
         if let (Some(frame), Some(t)) = (frame, self.transport.get()) {
             match t.transmit(frame).await {
@@ -1041,6 +1099,11 @@ impl Ingress {
     /// Delivers a message read from the wire to every matching local interface.
     /// Returns false once the medium is gone or closed, so the reader can stop.
     pub fn deliver(&self, msg: Message) -> bool {
+        self.hand_out(msg, false)
+    }
+
+    /// [`Ingress::deliver`]; `fresh`: this medium has just numbered the message.
+    fn hand_out(&self, msg: Message, fresh: bool) -> bool {
         let Some(inner) = self.inner.upgrade() else {
             return false;
         };
@@ -1049,7 +1112,8 @@ impl Ingress {
         }
         inner.counters.received.fetch_add(1, Ordering::Relaxed);
         // from the wire nothing waits: a full command queue refuses
-        inner.fan_out(msg, None, false);
+        let check = inner.check(&msg, fresh);
+        inner.fan_out(msg, None, false, check);
         true
     }
 
@@ -1076,7 +1140,7 @@ impl Ingress {
             stamp: Stamp::now(),
             payload,
         };
-        self.deliver(msg)
+        self.hand_out(msg, true)
     }
 
     /// True while the medium exists and is open.
@@ -1095,6 +1159,23 @@ impl Ingress {
                 reason,
                 format_args!("rejected input: {detail}"),
             );
+        }
+    }
+
+    /// Counts a send that failed after the sender was told it was on its way (one from a queue of
+    /// datagrams) as a transmit error, and logs it (the first in 10 s, then the next with the count
+    /// of those not logged).
+    pub fn send_failed(&self, detail: impl fmt::Display) {
+        if let Some(inner) = self.inner.upgrade() {
+            inner.counters.tx_errors.fetch_add(1, Ordering::Relaxed);
+            let held = inner
+                .send_failures
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .admit(std::time::Instant::now());
+            if let Some(held) = held {
+                tracing::warn!(medium = %inner.name, "not sent: {detail}{held}");
+            }
         }
     }
 
@@ -1381,14 +1462,14 @@ impl Interface {
             stamp: Stamp::now(),
             payload: payload.into(),
         };
-        inner.send(msg, self.id, true).await.map(|()| seq)
+        inner.send(msg, self.id, true, true).await.map(|()| seq)
     }
 
     /// Sends a message that already has a provenance (a bridge forwarding it), keeping it. A
     /// forwarded command never waits for room: like one read from the wire, it is refused and
     /// counted when a receiver's command queue is full (so bridges can never wait on each other).
     pub async fn forward(&self, msg: Message) -> Result<(), SendError> {
-        self.medium.inner.send(msg, self.id, false).await
+        self.medium.inner.send(msg, self.id, false, false).await
     }
 
     /// Waits for the next message; `None` once the medium is closed and the queue drained.
@@ -1584,5 +1665,40 @@ mod tests {
         assert_eq!(got, want);
         assert!(nav.try_recv().is_err(), "not back to its sender");
         assert!(idle.iter_mut().all(|p| p.try_recv().is_err()));
+    }
+
+    #[tokio::test]
+    async fn a_message_of_this_mediums_numbering_seen_again_is_a_duplicate() {
+        // what a medium numbers is handed out once, unchecked; the same message back (through a
+        // bridge that forwards it home, or from the wire) is dropped and counted as a duplicate,
+        // while one of another medium's numbering goes through the receivers' windows
+        let node = Node::new("n");
+        let bus = Medium::in_process("bus", &node);
+        let other = Medium::in_process("other", &node);
+        let tx = bus.attach("tx");
+        let bridge = bus.attach("bridge");
+        let mut rx = bus.attach("rx").subscribed("**").unwrap();
+        let mut there = other.attach("there").subscribed("**").unwrap();
+        for i in 0..3i64 {
+            tx.send("d", DataMap::new().with("i", i)).await.unwrap();
+        }
+        let mine: Vec<Message> = (0..3).map(|_| rx.try_recv().unwrap()).collect();
+        for m in &mine {
+            bridge.forward(m.clone()).await.unwrap();
+        }
+        assert_eq!(rx.try_recv().unwrap_err(), TryRecvError::Empty);
+        assert_eq!(rx.stats().duplicates, 3);
+        // another medium's message: new once, then a duplicate by the window
+        other.attach("o").send("e", DataMap::new()).await.unwrap();
+        let foreign = there.try_recv().unwrap();
+        bridge.forward(foreign.clone()).await.unwrap();
+        assert_eq!(rx.try_recv().unwrap().provenance, foreign.provenance);
+        bridge.forward(foreign).await.unwrap();
+        assert_eq!(rx.try_recv().unwrap_err(), TryRecvError::Empty);
+        assert_eq!(rx.stats().duplicates, 4);
+        // a fresh message from the wire side (a frame without a header) is handed out
+        bus.ingress()
+            .originate(Topic::new("w").unwrap(), DataMap::new().into());
+        assert_eq!(rx.try_recv().unwrap().provenance.seq, 4);
     }
 }

@@ -1,6 +1,7 @@
 //! Sockets for media that use IP: UDP endpoints as URLs name them ([`UdpEndpoint`]: unicast to
-//! listed peers, broadcast, or a multicast group), the host's interface addresses, and socket
-//! options the standard library has no call for.
+//! listed peers, broadcast, or a multicast group), the host's interface addresses, socket options
+//! the standard library has no call for, and the datagrams waiting on a socket taken in one call
+//! ([`RecvBatch`]).
 
 use crate::url::{MediumUrl, UrlError};
 use socket2::{Domain, Protocol, Socket, Type};
@@ -295,6 +296,132 @@ pub fn bind(cfg: &UdpEndpoint) -> std::io::Result<(std::net::UdpSocket, Vec<Sock
     Ok((socket(cfg)?.0, cfg.destinations()?))
 }
 
+/// The most datagrams a [`RecvBatch`] takes in one call.
+pub const MAX_RECV_BATCH: usize = 32;
+
+/// Where one recvmmsg(2) call puts the datagrams (or frames) waiting on a socket: `count` slots of
+/// `size` bytes, with each one's length and its sender's address. A datagram longer than a slot is
+/// cut to it. Its slots are mapped as they are first written, so a quiet socket keeps only the
+/// first resident.
+pub struct RecvBatch {
+    slots: Vec<u8>,
+    size: usize,
+    count: usize,
+    addrs: Vec<libc::sockaddr_storage>,
+    lens: [usize; MAX_RECV_BATCH],
+    /// taken by the last call
+    taken: usize,
+}
+
+impl RecvBatch {
+    /// Room for `count` (at most [`MAX_RECV_BATCH`]) datagrams of up to `size` bytes.
+    pub fn new(count: usize, size: usize) -> RecvBatch {
+        let count = count.clamp(1, MAX_RECV_BATCH);
+        RecvBatch {
+            slots: vec![0; count * size],
+            size,
+            count,
+            // SAFETY: sockaddr_storage is plain data, all zeroes is a valid value
+            addrs: vec![unsafe { std::mem::zeroed() }; count],
+            lens: [0; MAX_RECV_BATCH],
+            taken: 0,
+        }
+    }
+
+    /// Datagrams one call takes at most.
+    pub fn capacity(&self) -> usize {
+        self.count
+    }
+
+    /// Takes the datagrams waiting on `fd`, up to [`capacity`](Self::capacity), without waiting;
+    /// `WouldBlock` when there are none. Fewer than the capacity means the socket had no more (a
+    /// datagram socket reports errors by waking its readers again, so nothing else stops the call
+    /// early).
+    pub fn receive(&mut self, fd: std::os::fd::RawFd) -> std::io::Result<usize> {
+        self.taken = 0;
+        // every pointer handed to the kernel comes from these two, taken once
+        let slots = self.slots.as_mut_ptr();
+        let addrs = self.addrs.as_mut_ptr();
+        let size = self.size;
+        let mut iovs: [libc::iovec; MAX_RECV_BATCH] = std::array::from_fn(|i| libc::iovec {
+            // SAFETY: `slots` holds `count` slots of `size` bytes; only the first `count` of these
+            // are handed to the kernel, and slot i < count lies inside it
+            iov_base: unsafe { slots.add(i.min(self.count - 1) * size) }.cast(),
+            iov_len: size,
+        });
+        let iov = iovs.as_mut_ptr();
+        // SAFETY: mmsghdr is plain data; zeroed means no control data and no flags
+        let mut msgs: [libc::mmsghdr; MAX_RECV_BATCH] = unsafe { std::mem::zeroed() };
+        for (i, m) in msgs.iter_mut().enumerate().take(self.count) {
+            // SAFETY: `iovs` holds MAX_RECV_BATCH entries and `addrs` `count`: entry i < count
+            // lies inside both
+            unsafe {
+                m.msg_hdr.msg_iov = iov.add(i);
+                m.msg_hdr.msg_name = addrs.add(i).cast();
+            }
+            m.msg_hdr.msg_iovlen = 1;
+            m.msg_hdr.msg_namelen =
+                std::mem::size_of::<libc::sockaddr_storage>() as libc::socklen_t;
+        }
+        // SAFETY: each of the first `count` headers points at a slot, an iovec and an address
+        // that outlive the call, with their true sizes
+        let n = unsafe {
+            libc::recvmmsg(
+                fd,
+                msgs.as_mut_ptr(),
+                self.count as libc::c_uint,
+                libc::MSG_DONTWAIT,
+                std::ptr::null_mut(),
+            )
+        };
+        if n < 0 {
+            return Err(std::io::Error::last_os_error());
+        }
+        let n = n as usize;
+        for (len, m) in self.lens.iter_mut().zip(&msgs[..n]) {
+            *len = (m.msg_len as usize).min(size);
+        }
+        self.taken = n;
+        Ok(n)
+    }
+
+    /// Datagrams the last call took.
+    pub fn taken(&self) -> usize {
+        self.taken
+    }
+
+    /// Datagram `i` of the last call and its sender's address.
+    pub fn get(&self, i: usize) -> (&libc::sockaddr_storage, &[u8]) {
+        let start = i * self.size;
+        (&self.addrs[i], &self.slots[start..start + self.lens[i]])
+    }
+}
+
+/// The address and port of a datagram's sender as recvmmsg(2) gives it on an IP socket (IPv4, or
+/// IPv6); `None` for another family.
+pub fn inet(a: &libc::sockaddr_storage) -> Option<SocketAddr> {
+    match i32::from(a.ss_family) {
+        libc::AF_INET => {
+            // SAFETY: the family says the storage holds a sockaddr_in, smaller than the storage
+            // and no more strictly aligned
+            let a = unsafe { &*(a as *const libc::sockaddr_storage).cast::<libc::sockaddr_in>() };
+            Some(SocketAddr::from((
+                Ipv4Addr::from(u32::from_be(a.sin_addr.s_addr)),
+                u16::from_be(a.sin_port),
+            )))
+        }
+        libc::AF_INET6 => {
+            // SAFETY: as above, for sockaddr_in6
+            let a = unsafe { &*(a as *const libc::sockaddr_storage).cast::<libc::sockaddr_in6>() };
+            Some(SocketAddr::from((
+                std::net::Ipv6Addr::from(a.sin6_addr.s6_addr),
+                u16::from_be(a.sin6_port),
+            )))
+        }
+        _ => None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -370,5 +497,47 @@ mod tests {
             cfg("udp://1.2.3.4:1?max=10").is_err(),
             "not an endpoint's option"
         );
+    }
+
+    #[test]
+    fn a_batch_takes_what_waits_up_to_its_capacity_with_each_sender() {
+        use std::os::fd::AsRawFd;
+        let rx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        rx.set_nonblocking(true).unwrap();
+        let to = rx.local_addr().unwrap();
+        let (a, b) = (
+            std::net::UdpSocket::bind("127.0.0.1:0").unwrap(),
+            std::net::UdpSocket::bind("127.0.0.1:0").unwrap(),
+        );
+        let mut batch = RecvBatch::new(4, 16);
+        assert_eq!(batch.capacity(), 4);
+        let e = batch.receive(rx.as_raw_fd()).unwrap_err();
+        assert_eq!(e.kind(), std::io::ErrorKind::WouldBlock);
+        a.send_to(b"one", to).unwrap();
+        b.send_to(b"a datagram longer than a slot", to).unwrap();
+        a.send_to(b"", to).unwrap();
+        assert_eq!(batch.receive(rx.as_raw_fd()).unwrap(), 3);
+        assert_eq!(batch.taken(), 3);
+        let got: Vec<(Option<SocketAddr>, &[u8])> = (0..3)
+            .map(|i| (inet(batch.get(i).0), batch.get(i).1))
+            .collect();
+        let (a_at, b_at) = (a.local_addr().ok(), b.local_addr().ok());
+        assert_eq!(
+            got,
+            [
+                (a_at, &b"one"[..]),
+                (b_at, &b"a datagram longe"[..]),
+                (a_at, &b""[..])
+            ]
+        );
+        // more than a batch waiting: a full batch, then the rest
+        for i in 0..6u8 {
+            a.send_to(&[i], to).unwrap();
+        }
+        assert_eq!(batch.receive(rx.as_raw_fd()).unwrap(), 4);
+        assert_eq!(batch.get(3).1, [3]);
+        assert_eq!(batch.receive(rx.as_raw_fd()).unwrap(), 2);
+        assert_eq!((batch.get(0).1, batch.get(1).1), (&[4u8][..], &[5u8][..]));
+        assert_eq!(RecvBatch::new(100, 8).capacity(), MAX_RECV_BATCH);
     }
 }

@@ -7,8 +7,10 @@
 //! that was forwarded or read from the wire). Commands are taken before data.
 //!
 //! Duplicates are dropped as messages arrive, in arrival order, by the queue's per-origin window
-//! ([`crate::dedup`]), so a duplicate never takes a slot. The receiver takes data in batches (one
-//! lock per batch); what it holds in hand counts against the capacity like what still waits.
+//! ([`crate::dedup`]), so a duplicate never takes a slot. A message its medium has just numbered
+//! cannot be one and skips the window; its medium drops any later sighting of it. The receiver
+//! takes data in batches (one lock per batch); what it holds in hand counts against the capacity
+//! like what still waits.
 //!
 //! Every data message a queue drops is counted in the queue and, under the receiver's name, in
 //! its medium's [`Losses`], which warns of a burst of them when it ends.
@@ -18,7 +20,7 @@ use crate::loss::Losses;
 use crate::message::{Kind, Message};
 use atomic_waker::AtomicWaker;
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering, fence};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use tokio::sync::Notify;
@@ -27,6 +29,17 @@ use tokio::sync::Notify;
 pub const DEFAULT_DATA_CAPACITY: usize = 1024;
 /// Default capacity of an interface's command queue.
 pub const DEFAULT_COMMAND_CAPACITY: usize = 64;
+
+/// How a pushed message is checked for duplicates.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+pub(crate) enum Check {
+    /// Through the queue's per-origin window.
+    Window,
+    /// Not at all: its medium has just numbered it, so nobody can have seen it.
+    Fresh,
+    /// A later sighting of a message its medium numbered and delivered: a duplicate.
+    Echo,
+}
 
 /// What happened to a pushed message.
 pub(crate) enum Pushed {
@@ -65,6 +78,9 @@ pub(crate) struct Queue {
     /// data messages waiting, readable without the lock
     data_len: AtomicUsize,
     waker: AtomicWaker,
+    /// the receiver found nothing and waits to be woken; a push reads it (not writing a line the
+    /// receiver shares) and wakes the receiver only then
+    parked: AtomicBool,
     space: Notify,
     closed: AtomicBool,
     data_cap: usize,
@@ -86,6 +102,7 @@ impl Queue {
             commands: AtomicUsize::new(0),
             data_len: AtomicUsize::new(0),
             waker: AtomicWaker::new(),
+            parked: AtomicBool::new(false),
             space: Notify::new(),
             closed: AtomicBool::new(false),
             data_cap: data_cap.max(1),
@@ -122,7 +139,12 @@ impl Queue {
         };
     }
 
-    pub fn push(&self, msg: Message) -> Pushed {
+    pub fn push(&self, msg: Message, check: Check) -> Pushed {
+        if check == Check::Echo {
+            self.count_seen(Seen::Duplicate);
+            return Pushed::Duplicate;
+        }
+        let fresh = check == Check::Fresh;
         let (origin, seq) = (msg.provenance.origin.id, msg.provenance.seq);
         let result = {
             let mut st = self.lock();
@@ -131,7 +153,11 @@ impl Queue {
             }
             match msg.kind {
                 Kind::Data => {
-                    let seen = st.seen.check_raw(origin, seq);
+                    let seen = if fresh {
+                        Seen::New
+                    } else {
+                        st.seen.check_raw(origin, seq)
+                    };
                     if seen != Seen::New {
                         drop(st);
                         self.count_seen(seen);
@@ -154,7 +180,11 @@ impl Queue {
                 Kind::Command => {
                     if st.commands.len() >= self.cmd_cap {
                         // a duplicate is dropped even when there is no room; anything else waits
-                        let seen = st.seen.peek_raw(origin, seq);
+                        let seen = if fresh {
+                            Seen::New
+                        } else {
+                            st.seen.peek_raw(origin, seq)
+                        };
                         drop(st);
                         if seen != Seen::New {
                             self.count_seen(seen);
@@ -162,7 +192,11 @@ impl Queue {
                         }
                         return Pushed::Full(msg);
                     }
-                    let seen = st.seen.check_raw(origin, seq);
+                    let seen = if fresh {
+                        Seen::New
+                    } else {
+                        st.seen.check_raw(origin, seq)
+                    };
                     if seen != Seen::New {
                         drop(st);
                         self.count_seen(seen);
@@ -177,17 +211,22 @@ impl Queue {
         if let Pushed::DroppedOldest = result {
             self.dropped(1);
         }
-        self.waker.wake();
+        // the message is in before `parked` is read; the receiver sets `parked` before it looks
+        // again (see `poll_next`): one of the two sees the other
+        fence(Ordering::SeqCst);
+        if self.parked.load(Ordering::Relaxed) && self.parked.swap(false, Ordering::AcqRel) {
+            self.waker.wake();
+        }
         result
     }
 
     /// Pushes a command, waiting for room in the command queue.
-    pub async fn push_wait(&self, mut msg: Message) -> Pushed {
+    pub async fn push_wait(&self, mut msg: Message, check: Check) -> Pushed {
         loop {
             let space = self.space.notified();
             tokio::pin!(space);
             space.as_mut().enable();
-            match self.push(msg) {
+            match self.push(msg, check) {
                 Pushed::Full(back) => {
                     msg = back;
                     space.await;
@@ -257,9 +296,14 @@ impl Queue {
             return Poll::Ready(self.next(batch));
         }
         self.waker.register(cx.waker());
+        self.parked.store(true, Ordering::Relaxed);
+        fence(Ordering::SeqCst);
         // a push may have landed between the first look and the registration
         match self.next(batch) {
-            Some(m) => Poll::Ready(Some(m)),
+            Some(m) => {
+                self.parked.store(false, Ordering::Relaxed);
+                Poll::Ready(Some(m))
+            }
             None if self.closed.load(Ordering::Acquire) => Poll::Ready(self.next(batch)),
             None => Poll::Pending,
         }

@@ -632,7 +632,7 @@ impl Receiver {
 
     async fn udp(mut self, socket: Arc<AsyncFd<std::net::UdpSocket>>) {
         use std::os::fd::AsRawFd;
-        let mut batch = sockets::Batch::new(65_536);
+        let mut batch = sockets::batch(65_536);
         loop {
             let mut ready = match socket.readable().await {
                 Ok(r) => r,
@@ -645,7 +645,7 @@ impl Receiver {
             let read = batch.receive(socket.as_raw_fd());
             // a batch that is not full emptied the socket, as a read that would block says: the
             // next read waits for a new datagram instead of trying
-            if !matches!(read, Ok(sockets::BATCH)) {
+            if !matches!(read, Ok(n) if n == batch.capacity()) {
                 ready.clear_ready();
             }
             if let Err(e) = read
@@ -657,7 +657,12 @@ impl Receiver {
             }
             for i in 0..batch.taken() {
                 let (from, d) = batch.get(i);
-                if !self.frame(&sockets::inet(from), d).0 {
+                let from = seabus_medium::net::inet(from);
+                let from: &dyn std::fmt::Display = match &from {
+                    Some(a) => a,
+                    None => &"an address of another family",
+                };
+                if !self.frame(from, d).0 {
                     return;
                 }
             }
@@ -665,7 +670,7 @@ impl Receiver {
     }
 
     async fn ethernet(mut self, socket: Arc<eth::RawSocket>) {
-        let mut batch = sockets::Batch::new(2048);
+        let mut batch = sockets::batch(2048);
         loop {
             if let Err(e) = socket.recv_batch(&mut batch).await {
                 tracing::debug!(medium = %self.medium, "dsaav receive: {e}");
@@ -924,14 +929,17 @@ pub mod eth {
         }
 
         /// Waits for frames and takes those waiting, up to a batch, with their Ethernet headers.
-        pub(super) async fn recv_batch(&self, batch: &mut super::sockets::Batch) -> io::Result<()> {
+        pub(super) async fn recv_batch(
+            &self,
+            batch: &mut seabus_medium::net::RecvBatch,
+        ) -> io::Result<()> {
             loop {
                 let mut ready = self.fd.readable().await?;
                 match batch.receive(self.fd.as_raw_fd()) {
                     Ok(n) => {
                         // a batch that is not full emptied the socket: the next call waits for
                         // a new frame instead of trying a read that would block
-                        if n < super::sockets::BATCH {
+                        if n < batch.capacity() {
                             ready.clear_ready();
                         }
                         return Ok(());

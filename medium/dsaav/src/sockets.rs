@@ -1,12 +1,13 @@
-//! A medium's backbone socket: the frames waiting taken in one recvmmsg(2) call, a kernel filter
-//! that drops the frames the medium sent itself before they are read, and sending on a socket
-//! watched for reading only.
+//! A medium's backbone socket: the frames waiting taken in one recvmmsg(2) call
+//! ([`seabus_medium::net::RecvBatch`]), a kernel filter that drops the frames the medium sent
+//! itself before they are read, and sending on a socket watched for reading only.
 //!
 //! A socket the runtime watches for writing too wakes its thread after every send, when the kernel
 //! frees what was sent; a medium's socket is watched for reading alone, and a send that finds it
 //! full waits for room on a copy of its descriptor ([`writable`]).
 
 use super::wire;
+use seabus_medium::net::RecvBatch;
 use std::io;
 use std::net::{SocketAddr, UdpSocket};
 use std::os::fd::{AsFd, BorrowedFd, RawFd};
@@ -16,88 +17,9 @@ use tokio::io::unix::AsyncFd;
 /// Frames one recvmmsg(2) call takes at most.
 pub(super) const BATCH: usize = 8;
 
-/// Where one recvmmsg(2) call puts its frames: [`BATCH`] slots of `size` bytes, with each frame's
-/// length and its sender's address.
-pub(super) struct Batch {
-    slots: Vec<u8>,
-    size: usize,
-    addrs: Vec<libc::sockaddr_storage>,
-    lens: [usize; BATCH],
-    /// frames taken by the last call
-    taken: usize,
-}
-
-impl Batch {
-    /// Room for frames of up to `size` bytes.
-    pub fn new(size: usize) -> Batch {
-        Batch {
-            slots: vec![0; BATCH * size],
-            size,
-            // SAFETY: sockaddr_storage is plain data, all zeroes is a valid value
-            addrs: vec![unsafe { std::mem::zeroed() }; BATCH],
-            lens: [0; BATCH],
-            taken: 0,
-        }
-    }
-
-    /// Takes the frames waiting on `fd`, up to a batch; `WouldBlock` when there are none. Fewer
-    /// than a batch means the socket had no more (a datagram socket reports errors by waking its
-    /// readers again, so nothing else stops the call early).
-    pub fn receive(&mut self, fd: RawFd) -> io::Result<usize> {
-        self.taken = 0;
-        // every pointer handed to the kernel comes from these two, taken once
-        let slots = self.slots.as_mut_ptr();
-        let addrs = self.addrs.as_mut_ptr();
-        let mut iovs: [libc::iovec; BATCH] = std::array::from_fn(|i| libc::iovec {
-            // SAFETY: `slots` holds BATCH slots of `size` bytes: slot i lies inside it
-            iov_base: unsafe { slots.add(i * self.size) }.cast(),
-            iov_len: self.size,
-        });
-        let iov = iovs.as_mut_ptr();
-        // SAFETY: mmsghdr is plain data; zeroed means no control data and no flags
-        let mut msgs: [libc::mmsghdr; BATCH] = unsafe { std::mem::zeroed() };
-        for (i, m) in msgs.iter_mut().enumerate() {
-            // SAFETY: `iovs` and `addrs` hold BATCH entries each, so entry i lies inside
-            unsafe {
-                m.msg_hdr.msg_iov = iov.add(i);
-                m.msg_hdr.msg_name = addrs.add(i).cast();
-            }
-            m.msg_hdr.msg_iovlen = 1;
-            m.msg_hdr.msg_namelen =
-                std::mem::size_of::<libc::sockaddr_storage>() as libc::socklen_t;
-        }
-        // SAFETY: every header points at a slot, an iovec and an address that outlive the call,
-        // with their true sizes
-        let n = unsafe {
-            libc::recvmmsg(
-                fd,
-                msgs.as_mut_ptr(),
-                BATCH as libc::c_uint,
-                libc::MSG_DONTWAIT,
-                std::ptr::null_mut(),
-            )
-        };
-        if n < 0 {
-            return Err(io::Error::last_os_error());
-        }
-        let n = n as usize;
-        for (len, m) in self.lens.iter_mut().zip(&msgs[..n]) {
-            *len = (m.msg_len as usize).min(self.size);
-        }
-        self.taken = n;
-        Ok(n)
-    }
-
-    /// Frames the last call took.
-    pub fn taken(&self) -> usize {
-        self.taken
-    }
-
-    /// Frame `i` of the last call and its sender's address.
-    pub fn get(&self, i: usize) -> (&libc::sockaddr_storage, &[u8]) {
-        let start = i * self.size;
-        (&self.addrs[i], &self.slots[start..start + self.lens[i]])
-    }
+/// Where one recvmmsg(2) call puts a backbone socket's frames, up to [`BATCH`] of `size` bytes.
+pub(super) fn batch(size: usize) -> RecvBatch {
+    RecvBatch::new(BATCH, size)
 }
 
 /// Waits until the socket `fd` has room for a datagram, watching a copy of its descriptor for
@@ -124,17 +46,6 @@ pub(super) async fn send_to(
             Err(e) => return Err(e),
         }
     }
-}
-
-/// The IPv4 address and port of a sender, as recvmmsg(2) gives it on a UDP socket.
-pub(super) fn inet(a: &libc::sockaddr_storage) -> std::net::SocketAddr {
-    // SAFETY: sockaddr_in is plain data, smaller than sockaddr_storage and no more strictly
-    // aligned: it reads from the storage whatever was written there (an IPv4 socket writes one)
-    let a = unsafe { &*(a as *const libc::sockaddr_storage).cast::<libc::sockaddr_in>() };
-    std::net::SocketAddr::from((
-        std::net::Ipv4Addr::from(u32::from_be(a.sin_addr.s_addr)),
-        u16::from_be(a.sin_port),
-    ))
 }
 
 /// A classic BPF program for frames starting at byte `at` of what a socket reads: a DSAAV frame
@@ -224,12 +135,15 @@ mod tests {
         ] {
             tx.send_to(&d, to).unwrap();
         }
-        let mut batch = Batch::new(2048);
+        let mut batch = batch(2048);
         assert_eq!(batch.receive(rx.as_raw_fd()).unwrap(), 3);
         assert_eq!(batch.taken(), 3);
         let got: Vec<&[u8]> = (0..3).map(|i| batch.get(i).1).collect();
         assert_eq!(got, [&frame(6, 2)[..], &other_version[..], b"D"]);
-        assert_eq!(inet(batch.get(0).0), tx.local_addr().unwrap());
+        assert_eq!(
+            seabus_medium::net::inet(batch.get(0).0),
+            tx.local_addr().ok()
+        );
         let e = batch.receive(rx.as_raw_fd()).unwrap_err();
         assert_eq!(e.kind(), io::ErrorKind::WouldBlock);
         // more than a batch waiting: a full batch, then the rest

@@ -33,13 +33,13 @@ use seabus_medium::medium::{
     BoxFuture, Ingress, LinkState, OpenError, Opening, SendError, Transport,
 };
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
-use seabus_medium::net::RECV_CHUNK;
+use seabus_medium::net::{self, RECV_CHUNK, RecvBatch};
+use seabus_medium::outbox::{Outbox, Outgoing};
 use seabus_medium::payload::{Format, Payload};
 use seabus_medium::topic::{ChannelRegex, Pattern, Topic};
 use seabus_medium::url::{MediumUrl, UrlError};
 use socket2::{Domain, Protocol, SockRef, Socket, Type};
 use std::collections::HashMap;
-use std::io::IoSlice;
 use std::net::{IpAddr, Ipv4Addr, SocketAddr, SocketAddrV4};
 use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Mutex};
@@ -227,8 +227,8 @@ pub struct LcmTransport {
     joined: std::sync::Once,
     cfg: LcmConfig,
     ingress: Ingress,
-    /// `None` once the medium is closed
-    socket: Mutex<Option<Arc<UdpSocket>>>,
+    /// Sends on the send socket; `None` once the medium is closed
+    outbox: Mutex<Option<Arc<Outbox>>>,
     /// Held while a message goes out in fragments, so that the fragments of two messages never
     /// interleave: liblcm up to 1.4 keeps one partial message per sender, and drops it when a
     /// fragment of another comes
@@ -322,7 +322,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
         joined: std::sync::Once::new(),
         cfg,
         ingress: o.ingress.clone(),
-        socket: Mutex::new(Some(tx)),
+        outbox: Mutex::new(Some(Arc::new(Outbox::new(tx, &o.ingress)))),
         fragmenting: tokio::sync::Mutex::new(()),
         dest: SocketAddr::V4(bind),
         seq: AtomicU32::new(0),
@@ -335,16 +335,6 @@ impl LcmTransport {
             medium: self.name.to_string(),
             reason: format!("sending to {}: {e}", self.dest),
         }
-    }
-
-    async fn send(&self, socket: &UdpSocket, parts: &[IoSlice<'_>]) -> Result<(), SendError> {
-        socket
-            .async_io(Interest::WRITABLE, || {
-                SockRef::from(socket).send_vectored(parts)
-            })
-            .await
-            .map(|_| ())
-            .map_err(|e| self.io_error(e))
     }
 }
 
@@ -389,51 +379,45 @@ impl Transport for LcmTransport {
 
     fn transmit(&self, frame: LcmFrame) -> BoxFuture<'_, Result<(), SendError>> {
         Box::pin(async move {
-            let socket = self
-                .socket
+            let outbox = self
+                .outbox
                 .lock()
                 .unwrap_or_else(|p| p.into_inner())
                 .clone()
                 .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
             // the frame is `channel NUL payload`, as encode made it
             let LcmFrame { data, payload_at } = frame;
-            let head = &data[..payload_at];
-            let channel = std::str::from_utf8(&head[..payload_at - 1]).unwrap_or_default();
-            let payload = &data[payload_at..];
-            if wire::is_short(channel, payload.len()) {
+            let channel = std::str::from_utf8(&data[..payload_at - 1]).unwrap_or_default();
+            let payload_len = data.len() - payload_at;
+            if wire::is_short(channel, payload_len) {
                 let header = wire::short_header(self.seq.fetch_add(1, Ordering::Relaxed));
-                return self
-                    .send(&socket, &[IoSlice::new(&header), IoSlice::new(&data)])
-                    .await;
+                return outbox
+                    .send(&[Outgoing::connected(&header, data)])
+                    .await
+                    .map_err(|e| self.io_error(e));
             }
-            // one message's fragments at a time, numbered in the order they go out
+            // one message's fragments at a time, numbered in the order they go out; the first
+            // carries the channel, each a slice of the frame
             let _fragmenting = self.fragmenting.lock().await;
             let seq = self.seq.fetch_add(1, Ordering::Relaxed);
-            for (header, range) in wire::fragments(seq, channel, payload.len()) {
-                let data = &payload[range.clone()];
-                if range.start == 0 {
-                    self.send(
-                        &socket,
-                        &[
-                            IoSlice::new(&header),
-                            IoSlice::new(head),
-                            IoSlice::new(data),
-                        ],
-                    )
-                    .await?;
-                } else {
-                    self.send(&socket, &[IoSlice::new(&header), IoSlice::new(data)])
-                        .await?;
-                }
-            }
-            Ok(())
+            let fragments: Vec<Outgoing> = wire::fragments(seq, channel, payload_len)
+                .map(|(header, range)| {
+                    let from = if range.start == 0 {
+                        0
+                    } else {
+                        payload_at + range.start
+                    };
+                    Outgoing::connected(&header, data.slice(from..payload_at + range.end))
+                })
+                .collect();
+            outbox.send(&fragments).await.map_err(|e| self.io_error(e))
         })
     }
 
     /// Releases both sockets (the receive task, which holds the receive socket too, is stopped
     /// by the medium), leaving the group.
     fn close(&self) {
-        self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
+        self.outbox.lock().unwrap_or_else(|p| p.into_inner()).take();
         self.listen.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 
@@ -530,88 +514,13 @@ const RECV_BATCH: usize = 32;
 /// Room for the largest UDP datagram.
 const SLOT: usize = 1 << 16;
 
-/// Where one recvmmsg(2) call puts its datagrams: a slot of the largest datagram's size each,
-/// with the sender's address and the length received.
-struct Batch {
-    slots: Vec<u8>,
-    addrs: Vec<libc::sockaddr_in>,
-    lens: Vec<usize>,
-}
-
-impl Batch {
-    fn new() -> Batch {
-        Batch {
-            slots: vec![0; RECV_BATCH * SLOT],
-            // SAFETY: sockaddr_in is plain data, all zeroes is a valid value
-            addrs: vec![unsafe { std::mem::zeroed() }; RECV_BATCH],
-            lens: vec![0; RECV_BATCH],
-        }
-    }
-
-    /// Takes the datagrams waiting on `socket`, up to a batch; `WouldBlock` when there are none.
-    fn receive(&mut self, socket: &UdpSocket) -> std::io::Result<usize> {
-        use std::os::fd::AsRawFd;
-        // every pointer handed to the kernel comes from these two, taken once
-        let slots = self.slots.as_mut_ptr();
-        let addrs = self.addrs.as_mut_ptr();
-        let mut iovs: [libc::iovec; RECV_BATCH] = std::array::from_fn(|i| libc::iovec {
-            // SAFETY: `slots` holds RECV_BATCH slots of SLOT bytes: slot i lies inside it
-            iov_base: unsafe { slots.add(i * SLOT) }.cast(),
-            iov_len: SLOT,
-        });
-        let iov = iovs.as_mut_ptr();
-        // SAFETY: mmsghdr is plain data; zeroed means no control data and no flags
-        let mut msgs: [libc::mmsghdr; RECV_BATCH] = unsafe { std::mem::zeroed() };
-        for (i, m) in msgs.iter_mut().enumerate() {
-            // SAFETY: `iovs` and `addrs` hold RECV_BATCH entries each, so entry i lies inside
-            unsafe {
-                m.msg_hdr.msg_iov = iov.add(i);
-                m.msg_hdr.msg_name = addrs.add(i).cast();
-            }
-            m.msg_hdr.msg_iovlen = 1;
-            m.msg_hdr.msg_namelen = std::mem::size_of::<libc::sockaddr_in>() as libc::socklen_t;
-        }
-        // SAFETY: every header points at a slot, an iovec and an address that outlive the call,
-        // with their true sizes
-        let n = unsafe {
-            libc::recvmmsg(
-                socket.as_raw_fd(),
-                msgs.as_mut_ptr(),
-                RECV_BATCH as libc::c_uint,
-                libc::MSG_DONTWAIT,
-                std::ptr::null_mut(),
-            )
-        };
-        if n < 0 {
-            return Err(std::io::Error::last_os_error());
-        }
-        let n = n as usize;
-        for (len, m) in self.lens.iter_mut().zip(&msgs[..n]) {
-            *len = m.msg_len as usize;
-        }
-        Ok(n)
-    }
-
-    /// Datagram `i` of the last batch and who sent it.
-    fn get(&self, i: usize) -> (SocketAddr, &[u8]) {
-        let a = &self.addrs[i];
-        let from = SocketAddr::from((
-            Ipv4Addr::from(u32::from_be(a.sin_addr.s_addr)),
-            u16::from_be(a.sin_port),
-        ));
-        (
-            from,
-            &self.slots[i * SLOT..i * SLOT + self.lens[i].min(SLOT)],
-        )
-    }
-}
-
 impl Receiver {
     async fn run(mut self, socket: Arc<UdpSocket>) {
-        let mut batch = Batch::new();
+        let mut batch = RecvBatch::new(RECV_BATCH, SLOT);
         let mut chunk = BytesMut::with_capacity(RECV_CHUNK);
         loop {
-            let wait = socket.async_io(Interest::READABLE, || batch.receive(&socket));
+            let fd = std::os::fd::AsRawFd::as_raw_fd(&*socket);
+            let wait = socket.async_io(Interest::READABLE, || batch.receive(fd));
             let received = match self.reassembler.next_deadline() {
                 None => wait.await,
                 Some(deadline) => {
@@ -637,6 +546,9 @@ impl Receiver {
             };
             for i in 0..n {
                 let (from, d) = batch.get(i);
+                let Some(from) = net::inet(from) else {
+                    continue;
+                };
                 if !self.datagram(from, d, &mut chunk) {
                     return;
                 }
@@ -823,13 +735,13 @@ mod tests {
         for (i, n) in sizes.iter().enumerate() {
             tx.send_to(&vec![i as u8 + 1; *n], to).unwrap();
         }
-        let mut batch = Batch::new();
+        let mut batch = RecvBatch::new(RECV_BATCH, SLOT);
         let mut got = Vec::new();
         for _ in 0..100 {
-            match batch.receive(&rx) {
+            match batch.receive(std::os::fd::AsRawFd::as_raw_fd(&rx)) {
                 Ok(n) => got.extend((0..n).map(|i| {
                     let (from, d) = batch.get(i);
-                    (from, d.to_vec())
+                    (net::inet(from), d.to_vec())
                 })),
                 Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
                 Err(e) => panic!("{e}"),
@@ -842,7 +754,7 @@ mod tests {
         let want: Vec<_> = sizes
             .iter()
             .enumerate()
-            .map(|(i, n)| (tx.local_addr().unwrap(), vec![i as u8 + 1; *n]))
+            .map(|(i, n)| (tx.local_addr().ok(), vec![i as u8 + 1; *n]))
             .collect();
         assert_eq!(got, want);
     }

@@ -20,7 +20,8 @@
 use bytes::{Bytes, BytesMut};
 use seabus_medium::caps::{Capabilities, Carries, Framing};
 use seabus_medium::datagram as wire;
-use seabus_medium::net::{self, MAX_DATAGRAM, RECV_CHUNK, UdpEndpoint};
+use seabus_medium::net::{self, MAX_DATAGRAM, RECV_CHUNK, RecvBatch, UdpEndpoint};
+use seabus_medium::outbox::{Outbox, Outgoing};
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{
     BoxFuture, Ingress, LinkState, Message, OpenError, Opened, Opening, Scheme, Schemes, SendError,
@@ -28,6 +29,7 @@ use seabus_medium::{
 };
 use std::net::SocketAddr;
 use std::sync::Arc;
+use tokio::io::Interest;
 use tokio::net::UdpSocket;
 
 /// A UDP medium's settings, read from its URL: the endpoint and the largest datagram sent.
@@ -95,7 +97,7 @@ pub fn schemes() -> Schemes {
 pub struct UdpTransport {
     name: Arc<str>,
     /// `None` once the medium is closed
-    socket: std::sync::Mutex<Option<Arc<UdpSocket>>>,
+    outbox: std::sync::Mutex<Option<Arc<Outbox>>>,
     sender: u64,
     dests: Vec<SocketAddr>,
     max: usize,
@@ -153,7 +155,7 @@ fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let sender = fastrand::u64(1..);
     let transport = Arc::new(UdpTransport {
         name: o.name.clone(),
-        socket: std::sync::Mutex::new(Some(socket.clone())),
+        outbox: std::sync::Mutex::new(Some(Arc::new(Outbox::new(socket.clone(), &o.ingress)))),
         sender,
         caps: cfg.capabilities(),
         dests: ep
@@ -169,8 +171,8 @@ fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
 }
 
 impl UdpTransport {
-    fn socket(&self) -> Option<Arc<UdpSocket>> {
-        self.socket
+    fn outbox(&self) -> Option<Arc<Outbox>> {
+        self.outbox
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .clone()
@@ -201,52 +203,72 @@ impl Transport for UdpTransport {
 
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
         Box::pin(async move {
-            let socket = self
-                .socket()
+            let outbox = self
+                .outbox()
                 .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
-            for dest in &self.dests {
-                socket
-                    .send_to(&frame, dest)
-                    .await
-                    .map_err(|e| SendError::Io {
-                        medium: self.name.to_string(),
-                        reason: format!("sending to {dest}: {e}"),
-                    })?;
-            }
-            Ok(())
+            let sent = match &self.dests[..] {
+                [to] => outbox.send(&[Outgoing::new(&[], frame, *to)]).await,
+                dests => {
+                    let ds: Vec<Outgoing> = dests
+                        .iter()
+                        .map(|to| Outgoing::new(&[], frame.clone(), *to))
+                        .collect();
+                    outbox.send(&ds).await
+                }
+            };
+            sent.map_err(|e| SendError::Io {
+                medium: self.name.to_string(),
+                reason: format!("sending {e}"),
+            })
         })
     }
 
     fn close(&self) {
-        // the receive task, which holds the other reference, is stopped by the medium
-        self.socket.lock().unwrap_or_else(|p| p.into_inner()).take();
+        // the receive and outbox tasks, which hold the other references, are stopped by the medium
+        self.outbox.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 }
 
+/// Datagrams taken from the socket in one recvmmsg(2) call.
+const RECV_BATCH: usize = 32;
+
 async fn receive(socket: Arc<UdpSocket>, me: u64, ingress: Ingress) {
-    let mut buf = BytesMut::with_capacity(RECV_CHUNK);
+    let mut batch = RecvBatch::new(RECV_BATCH, MAX_DATAGRAM + 1);
+    let mut chunk = BytesMut::with_capacity(RECV_CHUNK);
     let mut origins = wire::Origins::default();
+    let fd = std::os::fd::AsRawFd::as_raw_fd(&*socket);
     loop {
-        if buf.capacity() - buf.len() < MAX_DATAGRAM + 1 {
-            buf = BytesMut::with_capacity(RECV_CHUNK);
-        }
-        let from = match socket.recv_buf_from(&mut buf).await {
-            Ok((_, from)) => from,
+        let n = match socket
+            .async_io(Interest::READABLE, || batch.receive(fd))
+            .await
+        {
+            Ok(n) => n,
             Err(e) => {
                 tracing::debug!("udp receive: {e}");
                 tokio::time::sleep(std::time::Duration::from_millis(10)).await;
                 continue;
             }
         };
-        let datagram = buf.split().freeze();
-        match wire::decode(&datagram, &mut origins) {
-            Ok((sender, _)) if sender == me => {}
-            Ok((_, msg)) => {
-                if !ingress.deliver(msg) {
-                    return;
+        for i in 0..n {
+            let (from, d) = batch.get(i);
+            // the payloads cut from a datagram share the chunk it is copied into
+            if chunk.capacity() - chunk.len() < d.len() {
+                chunk = BytesMut::with_capacity(RECV_CHUNK.max(d.len()));
+            }
+            chunk.extend_from_slice(d);
+            let datagram = chunk.split().freeze();
+            match wire::decode(&datagram, &mut origins) {
+                Ok((sender, _)) if sender == me => {}
+                Ok((_, msg)) => {
+                    if !ingress.deliver(msg) {
+                        return;
+                    }
+                }
+                Err(e) => {
+                    let from = net::inet(from).map_or_else(|| "?".to_string(), |a| a.to_string());
+                    ingress.reject(e.kind(), format_args!("datagram from {from}: {e}"))
                 }
             }
-            Err(e) => ingress.reject(e.kind(), format_args!("datagram from {from}: {e}")),
         }
     }
 }

@@ -1,0 +1,548 @@
+//! Sending a medium's datagrams on its UDP socket: a message at once when the socket is quiet, in
+//! sendmmsg(2) batches when messages come faster than one call each.
+//!
+//! Datagrams leave at once, from the sender's task, unless they come in a stream: [`STREAM`]
+//! handovers in a row, each less than [`QUIET`] after the last one ended. A message now and then, or a few at
+//! once, costs no more than a plain send. Datagrams of a stream join a queue: the sender that fills a batch sends it itself, and what is left is sent by
+//! the outbox's own task as soon as it runs (at once on another thread of a multi-threaded
+//! runtime; on a single-threaded one, when the sender's task next waits). The queue holds at most
+//! [`CAPACITY`] datagrams; a sender finding it full waits for room. Datagrams leave in the order
+//! they were handed over. A failure sending one from the queue is counted in the medium's
+//! `tx_errors` and logged (rate-limited), and the others still go; one sent at once is returned to
+//! its sender.
+//!
+//! Used by the UDP and LCM media.
+
+use crate::medium::Ingress;
+use bytes::Bytes;
+use socket2::SockAddr;
+use std::collections::VecDeque;
+use std::io;
+use std::net::SocketAddr;
+use std::os::fd::AsRawFd;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::io::Interest;
+use tokio::net::UdpSocket;
+use tokio::sync::Notify;
+
+/// Datagrams one sendmmsg(2) call sends at most.
+pub const BATCH: usize = 32;
+/// Datagrams waiting at most.
+pub const CAPACITY: usize = 4 * BATCH;
+/// Handovers less than this apart make a stream.
+pub const QUIET: Duration = Duration::from_micros(50);
+/// Handovers in a row, each less than [`QUIET`] after the last, that make a stream.
+pub const STREAM: u32 = 8;
+/// Bytes of header a datagram keeps beside its body.
+pub const MAX_HEAD: usize = 32;
+
+/// One datagram: a short header, then a body shared with the frame it was cut from.
+#[derive(Clone)]
+pub struct Outgoing {
+    head: [u8; MAX_HEAD],
+    head_len: u8,
+    body: Bytes,
+    /// `None`: the peer a connected socket sends to
+    to: Option<SocketAddr>,
+}
+
+impl Outgoing {
+    /// `head` then `body`, to `to`. A head longer than [`MAX_HEAD`] is copied to the front of the
+    /// body.
+    pub fn new(head: &[u8], body: Bytes, to: SocketAddr) -> Outgoing {
+        Outgoing::with(head, body, Some(to))
+    }
+
+    /// `head` then `body`, to the peer of a connected socket (whose route the kernel keeps, where
+    /// it looks one up for every datagram given an address).
+    pub fn connected(head: &[u8], body: Bytes) -> Outgoing {
+        Outgoing::with(head, body, None)
+    }
+
+    fn with(head: &[u8], body: Bytes, to: Option<SocketAddr>) -> Outgoing {
+        let mut out = Outgoing {
+            head: [0; MAX_HEAD],
+            head_len: 0,
+            body,
+            to,
+        };
+        if head.len() <= MAX_HEAD {
+            out.head[..head.len()].copy_from_slice(head);
+            out.head_len = head.len() as u8;
+        } else {
+            let mut joined = Vec::with_capacity(head.len() + out.body.len());
+            joined.extend_from_slice(head);
+            joined.extend_from_slice(&out.body);
+            out.body = Bytes::from(joined);
+        }
+        out
+    }
+
+    fn head(&self) -> &[u8] {
+        &self.head[..usize::from(self.head_len)]
+    }
+
+    /// Where it goes, as an error names it.
+    fn dest(&self) -> String {
+        self.to
+            .map_or_else(|| "the connected peer".to_string(), |to| to.to_string())
+    }
+}
+
+struct State {
+    queue: VecDeque<Outgoing>,
+    /// an empty queue kept for the next batch taken whole, so that taking one allocates nothing
+    spare: VecDeque<Outgoing>,
+    /// somebody (the outbox's task, or a sender with a full batch) is sending from the queue
+    sending: bool,
+    /// when the last handover ended
+    last: Option<Instant>,
+    /// handovers in a row less than [`QUIET`] apart
+    streak: u32,
+    /// when the oldest datagram waiting was queued
+    oldest: Option<Instant>,
+}
+
+struct Shared {
+    socket: Arc<UdpSocket>,
+    /// handovers less than this apart make a stream ([`QUIET`])
+    quiet: Duration,
+    state: Mutex<State>,
+    /// wakes the outbox's task: datagrams wait
+    wake: Notify,
+    /// wakes senders waiting for room
+    room: Notify,
+    ingress: Ingress,
+}
+
+impl Shared {
+    fn lock(&self) -> std::sync::MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// Takes every datagram waiting, to be sent by the caller (who then calls [`Shared::sent`]).
+    fn take(st: &mut State) -> VecDeque<Outgoing> {
+        st.sending = true;
+        st.oldest = None;
+        let spare = std::mem::take(&mut st.spare);
+        std::mem::replace(&mut st.queue, spare)
+    }
+
+    /// Sends `batch`, waiting while the socket has no room; a datagram that fails is counted and
+    /// logged, and the rest still go.
+    async fn send_queued(&self, batch: &mut VecDeque<Outgoing>) {
+        let batch = &*batch.make_contiguous();
+        let mut at = 0;
+        while at < batch.len() {
+            // tried at once; the runtime's word that the socket has room is awaited only once it
+            // had none (the runtime learns of room only when it next looks, which a task that
+            // keeps sending without waiting may put off)
+            let sent = match send_now(&self.socket, &batch[at..]) {
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => {
+                    self.socket
+                        .async_io(Interest::WRITABLE, || send_now(&self.socket, &batch[at..]))
+                        .await
+                }
+                sent => sent,
+            };
+            match sent {
+                Ok(n) => at += n.max(1),
+                Err(e) => {
+                    self.ingress
+                        .send_failed(format_args!("sending to {}: {e}", batch[at].dest()));
+                    at += 1;
+                }
+            }
+        }
+    }
+
+    /// Marks the queue free after `batch` was sent from it, waking whoever waits for room and the
+    /// outbox's task when more wait to go.
+    fn sent(&self, mut batch: VecDeque<Outgoing>) {
+        batch.clear();
+        let waiting = {
+            let mut st = self.lock();
+            st.sending = false;
+            st.spare = batch;
+            !st.queue.is_empty()
+        };
+        self.room.notify_waiters();
+        if waiting {
+            self.wake.notify_one();
+        }
+    }
+}
+
+/// Sends a medium's datagrams on its socket (see the module's documentation).
+pub struct Outbox {
+    shared: Arc<Shared>,
+}
+
+impl Outbox {
+    /// An outbox for `socket`. Its task stops when the medium `ingress` belongs to closes.
+    pub fn new(socket: Arc<UdpSocket>, ingress: &Ingress) -> Outbox {
+        Outbox::with_quiet(socket, ingress, QUIET)
+    }
+
+    /// [`Outbox::new`] with handovers less than `quiet` apart making a stream.
+    fn with_quiet(socket: Arc<UdpSocket>, ingress: &Ingress, quiet: Duration) -> Outbox {
+        let shared = Arc::new(Shared {
+            socket,
+            quiet,
+            state: Mutex::new(State {
+                queue: VecDeque::new(),
+                spare: VecDeque::new(),
+                sending: false,
+                last: None,
+                streak: 0,
+                oldest: None,
+            }),
+            wake: Notify::new(),
+            room: Notify::new(),
+            ingress: ingress.clone(),
+        });
+        let task = tokio::spawn(run(shared.clone()));
+        ingress.own_task(task.abort_handle());
+        Outbox { shared }
+    }
+
+    /// Sends `ds` in order: at once unless they are part of a stream (returning the first error,
+    /// which names the datagram's destination unless the socket is connected, the datagrams after
+    /// it not sent), else through the queue (waiting for room when it is full). Datagrams that have waited [`QUIET`] or longer go
+    /// now, before these.
+    pub async fn send(&self, ds: &[Outgoing]) -> io::Result<()> {
+        let now = Instant::now();
+        let (stream, overdue) = {
+            let mut st = self.shared.lock();
+            let soon = st
+                .last
+                .is_some_and(|l| now.saturating_duration_since(l) < self.shared.quiet);
+            st.streak = if soon { st.streak.saturating_add(1) } else { 0 };
+            let overdue = !st.sending
+                && st
+                    .oldest
+                    .is_some_and(|o| now.saturating_duration_since(o) >= self.shared.quiet);
+            let overdue = overdue.then(|| Shared::take(&mut st));
+            (st.streak >= STREAM, overdue)
+        };
+        if let Some(mut batch) = overdue {
+            // the sender's task may not have let the outbox's run since: they go now
+            self.shared.send_queued(&mut batch).await;
+            self.shared.sent(batch);
+        }
+        let quiet = !stream && {
+            let st = self.shared.lock();
+            st.queue.is_empty() && !st.sending
+        };
+        let mut at = 0;
+        if quiet {
+            while at < ds.len() {
+                match send_now(&self.shared.socket, &ds[at..]) {
+                    Ok(n) => at += n.max(1),
+                    Err(e) if e.kind() == io::ErrorKind::WouldBlock => break,
+                    Err(e) => {
+                        return Err(match ds[at].to {
+                            Some(to) => io::Error::new(e.kind(), format!("to {to}: {e}")),
+                            None => e,
+                        });
+                    }
+                }
+            }
+        }
+        for d in &ds[at..] {
+            self.enqueue(d.clone()).await;
+        }
+        // the gap to the next handover is the sender's own time, not that of its sends
+        self.shared.lock().last = Some(Instant::now());
+        Ok(())
+    }
+
+    /// Puts `d` in the queue, waiting for room; a sender that fills a batch sends it.
+    async fn enqueue(&self, d: Outgoing) {
+        let mut d = Some(d);
+        loop {
+            let room = self.shared.room.notified();
+            tokio::pin!(room);
+            room.as_mut().enable();
+            let batch = {
+                let mut st = self.shared.lock();
+                if st.queue.len() >= CAPACITY {
+                    None
+                } else {
+                    st.queue.extend(d.take());
+                    if st.oldest.is_none() {
+                        st.oldest = Some(Instant::now());
+                    }
+                    if st.queue.len() >= BATCH && !st.sending {
+                        Some(Shared::take(&mut st))
+                    } else {
+                        if st.queue.len() == 1 && !st.sending {
+                            self.shared.wake.notify_one();
+                        }
+                        return;
+                    }
+                }
+            };
+            match batch {
+                Some(mut batch) => {
+                    self.shared.send_queued(&mut batch).await;
+                    self.shared.sent(batch);
+                    return;
+                }
+                None => room.await,
+            }
+        }
+    }
+
+    /// Datagrams waiting in the queue.
+    pub fn waiting(&self) -> usize {
+        self.shared.lock().queue.len()
+    }
+
+    /// Sends what waits without waiting for room (a medium closing); what the socket does not
+    /// take is counted as failed.
+    pub fn flush_now(&self) {
+        let batch: Vec<Outgoing> = {
+            let mut st = self.shared.lock();
+            st.oldest = None;
+            st.queue.drain(..).collect()
+        };
+        let mut at = 0;
+        while at < batch.len() {
+            match send_now(&self.shared.socket, &batch[at..]) {
+                Ok(n) => at += n.max(1),
+                Err(e) => {
+                    self.shared
+                        .ingress
+                        .send_failed(format_args!("sending to {}: {e}", batch[at].dest()));
+                    at += 1;
+                }
+            }
+        }
+    }
+}
+
+impl Drop for Outbox {
+    fn drop(&mut self) {
+        self.flush_now();
+    }
+}
+
+/// The outbox's task: sends what waits whenever nobody else is.
+async fn run(shared: Arc<Shared>) {
+    loop {
+        shared.wake.notified().await;
+        loop {
+            let mut batch = {
+                let mut st = shared.lock();
+                if st.queue.is_empty() || st.sending {
+                    break;
+                }
+                Shared::take(&mut st)
+            };
+            shared.send_queued(&mut batch).await;
+            shared.sent(batch);
+        }
+    }
+}
+
+/// Sends as many of `ds` (up to [`BATCH`]) as the socket takes now in one sendmmsg(2) call: how
+/// many went, or the error of the first (`WouldBlock` when the socket has no room).
+fn send_now(socket: &UdpSocket, ds: &[Outgoing]) -> io::Result<usize> {
+    let n = ds.len().min(BATCH);
+    let ds = &ds[..n];
+    let addrs: [Option<SockAddr>; BATCH] =
+        std::array::from_fn(|i| ds.get(i).and_then(|d| d.to).map(SockAddr::from));
+    let mut iovs: [libc::iovec; 2 * BATCH] = std::array::from_fn(|j| {
+        let part =
+            ds.get(j / 2)
+                .map_or(&[][..], |d| if j % 2 == 0 { d.head() } else { &d.body[..] });
+        libc::iovec {
+            iov_base: part.as_ptr() as *mut libc::c_void,
+            iov_len: part.len(),
+        }
+    });
+    // SAFETY: mmsghdr is plain data; zeroed means no address, no control data and no flags
+    let mut msgs: [libc::mmsghdr; BATCH] = unsafe { std::mem::zeroed() };
+    for (i, (m, a)) in msgs.iter_mut().zip(&addrs).take(n).enumerate() {
+        if let Some(a) = a {
+            m.msg_hdr.msg_name = a.as_ptr() as *mut libc::c_void;
+            m.msg_hdr.msg_namelen = a.len();
+        }
+        // SAFETY: `iovs` holds two entries per datagram: 2i and 2i + 1 lie inside it
+        m.msg_hdr.msg_iov = unsafe { iovs.as_mut_ptr().add(2 * i) };
+        m.msg_hdr.msg_iovlen = 2;
+    }
+    // SAFETY: every header points at an address and two iovecs that outlive the call, each with
+    // its true length, and the iovecs at the datagram's parts, which the kernel only reads
+    let sent = unsafe {
+        libc::sendmmsg(
+            socket.as_raw_fd(),
+            msgs.as_mut_ptr(),
+            n as libc::c_uint,
+            libc::MSG_DONTWAIT,
+        )
+    };
+    if sent < 0 {
+        return Err(io::Error::last_os_error());
+    }
+    Ok(sent as usize)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::medium::{Medium, Node};
+
+    /// Long enough that a test's sends in a row make a stream on a busy machine.
+    const TEST_QUIET: Duration = Duration::from_millis(20);
+
+    /// A medium (for its counters), a sending socket and a receiving one on loopback.
+    fn pair() -> (Medium, Arc<UdpSocket>, std::net::UdpSocket) {
+        let medium = Medium::in_process("net", &Node::new("n"));
+        let rx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        rx.set_nonblocking(true).unwrap();
+        let tx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        tx.set_nonblocking(true).unwrap();
+        let tx = Arc::new(UdpSocket::from_std(tx).unwrap());
+        (medium, tx, rx)
+    }
+
+    /// Everything waiting on `rx` now.
+    fn waiting(rx: &std::net::UdpSocket) -> Vec<Vec<u8>> {
+        let mut got = Vec::new();
+        let mut buf = [0u8; 2048];
+        while let Ok(n) = rx.recv(&mut buf) {
+            got.push(buf[..n].to_vec());
+        }
+        got
+    }
+
+    fn datagram(i: u32, to: SocketAddr) -> Outgoing {
+        Outgoing::new(&i.to_be_bytes(), Bytes::from_static(b"body"), to)
+    }
+
+    fn numbers(got: &[Vec<u8>]) -> Vec<u32> {
+        got.iter()
+            .map(|d| {
+                assert_eq!(&d[4..], b"body");
+                u32::from_be_bytes(d[..4].try_into().unwrap())
+            })
+            .collect()
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_lone_datagram_leaves_before_send_returns() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        for i in 0..3 {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+            // no task has run in between: the sender's own call sent it
+            assert_eq!(numbers(&waiting(&rx)), [i]);
+            std::thread::sleep(TEST_QUIET * 2);
+        }
+        // a head and body together, fragments of one message in one call
+        let long_head = [7u8; MAX_HEAD + 3];
+        outbox
+            .send(&[
+                Outgoing::new(&long_head, Bytes::from_static(b"x"), to),
+                Outgoing::new(b"ab", Bytes::from_static(b"cd"), to),
+            ])
+            .await
+            .unwrap();
+        let got = waiting(&rx);
+        assert_eq!(got.len(), 2);
+        assert_eq!(got[0][..MAX_HEAD + 3], long_head);
+        assert_eq!(got[0][MAX_HEAD + 3..], *b"x");
+        assert_eq!(got[1], b"abcd");
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_stream_goes_in_batches_in_order_and_its_tail_when_the_sender_waits() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        let n = 3 * BATCH as u32 + 5;
+        for i in 0..n {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        // the first of the stream went one by one, then whole batches; the tail waits
+        let first = numbers(&waiting(&rx));
+        let sent = first.len() as u32;
+        assert_eq!(first, (0..sent).collect::<Vec<_>>());
+        assert!(sent < n, "the tail of a stream waits for the outbox's task");
+        assert_eq!(outbox.waiting() as u32, n - sent);
+        // the sender waits for something: the outbox's task sends the rest
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        assert_eq!(numbers(&waiting(&rx)), (sent..n).collect::<Vec<_>>());
+        assert_eq!(outbox.waiting(), 0);
+        assert_eq!(medium.stats().tx_errors, 0);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn what_waited_goes_before_the_next_datagram_and_all_goes_when_the_outbox_is_dropped() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        let stream = STREAM + 3;
+        for i in 0..stream {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        let before = numbers(&waiting(&rx)).len() as u32;
+        assert!(before < stream);
+        // the sender went on without waiting on anything, then sends again after a pause: the
+        // overdue ones go first, then this one, at once
+        std::thread::sleep(TEST_QUIET * 2);
+        outbox.send(&[datagram(stream, to)]).await.unwrap();
+        assert_eq!(
+            numbers(&waiting(&rx)),
+            (before..=stream).collect::<Vec<_>>()
+        );
+        // a stream's tail goes when the outbox is dropped (its medium closing)
+        for i in 0..stream {
+            outbox.send(&[datagram(100 + i, to)]).await.unwrap();
+        }
+        let sent = waiting(&rx).len() as u32;
+        drop(outbox);
+        assert_eq!(
+            numbers(&waiting(&rx)),
+            (100 + sent..100 + stream).collect::<Vec<_>>()
+        );
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn failures_are_returned_when_sent_at_once_and_counted_when_sent_from_the_queue() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        // larger than any UDP datagram
+        let huge = Outgoing::new(&[], Bytes::from(vec![0u8; 70_000]), to);
+        let e = outbox.send(std::slice::from_ref(&huge)).await.unwrap_err();
+        assert!(e.to_string().starts_with(&format!("to {to}: ")), "{e}");
+        assert_eq!(medium.stats().tx_errors, 0, "returned, not counted");
+        // in a stream, it waits in the queue: counted, and those after it still go
+        for i in 0..STREAM {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        outbox.send(&[huge, datagram(50, to)]).await.unwrap();
+        tokio::time::sleep(Duration::from_millis(5)).await;
+        let got = numbers(&waiting(&rx));
+        assert_eq!(got.last(), Some(&50));
+        assert_eq!(got.len() as u32, STREAM + 1);
+        assert_eq!(medium.stats().tx_errors, 1);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_connected_socket_sends_without_an_address() {
+        let (medium, tx, rx) = pair();
+        tx.connect(rx.local_addr().unwrap()).await.unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress());
+        outbox
+            .send(&[Outgoing::connected(b"he", Bytes::from_static(b"llo"))])
+            .await
+            .unwrap();
+        assert_eq!(waiting(&rx), [b"hello".to_vec()]);
+    }
+}
