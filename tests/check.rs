@@ -99,7 +99,7 @@ fn bad_urls_say_what_is_wrong() {
     expect_error(
         "<seabus>\n  <medium name=\"net\" url=\"udp://239.255.42.1:47800?tll=0\"/>\n</seabus>\n",
         "2:22: bad medium URL `udp://239.255.42.1:47800?tll=0`: unknown option `tll` for udp://; known options: \
-         ttl, iface, peer, bind, broadcast, loop, recv_buf, max",
+         ttl, iface, peer, bind, broadcast, loop, recv_buf, max, send_gap",
     );
     expect_error(
         "<seabus>\n  <medium name=\"net\" url=\"239.255.42.1:47800\"/>\n</seabus>\n",

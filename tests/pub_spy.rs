@@ -140,3 +140,41 @@ fn bad_arguments_are_refused_with_a_reason() {
         assert!(err.contains(reason), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn a_burst_from_pub_arrives_whole_and_in_order_before_pub_ends() {
+    // sent as fast as pub can, as a stream however slow this build (a gap of a second): the
+    // datagrams go out in batches, and the last of them before pub exits
+    let rx = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let _ = socket2::SockRef::from(&rx).set_recv_buffer_size(4 << 20);
+    let port = rx.local_addr().unwrap().port();
+    let n = 500;
+    let out = seabus()
+        .args([
+            "pub",
+            &format!("udp://127.0.0.1:{port}?send_gap=1s"),
+            "burst",
+            "x=1",
+        ])
+        .args(["--count", &n.to_string(), "--rate", "1000000"])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    rx.set_read_timeout(Some(Duration::from_millis(500)))
+        .unwrap();
+    let mut origins = seabus_medium::datagram::Origins::default();
+    let mut seqs = Vec::new();
+    let mut buf = vec![0u8; 65536];
+    while let Ok(len) = rx.recv(&mut buf) {
+        let d = bytes::Bytes::copy_from_slice(&buf[..len]);
+        let (_, msg) = seabus_medium::datagram::decode(&d, &mut origins).unwrap();
+        assert_eq!(msg.topic.as_str(), "burst");
+        seqs.push(msg.provenance.seq);
+        assert!(seqs.len() <= n, "more than sent");
+    }
+    assert_eq!(seqs, (1..=n as u64).collect::<Vec<_>>());
+}

@@ -2,7 +2,9 @@
 //! sendmmsg(2) batches when messages come faster than one call each.
 //!
 //! Datagrams leave at once, from the sender's task, unless they come in a stream: [`STREAM`]
-//! handovers in a row, each less than [`QUIET`] after the last one ended. A message now and then, or a few at
+//! handovers in a row, each less than the medium's gap ([`QUIET`] unless its URL says
+//! `send_gap=`, [`gap_from_url`]; `send_gap=0` sends every datagram at once) after the last one
+//! ended. A message now and then, or a few at
 //! once, costs no more than a plain send. Datagrams of a stream join a queue: the sender that fills a batch sends it itself, and what is left is sent by
 //! the outbox's own task as soon as it runs (at once on another thread of a multi-threaded
 //! runtime; on a single-threaded one, when the sender's task next waits). The queue holds at most
@@ -14,6 +16,7 @@
 //! Used by the UDP and LCM media.
 
 use crate::medium::Ingress;
+use crate::url::{MediumUrl, UrlError};
 use bytes::Bytes;
 use socket2::SockAddr;
 use std::collections::VecDeque;
@@ -30,8 +33,26 @@ use tokio::sync::Notify;
 pub const BATCH: usize = 32;
 /// Datagrams waiting at most.
 pub const CAPACITY: usize = 4 * BATCH;
-/// Handovers less than this apart make a stream.
+/// Handovers less than this apart make a stream, by default.
 pub const QUIET: Duration = Duration::from_micros(50);
+/// The longest gap a URL may set.
+pub const MAX_GAP: Duration = Duration::from_secs(1);
+
+/// The gap a medium's URL sets with `send_gap=` (a duration: `50us`, `2ms`; `0` sends every
+/// datagram at once), taking the option; `None` without it.
+pub fn gap_from_url(url: &mut MediumUrl) -> Result<Option<Duration>, UrlError> {
+    let Some(text) = url.take("send_gap") else {
+        return Ok(None);
+    };
+    crate::parse::parse_duration(&text)
+        .filter(|d| *d <= MAX_GAP)
+        .map(Some)
+        .ok_or_else(|| {
+            url.error(format!(
+                "option `send_gap={text}`: expected a duration up to 1s such as 50us or 2ms, or 0"
+            ))
+        })
+}
 /// Handovers in a row, each less than [`QUIET`] after the last, that make a stream.
 pub const STREAM: u32 = 8;
 /// Bytes of header a datagram keeps beside its body.
@@ -180,16 +201,12 @@ pub struct Outbox {
 }
 
 impl Outbox {
-    /// An outbox for `socket`. Its task stops when the medium `ingress` belongs to closes.
-    pub fn new(socket: Arc<UdpSocket>, ingress: &Ingress) -> Outbox {
-        Outbox::with_quiet(socket, ingress, QUIET)
-    }
-
-    /// [`Outbox::new`] with handovers less than `quiet` apart making a stream.
-    fn with_quiet(socket: Arc<UdpSocket>, ingress: &Ingress, quiet: Duration) -> Outbox {
+    /// An outbox for `socket`, handovers less than `gap` apart making a stream ([`QUIET`] by
+    /// default; zero: none does). Its task stops when the medium `ingress` belongs to closes.
+    pub fn new(socket: Arc<UdpSocket>, ingress: &Ingress, gap: Duration) -> Outbox {
         let shared = Arc::new(Shared {
             socket,
-            quiet,
+            quiet: gap,
             state: Mutex::new(State {
                 queue: VecDeque::new(),
                 spare: VecDeque::new(),
@@ -295,6 +312,33 @@ impl Outbox {
         }
     }
 
+    /// Returns once every datagram handed over so far has been given to the socket (a program
+    /// about to end, [`Transport::flush`]), sending what waits from this task.
+    ///
+    /// [`Transport::flush`]: crate::medium::Transport::flush
+    pub async fn flush(&self) {
+        loop {
+            let room = self.shared.room.notified();
+            tokio::pin!(room);
+            room.as_mut().enable();
+            let batch = {
+                let mut st = self.shared.lock();
+                if st.queue.is_empty() && !st.sending {
+                    return;
+                }
+                (!st.sending).then(|| Shared::take(&mut st))
+            };
+            match batch {
+                Some(mut batch) => {
+                    self.shared.send_queued(&mut batch).await;
+                    self.shared.sent(batch);
+                }
+                // another sends a batch: it wakes those waiting for room when done
+                None => room.await,
+            }
+        }
+    }
+
     /// Datagrams waiting in the queue.
     pub fn waiting(&self) -> usize {
         self.shared.lock().queue.len()
@@ -355,9 +399,9 @@ fn send_now(socket: &UdpSocket, ds: &[Outgoing]) -> io::Result<usize> {
     let addrs: [Option<SockAddr>; BATCH] =
         std::array::from_fn(|i| ds.get(i).and_then(|d| d.to).map(SockAddr::from));
     let mut iovs: [libc::iovec; 2 * BATCH] = std::array::from_fn(|j| {
-        let part =
-            ds.get(j / 2)
-                .map_or(&[][..], |d| if j % 2 == 0 { d.head() } else { &d.body[..] });
+        let part = ds
+            .get(j / 2)
+            .map_or(&[][..], |d| if j % 2 == 0 { d.head() } else { &d.body[..] });
         libc::iovec {
             iov_base: part.as_ptr() as *mut libc::c_void,
             iov_len: part.len(),
@@ -436,7 +480,7 @@ mod tests {
     async fn a_lone_datagram_leaves_before_send_returns() {
         let (medium, tx, rx) = pair();
         let to = rx.local_addr().unwrap();
-        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
         for i in 0..3 {
             outbox.send(&[datagram(i, to)]).await.unwrap();
             // no task has run in between: the sender's own call sent it
@@ -463,7 +507,7 @@ mod tests {
     async fn a_stream_goes_in_batches_in_order_and_its_tail_when_the_sender_waits() {
         let (medium, tx, rx) = pair();
         let to = rx.local_addr().unwrap();
-        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
         let n = 3 * BATCH as u32 + 5;
         for i in 0..n {
             outbox.send(&[datagram(i, to)]).await.unwrap();
@@ -485,7 +529,7 @@ mod tests {
     async fn what_waited_goes_before_the_next_datagram_and_all_goes_when_the_outbox_is_dropped() {
         let (medium, tx, rx) = pair();
         let to = rx.local_addr().unwrap();
-        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
         let stream = STREAM + 3;
         for i in 0..stream {
             outbox.send(&[datagram(i, to)]).await.unwrap();
@@ -513,10 +557,27 @@ mod tests {
     }
 
     #[tokio::test(flavor = "current_thread")]
+    async fn flush_returns_once_a_streams_tail_is_sent() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let n = BATCH as u32 + 3;
+        for i in 0..n {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        assert!(outbox.waiting() > 0);
+        outbox.flush().await;
+        assert_eq!(outbox.waiting(), 0);
+        assert_eq!(numbers(&waiting(&rx)), (0..n).collect::<Vec<_>>());
+        // nothing waiting: at once
+        outbox.flush().await;
+    }
+
+    #[tokio::test(flavor = "current_thread")]
     async fn failures_are_returned_when_sent_at_once_and_counted_when_sent_from_the_queue() {
         let (medium, tx, rx) = pair();
         let to = rx.local_addr().unwrap();
-        let outbox = Outbox::with_quiet(tx, &medium.ingress(), TEST_QUIET);
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
         // larger than any UDP datagram
         let huge = Outgoing::new(&[], Bytes::from(vec![0u8; 70_000]), to);
         let e = outbox.send(std::slice::from_ref(&huge)).await.unwrap_err();
@@ -535,10 +596,44 @@ mod tests {
     }
 
     #[tokio::test(flavor = "current_thread")]
+    async fn no_gap_sends_every_datagram_at_once() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), Duration::ZERO);
+        for i in 0..3 * STREAM {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+            assert_eq!(outbox.waiting(), 0);
+        }
+        assert_eq!(numbers(&waiting(&rx)), (0..3 * STREAM).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn a_urls_gap_is_a_duration_up_to_a_second() {
+        let gap = |text: &str| gap_from_url(&mut MediumUrl::parse(text).unwrap());
+        assert_eq!(gap("udp://127.0.0.1:1").unwrap(), None);
+        assert_eq!(
+            gap("udp://127.0.0.1:1?send_gap=2ms").unwrap(),
+            Some(Duration::from_millis(2))
+        );
+        assert_eq!(
+            gap("udp://127.0.0.1:1?send_gap=0").unwrap(),
+            Some(Duration::ZERO)
+        );
+        for bad in ["2s", "soon", "-1"] {
+            let e = gap(&format!("udp://127.0.0.1:1?send_gap={bad}")).unwrap_err();
+            assert!(
+                e.reason
+                    .starts_with(&format!("option `send_gap={bad}`: expected a duration")),
+                "{e}"
+            );
+        }
+    }
+
+    #[tokio::test(flavor = "current_thread")]
     async fn a_connected_socket_sends_without_an_address() {
         let (medium, tx, rx) = pair();
         tx.connect(rx.local_addr().unwrap()).await.unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress());
+        let outbox = Outbox::new(tx, &medium.ingress(), QUIET);
         outbox
             .send(&[Outgoing::connected(b"he", Bytes::from_static(b"llo"))])
             .await

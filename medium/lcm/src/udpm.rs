@@ -11,7 +11,9 @@
 //! name or IPv4 address to join and send on; by default the route's interface, and loopback too,
 //! or loopback alone on a host without a multicast route), `channels` (regular expression the whole
 //! channel must match to be received), `frag_timeout` (how long a partial message waits for its next
-//! fragment, default 2s), `frag_mem` (bytes partial messages may hold, default 300 MiB).
+//! fragment, default 2s), `frag_mem` (bytes partial messages may hold, default 300 MiB), `send_gap`
+//! (messages handed over in a stream less than this apart go out in batches, default 50us; 0: each
+//! at once, [`seabus_medium::outbox`]).
 //!
 //! The channel is the topic; the payload is the LCM message's bytes. A channel that is not a
 //! seabus topic (`POSE.`, `a..b`, `with space`) is delivered as it came
@@ -34,7 +36,7 @@ use seabus_medium::medium::{
 };
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::net::{self, RECV_CHUNK, RecvBatch};
-use seabus_medium::outbox::{Outbox, Outgoing};
+use seabus_medium::outbox::{self, Outbox, Outgoing};
 use seabus_medium::payload::{Format, Payload};
 use seabus_medium::topic::{ChannelRegex, Pattern, Topic};
 use seabus_medium::url::{MediumUrl, UrlError};
@@ -54,8 +56,9 @@ pub const ENV_URL: &str = "LCM_DEFAULT_URL";
 /// Default socket receive buffer.
 pub const DEFAULT_RECV_BUF: usize = 8 << 20;
 
-const OPTIONS: [&str; 6] = [
+const OPTIONS: [&str; 7] = [
     "ttl",
+    "send_gap",
     "recv_buf_size",
     "iface",
     "channels",
@@ -82,6 +85,8 @@ pub struct LcmConfig {
     pub frag_timeout: Duration,
     /// Bytes partial messages may hold.
     pub frag_mem: usize,
+    /// Messages handed over less than this apart, in a stream, go out in batches.
+    pub send_gap: Duration,
 }
 
 impl LcmConfig {
@@ -123,6 +128,7 @@ impl LcmConfig {
             channels: None,
             frag_timeout: reassembly::DEFAULT_TIMEOUT,
             frag_mem: reassembly::DEFAULT_MEMORY,
+            send_gap: outbox::QUIET,
         };
         Self::options(url, &mut cfg)?;
         Ok(cfg)
@@ -167,6 +173,9 @@ impl LcmConfig {
         }
         if let Some(n) = url.take_parsed("frag_mem", "a size in bytes")? {
             cfg.frag_mem = n;
+        }
+        if let Some(gap) = outbox::gap_from_url(url)? {
+            cfg.send_gap = gap;
         }
         url.finish(&OPTIONS)
     }
@@ -316,13 +325,14 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
     o.ingress.own_task(task.abort_handle());
     o.ingress.set_link(LinkState::Up);
     tracing::debug!(medium = %o.name, group = %cfg.group, port = cfg.port, ttl = cfg.ttl, "lcm medium open");
+    let outbox = Arc::new(Outbox::new(tx, &o.ingress, cfg.send_gap));
     Ok(Arc::new(LcmTransport {
         name: o.name.clone(),
         listen: Mutex::new(Some(rx)),
         joined: std::sync::Once::new(),
         cfg,
         ingress: o.ingress.clone(),
-        outbox: Mutex::new(Some(Arc::new(Outbox::new(tx, &o.ingress)))),
+        outbox: Mutex::new(Some(outbox)),
         fragmenting: tokio::sync::Mutex::new(()),
         dest: SocketAddr::V4(bind),
         seq: AtomicU32::new(0),
@@ -411,6 +421,20 @@ impl Transport for LcmTransport {
                 })
                 .collect();
             outbox.send(&fragments).await.map_err(|e| self.io_error(e))
+        })
+    }
+
+    /// Returns once the datagrams of a stream still queued have gone to the socket.
+    fn flush(&self) -> BoxFuture<'_, ()> {
+        Box::pin(async move {
+            let outbox = self
+                .outbox
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .clone();
+            if let Some(outbox) = outbox {
+                outbox.flush().await;
+            }
         })
     }
 

@@ -10,8 +10,9 @@
 //! Options: `ttl` (multicast hop limit, default 0), `iface` (interface name or IPv4 address),
 //! `peer` (repeatable, or comma-separated), `bind` (address to bind instead of the default),
 //! `broadcast`, `loop` (multicast loopback, default on), `recv_buf` (socket receive buffer in bytes,
-//! default 4 MiB), `max` (largest datagram, default 65507). A message that encodes larger than `max`
-//! is refused at send. A datagram that does not decode is counted by reason and dropped. A node
+//! default 4 MiB), `max` (largest datagram, default 65507), `send_gap` (datagrams handed over in a
+//! stream less than this apart go out in batches, default 50us; 0: each at once,
+//! [`seabus_medium::outbox`]). A message that encodes larger than `max` is refused at send. A datagram that does not decode is counted by reason and dropped. A node
 //! never receives its own datagrams back (multicast loopback): each carries its sender's id.
 //!
 //! Who may depend on it: the program, to register `udp://` ([`register`]). It depends on the core
@@ -21,7 +22,7 @@ use bytes::{Bytes, BytesMut};
 use seabus_medium::caps::{Capabilities, Carries, Framing};
 use seabus_medium::datagram as wire;
 use seabus_medium::net::{self, MAX_DATAGRAM, RECV_CHUNK, RecvBatch, UdpEndpoint};
-use seabus_medium::outbox::{Outbox, Outgoing};
+use seabus_medium::outbox::{self, Outbox, Outgoing};
 use seabus_medium::url::{MediumUrl, UrlError};
 use seabus_medium::{
     BoxFuture, Ingress, LinkState, Message, OpenError, Opened, Opening, Scheme, Schemes, SendError,
@@ -39,6 +40,8 @@ pub struct UdpConfig {
     pub endpoint: UdpEndpoint,
     /// Largest datagram sent.
     pub max: usize,
+    /// Datagrams handed over less than this apart, in a stream, go out in batches.
+    pub send_gap: std::time::Duration,
 }
 
 impl UdpConfig {
@@ -54,10 +57,15 @@ impl UdpConfig {
                 wire::FIXED + 3
             )));
         }
+        let send_gap = outbox::gap_from_url(url)?.unwrap_or(outbox::QUIET);
         let mut options = UdpEndpoint::OPTIONS.to_vec();
-        options.push("max");
+        options.extend(["max", "send_gap"]);
         url.finish(&options)?;
-        Ok(UdpConfig { endpoint, max })
+        Ok(UdpConfig {
+            endpoint,
+            max,
+            send_gap,
+        })
     }
 
     /// What a UDP medium can do: whole seabus messages with provenance in datagrams of at most
@@ -155,7 +163,11 @@ fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let sender = fastrand::u64(1..);
     let transport = Arc::new(UdpTransport {
         name: o.name.clone(),
-        outbox: std::sync::Mutex::new(Some(Arc::new(Outbox::new(socket.clone(), &o.ingress)))),
+        outbox: std::sync::Mutex::new(Some(Arc::new(Outbox::new(
+            socket.clone(),
+            &o.ingress,
+            cfg.send_gap,
+        )))),
         sender,
         caps: cfg.capabilities(),
         dests: ep
@@ -220,6 +232,20 @@ impl Transport for UdpTransport {
                 medium: self.name.to_string(),
                 reason: format!("sending {e}"),
             })
+        })
+    }
+
+    /// Returns once the datagrams of a stream still queued have gone to the socket.
+    fn flush(&self) -> BoxFuture<'_, ()> {
+        Box::pin(async move {
+            let outbox = self
+                .outbox
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .clone();
+            if let Some(outbox) = outbox {
+                outbox.flush().await;
+            }
         })
     }
 
