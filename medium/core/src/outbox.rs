@@ -142,7 +142,7 @@ impl Shared {
         self.state.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Takes every datagram waiting, to be sent by the caller (who then calls [`Shared::sent`]).
+    /// Takes every datagram waiting, to be sent by the caller ([`Shared::send_taken`]).
     fn take(st: &mut State) -> VecDeque<Outgoing> {
         st.sending = true;
         st.oldest = None;
@@ -150,10 +150,17 @@ impl Shared {
         std::mem::replace(&mut st.queue, spare)
     }
 
-    /// Sends `batch`, waiting while the socket has no room; a datagram that fails is counted and
-    /// logged, and the rest still go.
-    async fn send_queued(&self, batch: &mut VecDeque<Outgoing>) {
-        let batch = &*batch.make_contiguous();
+    /// Sends `batch`, taken with [`Shared::take`], waiting while the socket has no room; a
+    /// datagram that fails is counted and logged, and the rest still go. Then marks the queue free,
+    /// waking whoever waits for room and the outbox's task when more wait to go. A sender that
+    /// stops waiting midway (its future dropped) puts what was not sent back at the queue's front.
+    async fn send_taken(&self, batch: VecDeque<Outgoing>) {
+        let mut taken = Taken {
+            shared: self,
+            batch,
+            at: 0,
+        };
+        let batch = &*taken.batch.make_contiguous();
         let mut at = 0;
         while at < batch.len() {
             // tried at once; the runtime's word that the socket has room is awaited only once it
@@ -175,22 +182,40 @@ impl Shared {
                     at += 1;
                 }
             }
+            taken.at = at;
         }
     }
+}
 
-    /// Marks the queue free after `batch` was sent from it, waking whoever waits for room and the
-    /// outbox's task when more wait to go.
-    fn sent(&self, mut batch: VecDeque<Outgoing>) {
+/// A batch taken from the queue while it is being sent: when dropped, whether sent or given up
+/// midway, the queue is free again and what was not sent is back at its front.
+struct Taken<'a> {
+    shared: &'a Shared,
+    batch: VecDeque<Outgoing>,
+    /// datagrams of the batch sent (or failed) so far
+    at: usize,
+}
+
+impl Drop for Taken<'_> {
+    fn drop(&mut self) {
+        let mut batch = std::mem::take(&mut self.batch);
+        let unsent = batch.split_off(self.at.min(batch.len()));
         batch.clear();
         let waiting = {
-            let mut st = self.lock();
+            let mut st = self.shared.lock();
             st.sending = false;
+            if !unsent.is_empty() {
+                for d in unsent.into_iter().rev() {
+                    st.queue.push_front(d);
+                }
+                st.oldest = Some(Instant::now());
+            }
             st.spare = batch;
             !st.queue.is_empty()
         };
-        self.room.notify_waiters();
+        self.shared.room.notify_waiters();
         if waiting {
-            self.wake.notify_one();
+            self.shared.wake.notify_one();
         }
     }
 }
@@ -226,8 +251,8 @@ impl Outbox {
 
     /// Sends `ds` in order: at once unless they are part of a stream (returning the first error,
     /// which names the datagram's destination unless the socket is connected, the datagrams after
-    /// it not sent), else through the queue (waiting for room when it is full). Datagrams that have waited [`QUIET`] or longer go
-    /// now, before these.
+    /// it not sent), else through the queue (waiting for room when it is full). Datagrams that
+    /// have waited a gap or longer go now, before these.
     pub async fn send(&self, ds: &[Outgoing]) -> io::Result<()> {
         let now = Instant::now();
         let (stream, overdue) = {
@@ -243,10 +268,9 @@ impl Outbox {
             let overdue = overdue.then(|| Shared::take(&mut st));
             (st.streak >= STREAM, overdue)
         };
-        if let Some(mut batch) = overdue {
+        if let Some(batch) = overdue {
             // the sender's task may not have let the outbox's run since: they go now
-            self.shared.send_queued(&mut batch).await;
-            self.shared.sent(batch);
+            self.shared.send_taken(batch).await;
         }
         let quiet = !stream && {
             let st = self.shared.lock();
@@ -302,9 +326,8 @@ impl Outbox {
                 }
             };
             match batch {
-                Some(mut batch) => {
-                    self.shared.send_queued(&mut batch).await;
-                    self.shared.sent(batch);
+                Some(batch) => {
+                    self.shared.send_taken(batch).await;
                     return;
                 }
                 None => room.await,
@@ -329,10 +352,7 @@ impl Outbox {
                 (!st.sending).then(|| Shared::take(&mut st))
             };
             match batch {
-                Some(mut batch) => {
-                    self.shared.send_queued(&mut batch).await;
-                    self.shared.sent(batch);
-                }
+                Some(batch) => self.shared.send_taken(batch).await,
                 // another sends a batch: it wakes those waiting for room when done
                 None => room.await,
             }
@@ -378,15 +398,14 @@ async fn run(shared: Arc<Shared>) {
     loop {
         shared.wake.notified().await;
         loop {
-            let mut batch = {
+            let batch = {
                 let mut st = shared.lock();
                 if st.queue.is_empty() || st.sending {
                     break;
                 }
                 Shared::take(&mut st)
             };
-            shared.send_queued(&mut batch).await;
-            shared.sent(batch);
+            shared.send_taken(batch).await;
         }
     }
 }
@@ -593,6 +612,36 @@ mod tests {
         assert_eq!(got.last(), Some(&50));
         assert_eq!(got.len() as u32, STREAM + 1);
         assert_eq!(medium.stats().tx_errors, 1);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_batch_given_up_midway_goes_back_to_the_front_and_the_outbox_goes_on() {
+        // a sender whose future is dropped while it waits for room in the socket (a timeout
+        // around its send) leaves the rest of the batch it took to whoever sends next
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        for i in 0..STREAM + 4 {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        assert_eq!(numbers(&waiting(&rx)), (0..STREAM).collect::<Vec<_>>());
+        let batch = Shared::take(&mut outbox.shared.lock());
+        assert_eq!(batch.len(), 4);
+        outbox.send(&[datagram(99, to)]).await.unwrap();
+        // the first of the batch went, then its sender stopped waiting
+        send_now(&outbox.shared.socket, &batch.as_slices().0[..1]).unwrap();
+        drop(Taken {
+            shared: &outbox.shared,
+            batch,
+            at: 1,
+        });
+        assert!(!outbox.shared.lock().sending);
+        assert_eq!(outbox.waiting(), 4);
+        outbox.flush().await;
+        assert_eq!(
+            numbers(&waiting(&rx)),
+            [STREAM, STREAM + 1, STREAM + 2, STREAM + 3, 99]
+        );
     }
 
     #[tokio::test(flavor = "current_thread")]
