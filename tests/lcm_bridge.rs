@@ -39,6 +39,16 @@ fn lcm_gen(dir: &Path, lcm_file: &Path) {
     assert!(status.success(), "lcm-gen made the Python classes");
 }
 
+/// A directory with Python's classes of seabus's own LCM types (`configs/lcm/seabus.lcm`).
+fn seabus_types() -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    lcm_gen(
+        dir.path(),
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/lcm/seabus.lcm"),
+    );
+    dir
+}
+
 fn python(dir: &Path, script: &str, args: &[&str]) -> std::process::Child {
     Command::new("python3")
         .arg("-c")
@@ -267,11 +277,7 @@ fn udpm_alone_is_the_lcm_default_url() {
 
 #[test]
 fn pub_sends_typed_lcm_messages_that_lcm_programs_read() {
-    let dir = tempfile::tempdir().unwrap();
-    lcm_gen(
-        dir.path(),
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/lcm/seabus.lcm"),
-    );
+    let dir = seabus_types();
     let url = format!("udpm://{}:{}?ttl=0", group(), free_port());
     let mut reader = python(
         dir.path(),
@@ -335,11 +341,7 @@ fn a_burst_from_pub_reaches_an_lcm_program_whole_and_in_order() {
     // sent as fast as pub can, as a stream however slow this build (a gap of a second): the
     // datagrams go out in batches, and the last of them before pub exits; liblcm (through
     // Python's `lcm`) hears every one
-    let dir = tempfile::tempdir().unwrap();
-    lcm_gen(
-        dir.path(),
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/lcm/seabus.lcm"),
-    );
+    let dir = seabus_types();
     let url = format!("udpm://{}:{}?ttl=0", group(), free_port());
     let n = 400;
     let mut reader = python(
@@ -360,22 +362,12 @@ fn a_burst_from_pub_reaches_an_lcm_program_whole_and_in_order() {
     );
     let mut lines = BufReader::new(reader.stdout.take().unwrap()).lines();
     assert_eq!(lines.next().unwrap().unwrap(), "ready");
-    let sent = seabus()
-        .args(["pub", &format!("{url}&send_gap=1s"), "BURST", "depth=1"])
-        .args(["--lcm", "seabus.depth_t"])
-        .args([
-            "--allow-missing",
-            "--count",
-            &n.to_string(),
-            "--rate",
-            "1000000",
-        ])
-        .output()
-        .unwrap();
-    assert!(
-        sent.status.success(),
-        "{}",
-        String::from_utf8_lossy(&sent.stderr)
+    succeeds(
+        seabus()
+            .args(["pub", &format!("{url}&send_gap=1s"), "BURST", "depth=1"])
+            .args(["--lcm", "seabus.depth_t", "--allow-missing"])
+            .args(["--count", &n.to_string(), "--rate", "1000000"]),
+        "seabus pub",
     );
     let got: Vec<i64> = serde_json::from_str(&lines.next().unwrap().unwrap()).unwrap();
     let _ = reader.wait();

@@ -149,20 +149,18 @@ fn a_burst_from_pub_arrives_whole_and_in_order_before_pub_ends() {
     let _ = socket2::SockRef::from(&rx).set_recv_buffer_size(4 << 20);
     let port = rx.local_addr().unwrap().port();
     let n = 500;
-    let out = seabus()
-        .args([
-            "pub",
-            &format!("udp://127.0.0.1:{port}?send_gap=1s"),
-            "burst",
-            "x=1",
-        ])
-        .args(["--count", &n.to_string(), "--rate", "1000000"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeds(
+        seabus()
+            .args(["pub", &format!("udp://127.0.0.1:{port}?send_gap=1s")])
+            .args([
+                "burst",
+                "x=1",
+                "--count",
+                &n.to_string(),
+                "--rate",
+                "1000000",
+            ]),
+        "seabus pub",
     );
     rx.set_read_timeout(Some(Duration::from_millis(500)))
         .unwrap();

@@ -174,15 +174,23 @@ impl Shared {
                 }
                 sent => sent,
             };
-            match sent {
-                Ok(n) => at += n.max(1),
-                Err(e) => {
-                    self.ingress
-                        .send_failed(format_args!("sending to {}: {e}", batch[at].dest()));
-                    at += 1;
-                }
-            }
+            at += self.went(sent, &batch[at]);
             taken.at = at;
+        }
+    }
+}
+
+impl Shared {
+    /// How many datagrams of a batch starting with `first` a send call dealt with: those it sent,
+    /// or the first, which failed (counted and logged).
+    fn went(&self, sent: io::Result<usize>, first: &Outgoing) -> usize {
+        match sent {
+            Ok(n) => n.max(1),
+            Err(e) => {
+                self.ingress
+                    .send_failed(format_args!("sending to {}: {e}", first.dest()));
+                1
+            }
         }
     }
 }
@@ -217,6 +225,39 @@ impl Drop for Taken<'_> {
         if waiting {
             self.shared.wake.notify_one();
         }
+    }
+}
+
+/// A transport's outbox until its medium closes.
+#[derive(Default)]
+pub struct Held(Mutex<Option<Arc<Outbox>>>);
+
+impl Held {
+    /// Holding `outbox`.
+    pub fn new(outbox: Outbox) -> Held {
+        Held(Mutex::new(Some(Arc::new(outbox))))
+    }
+
+    fn slot(&self) -> std::sync::MutexGuard<'_, Option<Arc<Outbox>>> {
+        self.0.lock().unwrap_or_else(|p| p.into_inner())
+    }
+
+    /// The outbox; `None` once closed.
+    pub fn get(&self) -> Option<Arc<Outbox>> {
+        self.slot().clone()
+    }
+
+    /// [`Outbox::flush`], at once once closed.
+    pub async fn flush(&self) {
+        let outbox = self.get();
+        if let Some(outbox) = outbox {
+            outbox.flush().await;
+        }
+    }
+
+    /// Lets the outbox go: what waits is sent once the sends under way end ([`Outbox`]'s drop).
+    pub fn close(&self) {
+        self.slot().take();
     }
 }
 
@@ -255,7 +296,8 @@ impl Outbox {
     /// have waited a gap or longer go now, before these.
     pub async fn send(&self, ds: &[Outgoing]) -> io::Result<()> {
         let now = Instant::now();
-        let (stream, overdue) = {
+        let free = |st: &State| st.queue.is_empty() && !st.sending;
+        let (stream, overdue, free_now) = {
             let mut st = self.shared.lock();
             let soon = st
                 .last
@@ -266,16 +308,17 @@ impl Outbox {
                     .oldest
                     .is_some_and(|o| now.saturating_duration_since(o) >= self.shared.quiet);
             let overdue = overdue.then(|| Shared::take(&mut st));
-            (st.streak >= STREAM, overdue)
+            (st.streak >= STREAM, overdue, free(&st))
         };
-        if let Some(batch) = overdue {
+        let free_now = match overdue {
             // the sender's task may not have let the outbox's run since: they go now
-            self.shared.send_taken(batch).await;
-        }
-        let quiet = !stream && {
-            let st = self.shared.lock();
-            st.queue.is_empty() && !st.sending
+            Some(batch) => {
+                self.shared.send_taken(batch).await;
+                free(&self.shared.lock())
+            }
+            None => free_now,
         };
+        let quiet = !stream && free_now;
         let mut at = 0;
         if quiet {
             while at < ds.len() {
@@ -374,15 +417,9 @@ impl Outbox {
         };
         let mut at = 0;
         while at < batch.len() {
-            match send_now(&self.shared.socket, &batch[at..]) {
-                Ok(n) => at += n.max(1),
-                Err(e) => {
-                    self.shared
-                        .ingress
-                        .send_failed(format_args!("sending to {}: {e}", batch[at].dest()));
-                    at += 1;
-                }
-            }
+            at += self
+                .shared
+                .went(send_now(&self.shared.socket, &batch[at..]), &batch[at]);
         }
     }
 }
@@ -642,6 +679,29 @@ mod tests {
             numbers(&waiting(&rx)),
             [STREAM, STREAM + 1, STREAM + 2, STREAM + 3, 99]
         );
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn what_waited_a_gap_goes_with_the_next_datagram_of_a_stream() {
+        // a stream whose sends come within the gap, while the oldest waiting passes it
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let n = STREAM + 8;
+        for i in 0..n {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+            if i >= STREAM {
+                std::thread::sleep(TEST_QUIET / 4);
+            }
+        }
+        let early = numbers(&waiting(&rx));
+        assert!(early.len() > STREAM as usize, "{early:?}");
+        assert_eq!(early, (0..early.len() as u32).collect::<Vec<_>>());
+        tokio::time::timeout(Duration::from_secs(5), outbox.flush())
+            .await
+            .expect("the outbox is free again");
+        let rest = numbers(&waiting(&rx));
+        assert_eq!(rest, (early.len() as u32..n).collect::<Vec<_>>());
     }
 
     #[tokio::test(flavor = "current_thread")]

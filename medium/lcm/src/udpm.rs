@@ -236,8 +236,8 @@ pub struct LcmTransport {
     joined: std::sync::Once,
     cfg: LcmConfig,
     ingress: Ingress,
-    /// Sends on the send socket; `None` once the medium is closed
-    outbox: Mutex<Option<Arc<Outbox>>>,
+    /// Sends on the send socket until the medium is closed
+    outbox: outbox::Held,
     /// Held while a message goes out in fragments, so that the fragments of two messages never
     /// interleave: liblcm up to 1.4 keeps one partial message per sender, and drops it when a
     /// fragment of another comes
@@ -325,14 +325,14 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
     o.ingress.own_task(task.abort_handle());
     o.ingress.set_link(LinkState::Up);
     tracing::debug!(medium = %o.name, group = %cfg.group, port = cfg.port, ttl = cfg.ttl, "lcm medium open");
-    let outbox = Arc::new(Outbox::new(tx, &o.ingress, cfg.send_gap));
+    let outbox = outbox::Held::new(Outbox::new(tx, &o.ingress, cfg.send_gap));
     Ok(Arc::new(LcmTransport {
         name: o.name.clone(),
         listen: Mutex::new(Some(rx)),
         joined: std::sync::Once::new(),
         cfg,
         ingress: o.ingress.clone(),
-        outbox: Mutex::new(Some(outbox)),
+        outbox,
         fragmenting: tokio::sync::Mutex::new(()),
         dest: SocketAddr::V4(bind),
         seq: AtomicU32::new(0),
@@ -391,9 +391,7 @@ impl Transport for LcmTransport {
         Box::pin(async move {
             let outbox = self
                 .outbox
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .clone()
+                .get()
                 .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
             // the frame is `channel NUL payload`, as encode made it
             let LcmFrame { data, payload_at } = frame;
@@ -426,22 +424,13 @@ impl Transport for LcmTransport {
 
     /// Returns once the datagrams of a stream still queued have gone to the socket.
     fn flush(&self) -> BoxFuture<'_, ()> {
-        Box::pin(async move {
-            let outbox = self
-                .outbox
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .clone();
-            if let Some(outbox) = outbox {
-                outbox.flush().await;
-            }
-        })
+        Box::pin(self.outbox.flush())
     }
 
     /// Releases both sockets (the receive task, which holds the receive socket too, is stopped
     /// by the medium), leaving the group.
     fn close(&self) {
-        self.outbox.lock().unwrap_or_else(|p| p.into_inner()).take();
+        self.outbox.close();
         self.listen.lock().unwrap_or_else(|p| p.into_inner()).take();
     }
 

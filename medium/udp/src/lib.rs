@@ -104,8 +104,8 @@ pub fn schemes() -> Schemes {
 /// The UDP transport.
 pub struct UdpTransport {
     name: Arc<str>,
-    /// `None` once the medium is closed
-    outbox: std::sync::Mutex<Option<Arc<Outbox>>>,
+    /// sends on the socket until the medium is closed
+    outbox: outbox::Held,
     sender: u64,
     dests: Vec<SocketAddr>,
     max: usize,
@@ -163,11 +163,7 @@ fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     let sender = fastrand::u64(1..);
     let transport = Arc::new(UdpTransport {
         name: o.name.clone(),
-        outbox: std::sync::Mutex::new(Some(Arc::new(Outbox::new(
-            socket.clone(),
-            &o.ingress,
-            cfg.send_gap,
-        )))),
+        outbox: outbox::Held::new(Outbox::new(socket.clone(), &o.ingress, cfg.send_gap)),
         sender,
         caps: cfg.capabilities(),
         dests: ep
@@ -180,15 +176,6 @@ fn open(mut o: Opening) -> Result<Arc<UdpTransport>, OpenError> {
     o.ingress.set_link(LinkState::Up);
     tracing::debug!(medium = %o.name, mode = ?ep.mode, bind = %ep.bind, "udp medium open");
     Ok(transport)
-}
-
-impl UdpTransport {
-    fn outbox(&self) -> Option<Arc<Outbox>> {
-        self.outbox
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .clone()
-    }
 }
 
 impl Transport for UdpTransport {
@@ -216,7 +203,8 @@ impl Transport for UdpTransport {
     fn transmit(&self, frame: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
         Box::pin(async move {
             let outbox = self
-                .outbox()
+                .outbox
+                .get()
                 .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
             let sent = match &self.dests[..] {
                 [to] => outbox.send(&[Outgoing::new(&[], frame, *to)]).await,
@@ -237,21 +225,12 @@ impl Transport for UdpTransport {
 
     /// Returns once the datagrams of a stream still queued have gone to the socket.
     fn flush(&self) -> BoxFuture<'_, ()> {
-        Box::pin(async move {
-            let outbox = self
-                .outbox
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .clone();
-            if let Some(outbox) = outbox {
-                outbox.flush().await;
-            }
-        })
+        Box::pin(self.outbox.flush())
     }
 
     fn close(&self) {
         // the receive and outbox tasks, which hold the other references, are stopped by the medium
-        self.outbox.lock().unwrap_or_else(|p| p.into_inner()).take();
+        self.outbox.close();
     }
 }
 
