@@ -16,6 +16,7 @@
 //! decided before a command ended can never follow what ended it.
 
 use super::history::Ack;
+use super::lease::Lease;
 use super::{Hub, now_s};
 use crate::layout::CommandDecl;
 use seabus_medium::{DataMap, Kind, SendError, Topic, Value};
@@ -355,9 +356,16 @@ impl Hub {
 
     /// Ends the kept commands `stop` picks, each one's neutral going once (when it declares
     /// one): the end of control.
-    pub(super) async fn end_kept(&self, stop: impl Fn(&Kept) -> bool, why: &str) {
+    /// `stop` is asked with the lease as it is then (under [`Hub::sending`]): a command kept
+    /// while the caller waited for that lock is judged by who holds control, not by what the
+    /// caller saw before.
+    pub(super) async fn end_kept(&self, stop: impl Fn(&Kept, &Lease) -> bool, why: &str) {
         let _sending = self.sending.lock().await;
-        let ended = self.state().keeps.end(stop, why);
+        let ended = {
+            let st = &mut *self.state();
+            let lease = &st.lease;
+            st.keeps.end(|k| stop(k, lease), why)
+        };
         for (k, m) in ended {
             self.broadcast(&m);
             if let Some(neutral) = k.neutral() {
@@ -371,19 +379,8 @@ impl Hub {
     /// watchdog).
     pub async fn keep(&self, now: Instant) {
         self.sort_heard().await;
-        let held: Vec<(String, String)> = {
-            let st = self.state();
-            st.keeps
-                .kept
-                .values()
-                .filter_map(|k| {
-                    let holder = st.lease.holder(&k.vehicle)?;
-                    Some((k.vehicle.clone(), holder.to_string()))
-                })
-                .collect()
-        };
         self.end_kept(
-            |k| !held.iter().any(|(v, u)| *v == k.vehicle && *u == k.user),
+            |k, lease| lease.holder(&k.vehicle) != Some(k.user.as_str()),
             "control ended",
         )
         .await;
@@ -510,6 +507,32 @@ mod tests {
         assert_eq!(field(released[0], "heading"), Some(Value::Int(90)));
         run_for(&f, 5).await;
         assert!(helms(&waiting(&mut driver)).is_empty());
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_command_kept_while_the_keeper_waits_to_send_is_judged_by_the_lease_then() {
+        let f = Fixture::new();
+        let mut ana = kept_helm(&f).await;
+        f.hub.stop_keeping(|_| true, "a fresh start");
+        let mut events = f.hub.events();
+        // the keeper waits for the sending lock, and a page's course waits behind it: the
+        // keeper looks at what is kept when it gets the lock (nothing), and the course is kept
+        // before the keeper's turn comes again
+        let sending = f.hub.sending.lock().await;
+        let pending = Duration::from_millis(10);
+        let mut keeping = std::pin::pin!(f.hub.keep(Instant::now()));
+        assert!(tokio::time::timeout(pending, &mut keeping).await.is_err());
+        let fields = course();
+        let mut course = std::pin::pin!(f.hub.send(&mut ana, "pilot", "helm", &fields, None));
+        assert!(tokio::time::timeout(pending, &mut course).await.is_err());
+        drop(sending);
+        let ((), sent) = tokio::join!(keeping, course);
+        sent.unwrap();
+        // ana holds control: the new course stays kept
+        let told = kept_events(&mut events);
+        assert_eq!(told.len(), 1, "{told:?}");
+        assert_eq!(told[0]["reason"], Json::Null, "{told:?}");
+        assert_eq!(f.hub.state().keeps.kept.len(), 1);
     }
 
     #[tokio::test(start_paused = true)]

@@ -221,7 +221,7 @@ impl Hub {
         if !take {
             let user = &session.user;
             self.end_kept(
-                |k| &k.user == user && k.vehicle() == vehicle,
+                |k, _| &k.user == user && k.vehicle() == vehicle,
                 "control released",
             )
             .await;
