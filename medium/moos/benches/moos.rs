@@ -13,6 +13,11 @@
 //! Goals: round trip p50 at most 1.2× the raw clients'; messages per second at least 0.9× theirs,
 //! with every notification received (the smoke run fails on a loss).
 //!
+//! Both sides run in a task of a two-thread runtime, as a module's code does. From the thread
+//! that blocks on the runtime instead, every message handed to the medium's connection task wakes a
+//! worker thread, which costs tens of microseconds on a virtual machine: the round trip was 3.2×
+//! the raw clients' that way (the raw clients write their socket themselves).
+//!
 //! Run: `cargo bench -p seabus-medium-moos --bench moos` (`SEABUS_BENCH_SMOKE=1`: the smoke run,
 //! the same sizes: the whole program takes about a second)
 
@@ -226,8 +231,11 @@ fn main() {
         .build()
         .unwrap();
     let mut goals = Goals::new();
-    let mut lost = Vec::new();
-    rt.block_on(async {
+    let mut lost: Vec<String> = Vec::new();
+    // the clients run in a task of the runtime, as a module's code does (not on the thread that
+    // blocks on the runtime, from where every hand-over to a task wakes a worker thread)
+    let (goals, lost) = rt.block_on(async {
+        tokio::spawn(async move {
         let db = MoosDb::start("127.0.0.1:0".parse().unwrap()).await.unwrap();
         let port = db.addr().port();
         let mut floor_pair = RawPair::open(db.addr(), "floor", "FLOOR").await;
@@ -263,12 +271,7 @@ fn main() {
         println!("MOOS round trip publish -> DB -> subscriber, {n} in turn:");
         println!("  floor (raw clients)  p50 {f50:.1} us, p99 {f99:.1} us");
         println!("  seabus client        p50 {s50:.1} us, p99 {s99:.1} us");
-        goals.aim_at_most(
-            "round trip p50, seabus / raw clients",
-            s50 / f50,
-            1.2,
-            "2-5x the raw clients on this machine, not yet profiled",
-        );
+        goals.at_most("round trip p50, seabus / raw clients", s50 / f50, 1.2);
 
         // floods, raw and seabus in turn
         let total = 100_000u32;
@@ -301,15 +304,14 @@ fn main() {
         for l in &lost {
             println!("  {l}");
         }
-        goals.aim_at_least(
-            "messages per second, seabus / raw clients",
-            s / r,
-            0.9,
-            "the raw clients batch notifications in packets of up to 1 MiB; not yet profiled",
-        );
+        goals.at_least("messages per second, seabus / raw clients", s / r, 0.9);
         a.close();
         b.close();
         drop(db);
+        (goals, lost)
+        })
+        .await
+        .expect("the benchmark's task")
     });
     let failed = seabus_bench::smoke() && !lost.is_empty();
     if failed {

@@ -13,7 +13,7 @@
 //! notifications the medium itself published (the DB sends back what a client registered for) are
 //! not delivered again.
 
-use super::wire::{self, MoosMsg, Packet, Read, data, kind};
+use super::wire::{self, MoosMsg, MoosRef, Packet, Visited, data, kind};
 use super::{from_moos, to_moos};
 use bytes::Bytes;
 use seabus_medium::caps::{Capabilities, Carries, Framing};
@@ -164,16 +164,18 @@ impl Encode for MoosEncoder {
 
     fn encode(&self, msg: &Message, link: &LinkSender<Bytes>) -> Result<Bytes, SendError> {
         let (data_type, value, string) = to_moos(&msg.payload).map_err(|e| link.error(e))?;
-        let m = MoosMsg {
+        let m = MoosRef {
             id: 0,
             kind: kind::NOTIFY,
             data_type,
-            source: self.client.as_bytes().to_vec(),
-            key: msg.topic.as_str().as_bytes().to_vec(),
+            source: self.client.as_bytes(),
+            source_aux: b"",
+            community: b"",
+            key: msg.topic.as_str().as_bytes(),
             time: local_now() + self.skew.get(),
             value,
-            string,
-            ..MoosMsg::default()
+            value2: 0.0,
+            string: &string,
         };
         if m.encoded_len() + wire::PACKET_HEADER > wire::MAX_PACKET {
             return Err(SendError::TooLarge {
@@ -318,6 +320,14 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
     Ok((sock, buf))
 }
 
+/// Bytes a session keeps for reading and for writing between packets; a larger buffer, left by a
+/// large packet, is given back.
+const KEPT_BUFFER: usize = 1 << 20;
+/// What a session reads at a time, at least.
+const READ_CHUNK: usize = 64 << 10;
+/// A packet written takes what waits up to this size.
+const BATCH: usize = 1 << 20;
+
 /// Carries messages both ways until the connection fails; returns why.
 async fn session(
     mut sock: TcpStream,
@@ -330,58 +340,59 @@ async fn session(
     let (mut reader, mut writer) = sock.split();
     let mut timing = tokio::time::interval(TIMING_EVERY);
     let mut topics: HashMap<Vec<u8>, Option<Topic>> = HashMap::new();
-    let mut chunk = vec![0u8; 65_536];
+    let mut packet = Vec::new();
+    // a frame taken from the queue that did not fit the last packet
+    let mut carried: Option<Bytes> = None;
     // a timing request is waiting for its answer
     let mut asked = false;
     loop {
+        // the packets read, each message looked at where it lies in the buffer
+        let mut used = 0;
         loop {
-            match wire::read_packet(&buf) {
-                Ok(Read::Packet(p, n)) => {
-                    buf.drain(..n);
-                    for m in p.messages {
-                        match m.kind {
-                            kind::NOTIFY => deliver(&m, cfg, &mut topics, ingress),
-                            // the DB sends back the timing message with its own
-                            // time as the value; the time is still the request's
-                            kind::TIMING if std::mem::take(&mut asked) => {
-                                skew.set(refined_skew(skew.get(), m.time, m.value, local_now()));
-                            }
-                            _ => {}
-                        }
-                    }
-                }
-                Ok(Read::Incomplete(_)) => break,
+            let mut timed = None;
+            let read = wire::visit_packet(&buf[used..], |m| match m.kind {
+                kind::NOTIFY => deliver(&m, cfg, &mut topics, ingress),
+                // the DB sends back the timing message with its own time as the value; the
+                // time is still the request's
+                kind::TIMING if std::mem::take(&mut asked) => timed = Some((m.time, m.value)),
+                _ => {}
+            });
+            if let Some((rq, tx)) = timed {
+                skew.set(refined_skew(skew.get(), rq, tx, local_now()));
+            }
+            match read {
+                Ok(Visited::Packet(n)) => used += n,
+                Ok(Visited::Incomplete(_)) => break,
                 Err(e) => {
                     ingress.reject(e.kind(), format_args!("from the MOOSDB: {e}"));
                     return format!("malformed packet: {e}");
                 }
             }
         }
+        buf.drain(..used);
+        if buf.capacity() > KEPT_BUFFER && buf.len() < READ_CHUNK {
+            buf.shrink_to(READ_CHUNK);
+        }
+        buf.reserve(READ_CHUNK);
+        if let Some(first) = carried.take() {
+            carried = match write_batch(&mut writer, queue, first, &mut packet).await {
+                Ok(c) => c,
+                Err(e) => return e,
+            };
+            continue;
+        }
         tokio::select! {
-            read = reader.read(&mut chunk) => match read {
+            read = reader.read_buf(&mut buf) => match read {
                 Ok(0) => return "the connection closed".into(),
-                Ok(n) => buf.extend_from_slice(&chunk[..n]),
+                Ok(_) => {}
                 Err(e) => return e.to_string(),
             },
             first = queue.recv() => {
                 let Some(first) = first else { return "closed".into() };
-                // what waits goes in one packet
-                let mut body = first.to_vec();
-                let mut count = 1i32;
-                while body.len() < 1 << 20 && let Some(m) = queue.try_recv() {
-                    body.extend_from_slice(&m);
-                    count += 1;
-                }
-                let mut packet = Vec::with_capacity(body.len() + wire::PACKET_HEADER);
-                packet.extend_from_slice(&((body.len() + wire::PACKET_HEADER) as i32).to_le_bytes());
-                packet.extend_from_slice(&count.to_le_bytes());
-                packet.push(0);
-                packet.extend_from_slice(&body);
-                let sent = writer.write_all(&packet).await;
-                queue.written(u64::try_from(count).unwrap_or(0));
-                if let Err(e) = sent {
-                    return e.to_string();
-                }
+                carried = match write_batch(&mut writer, queue, first, &mut packet).await {
+                    Ok(c) => c,
+                    Err(e) => return e,
+                };
             }
             _ = timing.tick() => {
                 let now = local_now();
@@ -399,6 +410,39 @@ async fn session(
             }
         }
     }
+}
+
+/// Writes `first` and what waits behind it in one packet (up to [`BATCH`] bytes, never past
+/// [`wire::MAX_PACKET`]), built in `packet`; returns a frame taken that did not fit, to go first
+/// in the next packet, or why the connection failed.
+async fn write_batch(
+    writer: &mut (impl tokio::io::AsyncWrite + Unpin),
+    queue: &mut LinkQueue<Bytes>,
+    first: Bytes,
+    packet: &mut Vec<u8>,
+) -> Result<Option<Bytes>, String> {
+    packet.clear();
+    packet.resize(wire::PACKET_HEADER, 0);
+    packet.extend_from_slice(&first);
+    let mut count = 1;
+    let mut carried = None;
+    while packet.len() < BATCH
+        && let Some(m) = queue.try_recv()
+    {
+        if packet.len() + m.len() > wire::MAX_PACKET {
+            carried = Some(m);
+            break;
+        }
+        packet.extend_from_slice(&m);
+        count += 1;
+    }
+    wire::seal_packet(packet, count);
+    let sent = writer.write_all(packet).await;
+    queue.written(count as u64);
+    if packet.capacity() > KEPT_BUFFER {
+        *packet = Vec::new();
+    }
+    sent.map(|()| carried).map_err(|e| e.to_string())
 }
 
 /// What one round trip to the DB says about the skew (MOOS time − local time): `rq` when the
@@ -435,7 +479,7 @@ pub fn refined_skew(old: f64, rq: f64, tx: f64, rx: f64) -> f64 {
 
 /// Delivers a notification as a message on the variable's topic.
 fn deliver(
-    m: &MoosMsg,
+    m: &MoosRef<'_>,
     cfg: &MoosConfig,
     topics: &mut HashMap<Vec<u8>, Option<Topic>>,
     ingress: &Ingress,
@@ -444,17 +488,19 @@ fn deliver(
     if m.source == cfg.name.as_bytes() {
         return;
     }
-    if topics.len() > 65_536 {
-        topics.clear();
-    }
-    let topic = topics
-        .entry(m.key.clone())
-        .or_insert_with(|| {
-            std::str::from_utf8(&m.key)
+    let topic = match topics.get(m.key) {
+        Some(t) => t.clone(),
+        None => {
+            if topics.len() > 65_536 {
+                topics.clear();
+            }
+            let t = std::str::from_utf8(m.key)
                 .ok()
-                .and_then(|k| Topic::new(k).ok())
-        })
-        .clone();
+                .and_then(|k| Topic::new(k).ok());
+            topics.insert(m.key.to_vec(), t.clone());
+            t
+        }
+    };
     let Some(topic) = topic else {
         ingress.reject(
             "moos-bad-key",
@@ -476,6 +522,70 @@ fn deliver(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Packets read back from `bytes`: each one's messages' values.
+    fn packets(bytes: &[u8]) -> Vec<Vec<f64>> {
+        let mut out = Vec::new();
+        let mut at = 0;
+        while at < bytes.len() {
+            let mut values = Vec::new();
+            match wire::visit_packet(&bytes[at..], |m| values.push(m.value)).unwrap() {
+                Visited::Packet(n) => at += n,
+                Visited::Incomplete(n) => panic!("a packet cut short: {n} bytes needed"),
+            }
+            out.push(values);
+        }
+        out
+    }
+
+    fn frame(value: f64, string: Vec<u8>) -> Bytes {
+        let mut out = Vec::new();
+        MoosMsg {
+            kind: kind::NOTIFY,
+            data_type: data::BINARY,
+            key: b"X".to_vec(),
+            value,
+            string,
+            ..MoosMsg::default()
+        }
+        .encode_into(&mut out);
+        Bytes::from(out)
+    }
+
+    #[tokio::test]
+    async fn what_waits_goes_in_one_packet_that_never_passes_the_largest() {
+        let medium: Arc<str> = Arc::from("moos");
+        let (link, mut queue) = link_queue(&medium, "the MOOSDB", 16);
+        queue.set_up(true);
+        for (i, size) in [10usize, 20, wire::MAX_PACKET - 200, 30].iter().enumerate() {
+            link.send(frame(i as f64 + 1.0, vec![7; *size]))
+                .await
+                .unwrap();
+        }
+        let mut wrote = Vec::new();
+        let mut packet = Vec::new();
+        let first = frame(0.0, Vec::new());
+        let carried = write_batch(&mut wrote, &mut queue, first, &mut packet)
+            .await
+            .unwrap()
+            .expect("the large frame waits for the next packet");
+        // the large frame goes first in the next packet, which is full with it
+        let none = write_batch(&mut wrote, &mut queue, carried, &mut packet)
+            .await
+            .unwrap();
+        assert!(none.is_none());
+        let last = queue.try_recv().expect("the last frame still waits");
+        write_batch(&mut wrote, &mut queue, last, &mut packet)
+            .await
+            .unwrap();
+        assert_eq!(
+            packets(&wrote),
+            vec![vec![0.0, 1.0, 2.0], vec![3.0], vec![4.0]]
+        );
+        // the packet's buffer is not kept at that size
+        assert!(packet.capacity() <= KEPT_BUFFER, "{}", packet.capacity());
+        assert!(wrote.len() > wire::MAX_PACKET - 200);
+    }
 
     #[test]
     fn the_handshake_takes_the_skew_nearest_zero_that_the_round_trip_allows() {

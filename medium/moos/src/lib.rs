@@ -28,7 +28,7 @@ pub mod wire;
 
 use seabus_medium::datamap::{DataMap, Value};
 use seabus_medium::payload::Payload;
-use wire::{MoosMsg, data};
+use wire::{MoosRef, data};
 
 pub use client::MoosConfig;
 
@@ -181,12 +181,12 @@ pub fn to_moos(p: &Payload) -> Result<(u8, f64, Vec<u8>), String> {
 }
 
 /// The payload of a MOOS notification.
-pub fn from_moos(m: &MoosMsg) -> Result<Payload, String> {
+pub fn from_moos(m: &MoosRef<'_>) -> Result<Payload, String> {
     match m.data_type {
         data::DOUBLE => Ok(Payload::from(DataMap::new().with("value", m.value))),
-        data::BINARY => Ok(Payload::from(m.string.clone())),
+        data::BINARY => Ok(Payload::from(m.string.to_vec())),
         data::STRING => {
-            let text = std::str::from_utf8(&m.string)
+            let text = std::str::from_utf8(m.string)
                 .map_err(|e| format!("a string value that is not UTF-8 ({e})"))?;
             Ok(Payload::from(
                 parse_pairs(text).unwrap_or_else(|| DataMap::new().with("value", text)),
@@ -199,6 +199,7 @@ pub fn from_moos(m: &MoosMsg) -> Result<Payload, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use wire::MoosMsg;
 
     #[test]
     fn pairs_survive_commas_equals_and_quotes() {
@@ -242,11 +243,14 @@ mod tests {
         let pairs = Payload::from(DataMap::new().with("value", "x=1"));
         let s = to_moos(&pairs).unwrap();
         assert_eq!((s.0, &s.2[..]), (data::STRING, &br#"value="x=1""#[..]));
-        let back = from_moos(&MoosMsg {
-            data_type: s.0,
-            string: s.2,
-            ..MoosMsg::default()
-        });
+        let back = from_moos(
+            &MoosMsg {
+                data_type: s.0,
+                string: s.2,
+                ..MoosMsg::default()
+            }
+            .borrowed(),
+        );
         assert_eq!(back.unwrap(), pairs);
         let p = to_moos(&Payload::from(
             DataMap::new().with("x", 1i64).with("y", 2i64),
@@ -263,12 +267,15 @@ mod tests {
             "field `l` is a list; MOOS key=value pairs carry numbers, booleans and text"
         );
         let back = |dt: u8, v: f64, s: &[u8]| {
-            from_moos(&MoosMsg {
-                data_type: dt,
-                value: v,
-                string: s.to_vec(),
-                ..MoosMsg::default()
-            })
+            from_moos(
+                &MoosMsg {
+                    data_type: dt,
+                    value: v,
+                    string: s.to_vec(),
+                    ..MoosMsg::default()
+                }
+                .borrowed(),
+            )
         };
         assert_eq!(
             back(data::DOUBLE, 3.5, b"").unwrap(),

@@ -110,6 +110,74 @@ fn bad(offset: usize, reason: &'static str, what: impl Into<String>) -> WireErro
 impl MoosMsg {
     /// The message's length on the wire.
     pub fn encoded_len(&self) -> usize {
+        self.borrowed().encoded_len()
+    }
+
+    /// Appends the message.
+    pub fn encode_into(&self, out: &mut Vec<u8>) {
+        self.borrowed().encode_into(out);
+    }
+
+    /// The message as a [`MoosRef`] borrowing this one's strings.
+    pub fn borrowed(&self) -> MoosRef<'_> {
+        MoosRef {
+            id: self.id,
+            kind: self.kind,
+            data_type: self.data_type,
+            source: &self.source,
+            source_aux: &self.source_aux,
+            community: &self.community,
+            key: &self.key,
+            time: self.time,
+            value: self.value,
+            value2: self.value2,
+            string: &self.string,
+        }
+    }
+
+    /// Reads one message from the start of `d` (`at` is its offset in the packet, for errors);
+    /// returns it and its length.
+    pub fn decode(d: &[u8], at: usize) -> Result<(MoosMsg, usize), WireError> {
+        MoosRef::decode(d, at).map(|(m, n)| (m.to_owned(), n))
+    }
+
+    /// The key as text (lossy).
+    pub fn key_str(&self) -> String {
+        self.borrowed().key_str().into_owned()
+    }
+}
+
+/// One MOOS message whose strings are borrowed from the bytes it was read from (or from a
+/// [`MoosMsg`]): what a reader that only looks at a message takes, without copying it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MoosRef<'a> {
+    /// Message id.
+    pub id: i32,
+    /// Message type ([`kind`]).
+    pub kind: u8,
+    /// Data type ([`data`]).
+    pub data_type: u8,
+    /// The publishing client.
+    pub source: &'a [u8],
+    /// More about the source.
+    pub source_aux: &'a [u8],
+    /// The originating community.
+    pub community: &'a [u8],
+    /// The variable.
+    pub key: &'a [u8],
+    /// When (UNIX seconds).
+    pub time: f64,
+    /// The double value.
+    pub value: f64,
+    /// A second double.
+    pub value2: f64,
+    /// The string (or binary) value.
+    pub string: &'a [u8],
+}
+
+impl<'a> MoosRef<'a> {
+    /// The message's length on the wire.
+    pub fn encoded_len(&self) -> usize {
         MIN_MESSAGE
             + self.source.len()
             + self.source_aux.len()
@@ -124,23 +192,46 @@ impl MoosMsg {
             out.extend_from_slice(&(v.len() as i32).to_le_bytes());
             out.extend_from_slice(v);
         };
+        out.reserve(self.encoded_len());
         out.extend_from_slice(&(self.encoded_len() as i32).to_le_bytes());
         out.extend_from_slice(&self.id.to_le_bytes());
         out.push(self.kind);
         out.push(self.data_type);
-        s(out, &self.source);
-        s(out, &self.source_aux);
-        s(out, &self.community);
-        s(out, &self.key);
+        s(out, self.source);
+        s(out, self.source_aux);
+        s(out, self.community);
+        s(out, self.key);
         out.extend_from_slice(&self.time.to_le_bytes());
         out.extend_from_slice(&self.value.to_le_bytes());
         out.extend_from_slice(&self.value2.to_le_bytes());
-        s(out, &self.string);
+        s(out, self.string);
+    }
+
+    /// A [`MoosMsg`] owning copies of the strings.
+    pub fn to_owned(&self) -> MoosMsg {
+        MoosMsg {
+            id: self.id,
+            kind: self.kind,
+            data_type: self.data_type,
+            source: self.source.to_vec(),
+            source_aux: self.source_aux.to_vec(),
+            community: self.community.to_vec(),
+            key: self.key.to_vec(),
+            time: self.time,
+            value: self.value,
+            value2: self.value2,
+            string: self.string.to_vec(),
+        }
+    }
+
+    /// The key as text (lossy).
+    pub fn key_str(&self) -> std::borrow::Cow<'a, str> {
+        String::from_utf8_lossy(self.key)
     }
 
     /// Reads one message from the start of `d` (`at` is its offset in the packet, for errors);
     /// returns it and its length.
-    pub fn decode(d: &[u8], at: usize) -> Result<(MoosMsg, usize), WireError> {
+    pub fn decode(d: &'a [u8], at: usize) -> Result<(MoosRef<'a>, usize), WireError> {
         let short = |pos: usize| bad(at + pos, "moos-short", "the packet ends inside a message");
         let int = |pos: usize| -> Result<i32, WireError> {
             d.get(pos..pos + 4)
@@ -176,7 +267,7 @@ impl MoosMsg {
         pos += 4;
         let (kind, data_type) = (d[pos], d[pos + 1]);
         pos += 2;
-        let string = |pos: &mut usize| -> Result<Vec<u8>, WireError> {
+        let string = |pos: &mut usize| -> Result<&'a [u8], WireError> {
             let n = int(*pos)?;
             let n = usize::try_from(n).map_err(|_| {
                 bad(
@@ -186,16 +277,13 @@ impl MoosMsg {
                 )
             })?;
             let start = *pos + 4;
-            let v = d
-                .get(start..start.saturating_add(n))
-                .ok_or_else(|| {
-                    bad(
-                        at + *pos,
-                        "moos-bad-length",
-                        format!("a string of {n} bytes past the message's end"),
-                    )
-                })?
-                .to_vec();
+            let v = d.get(start..start.saturating_add(n)).ok_or_else(|| {
+                bad(
+                    at + *pos,
+                    "moos-bad-length",
+                    format!("a string of {n} bytes past the message's end"),
+                )
+            })?;
             *pos = start + n;
             Ok(v)
         };
@@ -219,7 +307,7 @@ impl MoosMsg {
             ));
         }
         Ok((
-            MoosMsg {
+            MoosRef {
                 id,
                 kind,
                 data_type,
@@ -234,11 +322,6 @@ impl MoosMsg {
             },
             len,
         ))
-    }
-
-    /// The key as text (lossy).
-    pub fn key_str(&self) -> String {
-        String::from_utf8_lossy(&self.key).into_owned()
     }
 }
 
@@ -259,12 +342,11 @@ impl Packet {
                 .map(MoosMsg::encoded_len)
                 .sum::<usize>();
         let mut out = Vec::with_capacity(len);
-        out.extend_from_slice(&(len as i32).to_le_bytes());
-        out.extend_from_slice(&(self.messages.len() as i32).to_le_bytes());
-        out.push(0);
+        out.resize(PACKET_HEADER, 0);
         for m in &self.messages {
             m.encode_into(&mut out);
         }
+        seal_packet(&mut out, self.messages.len());
         out
     }
 }
@@ -281,8 +363,31 @@ pub enum Read {
 /// Reads a packet from the start of `d`: complete, incomplete, or malformed (the stream cannot be
 /// trusted after that).
 pub fn read_packet(d: &[u8]) -> Result<Read, WireError> {
+    let mut messages = Vec::new();
+    Ok(match visit_packet(d, |m| messages.push(m.to_owned()))? {
+        Visited::Packet(n) => Read::Packet(Packet { messages }, n),
+        Visited::Incomplete(n) => Read::Incomplete(n),
+    })
+}
+
+/// What [`visit_packet`] found at the start of a byte stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Visited {
+    /// A whole packet, its messages visited, and the bytes it took.
+    Packet(usize),
+    /// Not all of it yet: at least this many bytes in all are needed (nothing visited).
+    Incomplete(usize),
+}
+
+/// Reads a packet from the start of `d` as [`read_packet`] does, handing each message to `each`
+/// borrowed from `d`, in order, as it is read; a message after which the packet proves malformed
+/// has been handed on (the error follows).
+pub fn visit_packet<'a>(
+    d: &'a [u8],
+    mut each: impl FnMut(MoosRef<'a>),
+) -> Result<Visited, WireError> {
     if d.len() < PACKET_HEADER {
-        return Ok(Read::Incomplete(PACKET_HEADER));
+        return Ok(Visited::Incomplete(PACKET_HEADER));
     }
     let len = i32::from_le_bytes([d[0], d[1], d[2], d[3]]);
     let count = i32::from_le_bytes([d[4], d[5], d[6], d[7]]);
@@ -307,14 +412,13 @@ pub fn read_packet(d: &[u8]) -> Result<Read, WireError> {
             )
         })?;
     if d.len() < len {
-        return Ok(Read::Incomplete(len));
+        return Ok(Visited::Incomplete(len));
     }
     let body = &d[..len];
     let mut at = PACKET_HEADER;
-    let mut messages = Vec::with_capacity(count);
     for _ in 0..count {
-        let (m, n) = MoosMsg::decode(&body[at..], at)?;
-        messages.push(m);
+        let (m, n) = MoosRef::decode(&body[at..], at)?;
+        each(m);
         at += n;
     }
     if at != len {
@@ -327,7 +431,16 @@ pub fn read_packet(d: &[u8]) -> Result<Read, WireError> {
             ),
         ));
     }
-    Ok(Read::Packet(Packet { messages }, len))
+    Ok(Visited::Packet(len))
+}
+
+/// A packet of `count` messages whose encodings follow a [`PACKET_HEADER`] of room at the start
+/// of `packet`: writes its header there.
+pub fn seal_packet(packet: &mut [u8], count: usize) {
+    let len = packet.len() as i32;
+    packet[..4].copy_from_slice(&len.to_le_bytes());
+    packet[4..8].copy_from_slice(&(count as i32).to_le_bytes());
+    packet[8] = 0;
 }
 
 /// The 32 handshake bytes.
@@ -464,6 +577,42 @@ mod tests {
             read_packet(&lie).unwrap_err().to_string(),
             "byte 35: a string of 9000 bytes past the message's end"
         );
+    }
+
+    #[test]
+    fn a_packet_visited_hands_out_its_messages_borrowed_in_order() {
+        let p = Packet {
+            messages: vec![
+                notify(),
+                MoosMsg {
+                    kind: kind::NOTIFY,
+                    data_type: data::BINARY,
+                    key: b"IMAGE".to_vec(),
+                    string: vec![0, 255, 7],
+                    ..MoosMsg::default()
+                },
+            ],
+        };
+        let mut bytes = p.encode();
+        let whole = bytes.len();
+        // a second packet behind it is not touched
+        bytes.extend_from_slice(&Packet::default().encode());
+        let mut seen = Vec::new();
+        let read = visit_packet(&bytes, |m| seen.push(m)).unwrap();
+        assert_eq!(read, Visited::Packet(whole));
+        assert_eq!(seen.len(), 2);
+        assert_eq!(seen[0], p.messages[0].borrowed());
+        assert_eq!(seen[1].string, &[0, 255, 7]);
+        assert_eq!(seen[1].to_owned(), p.messages[1]);
+        // nothing of a packet not all there is handed out
+        let mut none = 0;
+        let read = visit_packet(&bytes[..whole - 1], |_| none += 1).unwrap();
+        assert_eq!((read, none), (Visited::Incomplete(whole), 0));
+        // a packet sealed over room left at its start is the one encoded
+        let mut sealed = vec![0xAA; PACKET_HEADER];
+        p.messages.iter().for_each(|m| m.encode_into(&mut sealed));
+        seal_packet(&mut sealed, 2);
+        assert_eq!(sealed, p.encode());
     }
 
     #[test]
