@@ -254,8 +254,23 @@ pub fn set_recv_buffer(s: &Socket, bytes: usize) -> usize {
     s.recv_buffer_size().unwrap_or(0) / 2
 }
 
+/// The send buffer a medium's socket asks for. With the kernel's default (about 200 kB: a few
+/// hundred small datagrams) a sender faster than the device fills it within a millisecond and
+/// stops until half is free, and the device can run dry while the sender's task is woken; with
+/// this much, the datagrams of a burst wait in the kernel instead.
+pub const SEND_BUFFER: usize = 1 << 20;
+
+/// Asks for a send buffer of [`SEND_BUFFER`] on `s` (the kernel grants up to
+/// `net.core.wmem_max`, keeping its default when that is smaller); returns the size granted.
+pub fn set_send_buffer(s: &impl std::os::fd::AsFd) -> usize {
+    let s = socket2::SockRef::from(s);
+    let _ = s.set_send_buffer_size(SEND_BUFFER);
+    // Linux reports double what was asked for (its bookkeeping overhead)
+    s.send_buffer_size().unwrap_or(0) / 2
+}
+
 /// A socket set up for an endpoint (a shared port for multicast and broadcast, the group joined, the
-/// receive buffer sized), non-blocking, and the receive buffer the kernel granted.
+/// receive and send buffers sized), non-blocking, and the receive buffer the kernel granted.
 pub fn socket(cfg: &UdpEndpoint) -> std::io::Result<(std::net::UdpSocket, usize)> {
     let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP))?;
     let shared = !matches!(cfg.mode, Mode::Unicast(_));
@@ -264,6 +279,7 @@ pub fn socket(cfg: &UdpEndpoint) -> std::io::Result<(std::net::UdpSocket, usize)
         s.set_reuse_address(true)?;
     }
     let got = set_recv_buffer(&s, cfg.recv_buf);
+    set_send_buffer(&s);
     match &cfg.mode {
         Mode::Multicast { iface, ttl, .. } => {
             s.set_multicast_ttl_v4(*ttl)?;
@@ -383,6 +399,13 @@ impl RecvBatch {
         }
         self.taken = n;
         Ok(n)
+    }
+
+    /// Whether a call that took `n` datagrams emptied the socket: a batch not filled did, so a
+    /// reader woken by edge-triggered readiness may wait for the next datagram instead of trying a
+    /// read that would block (a datagram that comes after the call is reported anew).
+    pub fn drained(&self, n: usize) -> bool {
+        n < self.count
     }
 
     /// Datagrams the last call took.
@@ -539,5 +562,17 @@ mod tests {
         assert_eq!(batch.receive(rx.as_raw_fd()).unwrap(), 2);
         assert_eq!((batch.get(0).1, batch.get(1).1), (&[4u8][..], &[5u8][..]));
         assert_eq!(RecvBatch::new(100, 8).capacity(), MAX_RECV_BATCH);
+    }
+
+    #[test]
+    fn a_send_buffer_is_asked_for_up_to_what_the_system_allows() {
+        let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+        let granted = set_send_buffer(&s);
+        let most = std::fs::read_to_string("/proc/sys/net/core/wmem_max")
+            .ok()
+            .and_then(|t| t.trim().parse::<usize>().ok())
+            .unwrap_or(0);
+        // Linux takes what is asked up to net.core.wmem_max
+        assert_eq!(granted, SEND_BUFFER.min(most), "wmem_max {most}");
     }
 }

@@ -303,6 +303,8 @@ impl Outbox {
                 .last
                 .is_some_and(|l| now.saturating_duration_since(l) < self.shared.quiet);
             st.streak = if soon { st.streak.saturating_add(1) } else { 0 };
+            // a handover that makes no system call ends now
+            st.last = Some(now);
             let overdue = !st.sending
                 && st
                     .oldest
@@ -310,6 +312,7 @@ impl Outbox {
             let overdue = overdue.then(|| Shared::take(&mut st));
             (st.streak >= STREAM, overdue, free(&st))
         };
+        let mut called = overdue.is_some();
         let free_now = match overdue {
             // the sender's task may not have let the outbox's run since: they go now
             Some(batch) => {
@@ -334,16 +337,20 @@ impl Outbox {
                 }
             }
         }
+        called |= at > 0;
         for d in &ds[at..] {
-            self.enqueue(d.clone()).await;
+            called |= self.enqueue(d.clone()).await;
         }
         // the gap to the next handover is the sender's own time, not that of its sends
-        self.shared.lock().last = Some(Instant::now());
+        if called {
+            self.shared.lock().last = Some(Instant::now());
+        }
         Ok(())
     }
 
-    /// Puts `d` in the queue, waiting for room; a sender that fills a batch sends it.
-    async fn enqueue(&self, d: Outgoing) {
+    /// Puts `d` in the queue, waiting for room; a sender that fills a batch sends it. True when
+    /// it sent one.
+    async fn enqueue(&self, d: Outgoing) -> bool {
         let mut d = Some(d);
         loop {
             let room = self.shared.room.notified();
@@ -364,14 +371,14 @@ impl Outbox {
                         if st.queue.len() == 1 && !st.sending {
                             self.shared.wake.notify_one();
                         }
-                        return;
+                        return false;
                     }
                 }
             };
             match batch {
                 Some(batch) => {
                     self.shared.send_taken(batch).await;
-                    return;
+                    return true;
                 }
                 None => room.await,
             }

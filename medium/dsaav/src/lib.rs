@@ -645,7 +645,7 @@ impl Receiver {
             let read = batch.receive(socket.as_raw_fd());
             // a batch that is not full emptied the socket, as a read that would block says: the
             // next read waits for a new datagram instead of trying
-            if !matches!(read, Ok(n) if n == batch.capacity()) {
+            if !matches!(read, Ok(n) if !batch.drained(n)) {
                 ready.clear_ready();
             }
             if let Err(e) = read
@@ -939,7 +939,7 @@ pub mod eth {
                     Ok(n) => {
                         // a batch that is not full emptied the socket: the next call waits for
                         // a new frame instead of trying a read that would block
-                        if n < batch.capacity() {
+                        if batch.drained(n) {
                             ready.clear_ready();
                         }
                         return Ok(());

@@ -235,6 +235,8 @@ fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) 
             let group_port = group_port.to_string();
             std::thread::spawn(move || {
                 let sock = std::net::UdpSocket::bind("0.0.0.0:0").expect("bind");
+                // the send buffer seabus's medium asks for
+                seabus_medium::net::set_send_buffer(&sock);
                 sock.set_multicast_ttl_v4(0).expect("ttl");
                 sock.connect(group_port).expect("connect");
                 let datagrams: Vec<Vec<u8>> = (0..per)

@@ -246,14 +246,6 @@ pub struct LcmTransport {
     seq: AtomicU32,
 }
 
-/// An LCM message on its way out: the channel, a NUL and the message's bytes, and where the
-/// message's bytes start.
-#[derive(Clone)]
-pub struct LcmFrame {
-    data: Bytes,
-    payload_at: usize,
-}
-
 /// Opens an LCM medium.
 pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
     let cfg = LcmConfig::from_url(&mut o.url)?;
@@ -286,6 +278,7 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
     let setup = |tx: &Socket| -> std::io::Result<()> {
         tx.set_multicast_ttl_v4(cfg.ttl)?;
         tx.set_multicast_loop_v4(true)?;
+        seabus_medium::net::set_send_buffer(tx);
         if let Some(iface) = send_iface {
             tx.set_multicast_if_v4(&iface)?;
         }
@@ -349,14 +342,16 @@ impl LcmTransport {
 }
 
 impl Transport for LcmTransport {
-    type Frame = LcmFrame;
+    /// The channel, a NUL and the message's bytes (a topic has no NUL: the first one ends the
+    /// channel).
+    type Frame = Bytes;
 
     fn capabilities(&self) -> Capabilities {
         self.cfg.capabilities()
     }
 
     /// The frame is the channel, a NUL, and the message bytes; headers are added as it is sent.
-    fn encode(&self, msg: &Message) -> Result<LcmFrame, SendError> {
+    fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
         let channel = msg.topic.as_str();
         let payload = msg
             .payload
@@ -381,20 +376,20 @@ impl Transport for LcmTransport {
         frame.extend_from_slice(channel.as_bytes());
         frame.extend_from_slice(&[0]);
         frame.extend_from_slice(bytes);
-        Ok(LcmFrame {
-            data: frame.freeze(),
-            payload_at: channel.len() + 1,
-        })
+        Ok(frame.freeze())
     }
 
-    fn transmit(&self, frame: LcmFrame) -> BoxFuture<'_, Result<(), SendError>> {
+    fn transmit(&self, data: Bytes) -> BoxFuture<'_, Result<(), SendError>> {
         Box::pin(async move {
             let outbox = self
                 .outbox
                 .get()
                 .ok_or_else(|| SendError::Closed(self.name.to_string()))?;
             // the frame is `channel NUL payload`, as encode made it
-            let LcmFrame { data, payload_at } = frame;
+            let Some(nul) = data.iter().position(|b| *b == 0) else {
+                return Err(self.io_error(std::io::Error::other("a frame without its channel")));
+            };
+            let payload_at = nul + 1;
             let channel = std::str::from_utf8(&data[..payload_at - 1]).unwrap_or_default();
             let payload_len = data.len() - payload_at;
             if wire::is_short(channel, payload_len) {
