@@ -260,8 +260,8 @@ pub fn set_recv_buffer(s: &Socket, bytes: usize) -> usize {
 /// this much, the datagrams of a burst wait in the kernel instead.
 pub const SEND_BUFFER: usize = 1 << 20;
 
-/// Asks for a send buffer of [`SEND_BUFFER`] on `s` (the kernel grants up to
-/// `net.core.wmem_max`, keeping its default when that is smaller); returns the size granted.
+/// Asks for a send buffer of [`SEND_BUFFER`] on `s` (Linux grants up to `net.core.wmem_max`);
+/// returns the size granted.
 pub fn set_send_buffer(s: &impl std::os::fd::AsFd) -> usize {
     let s = socket2::SockRef::from(s);
     let _ = s.set_send_buffer_size(SEND_BUFFER);
@@ -568,10 +568,11 @@ mod tests {
     fn a_send_buffer_is_asked_for_up_to_what_the_system_allows() {
         let s = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
         let granted = set_send_buffer(&s);
-        let most = std::fs::read_to_string("/proc/sys/net/core/wmem_max")
-            .ok()
-            .and_then(|t| t.trim().parse::<usize>().ok())
-            .unwrap_or(0);
+        let most: usize = std::fs::read_to_string("/proc/sys/net/core/wmem_max")
+            .expect("net.core.wmem_max")
+            .trim()
+            .parse()
+            .expect("a number");
         // Linux takes what is asked up to net.core.wmem_max
         assert_eq!(granted, SEND_BUFFER.min(most), "wmem_max {most}");
     }

@@ -117,7 +117,8 @@ struct State {
     spare: VecDeque<Outgoing>,
     /// somebody (the outbox's task, or a sender with a full batch) is sending from the queue
     sending: bool,
-    /// when the last handover ended
+    /// when the last handover ended (when it began, for one that neither called the kernel nor
+    /// waited: the same to within the lock)
     last: Option<Instant>,
     /// handovers in a row less than [`QUIET`] apart
     streak: u32,
@@ -303,7 +304,7 @@ impl Outbox {
                 .last
                 .is_some_and(|l| now.saturating_duration_since(l) < self.shared.quiet);
             st.streak = if soon { st.streak.saturating_add(1) } else { 0 };
-            // a handover that makes no system call ends now
+            // a handover that neither calls the kernel nor waits ends now
             st.last = Some(now);
             let overdue = !st.sending
                 && st
@@ -337,21 +338,24 @@ impl Outbox {
                 }
             }
         }
-        called |= at > 0;
+        // a send tried, even one the socket had no room for, took the kernel's time
+        called |= quiet;
         for d in &ds[at..] {
-            called |= self.enqueue(d.clone()).await;
+            called |= self.enqueue(d.clone(), now).await;
         }
-        // the gap to the next handover is the sender's own time, not that of its sends
+        // the gap to the next handover is the sender's own time, not that of its sends or waits
         if called {
             self.shared.lock().last = Some(Instant::now());
         }
         Ok(())
     }
 
-    /// Puts `d` in the queue, waiting for room; a sender that fills a batch sends it. True when
-    /// it sent one.
-    async fn enqueue(&self, d: Outgoing) -> bool {
+    /// Puts `d` in the queue at `now`, waiting for room; a sender that fills a batch sends it.
+    /// True when it waited or sent one (`now` is then past).
+    async fn enqueue(&self, d: Outgoing, now: Instant) -> bool {
         let mut d = Some(d);
+        let mut at = now;
+        let mut waited = false;
         loop {
             let room = self.shared.room.notified();
             tokio::pin!(room);
@@ -363,7 +367,7 @@ impl Outbox {
                 } else {
                     st.queue.extend(d.take());
                     if st.oldest.is_none() {
-                        st.oldest = Some(Instant::now());
+                        st.oldest = Some(at);
                     }
                     if st.queue.len() >= BATCH && !st.sending {
                         Some(Shared::take(&mut st))
@@ -371,7 +375,7 @@ impl Outbox {
                         if st.queue.len() == 1 && !st.sending {
                             self.shared.wake.notify_one();
                         }
-                        return false;
+                        return waited;
                     }
                 }
             };
@@ -380,7 +384,11 @@ impl Outbox {
                     self.shared.send_taken(batch).await;
                     return true;
                 }
-                None => room.await,
+                None => {
+                    room.await;
+                    waited = true;
+                    at = Instant::now();
+                }
             }
         }
     }

