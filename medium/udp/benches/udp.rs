@@ -79,6 +79,13 @@ fn raw(size: usize, n: usize, rate: Option<f64>) -> Seen {
         seen
     });
     let _ = ready_rx.recv();
+    raw_send(dest, size, n, rate);
+    receiver.join().expect("receiver")
+}
+
+/// A raw sender: `n` datagrams of `size` bytes to `dest`, each stamped with the time it goes,
+/// paced at `rate` per second (unpaced when `None`).
+fn raw_send(dest: std::net::SocketAddr, size: usize, n: usize, rate: Option<f64>) {
     let tx = UdpSocket::bind("127.0.0.1:0").expect("bind");
     // the send buffer seabus's medium asks for
     seabus_medium::net::set_send_buffer(&tx);
@@ -91,7 +98,6 @@ fn raw(size: usize, n: usize, rate: Option<f64>) -> Seen {
         payload[..8].copy_from_slice(&now_nanos().to_le_bytes());
         let _ = tx.send_to(&payload, dest);
     }
-    receiver.join().expect("receiver")
 }
 
 /// The same through two seabus UDP media (unicast), each on its own thread.
@@ -193,14 +199,7 @@ fn async_read(size: usize, n: usize, rate: f64) -> Vec<Duration> {
         })
     });
     let _ = ready_rx.recv();
-    let tx = UdpSocket::bind("127.0.0.1:0").expect("bind");
-    let mut payload = vec![0u8; size];
-    let start = Instant::now();
-    for i in 0..n {
-        common::pace(start + Duration::from_secs_f64(i as f64 / rate));
-        payload[..8].copy_from_slice(&now_nanos().to_le_bytes());
-        let _ = tx.send_to(&payload, dest);
-    }
+    raw_send(dest, size, n, Some(rate));
     receiver.join().expect("receiver")
 }
 

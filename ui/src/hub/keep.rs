@@ -508,6 +508,23 @@ mod tests {
         assert!(helms(&waiting(&mut driver)).is_empty());
     }
 
+    /// Polls `f` until it waits (for the sending lock the test holds).
+    async fn waits<F: std::future::Future>(f: std::pin::Pin<&mut F>) {
+        let polled = tokio::time::timeout(Duration::from_millis(10), f).await;
+        assert!(polled.is_err(), "it waits for the sending lock");
+    }
+
+    /// The one `kept` event on `events` says a course is kept (not ended), and it is.
+    fn only_kept_anew(
+        f: &Fixture,
+        events: &mut tokio::sync::broadcast::Receiver<std::sync::Arc<str>>,
+    ) {
+        let told = kept_events(events);
+        assert_eq!(told.len(), 1, "{told:?}");
+        assert_eq!(told[0]["reason"], Json::Null, "{told:?}");
+        assert_eq!(f.hub.state().keeps.kept.len(), 1);
+    }
+
     #[tokio::test(start_paused = true)]
     async fn a_command_kept_while_the_keeper_waits_to_send_is_judged_by_the_lease_then() {
         let f = Fixture::new();
@@ -518,20 +535,16 @@ mod tests {
         // waits behind it: the course is kept while the keeper waits for the lock again, to end
         // what is no longer in control
         let sending = f.hub.sending.lock().await;
-        let pending = Duration::from_millis(10);
         let mut keeping = std::pin::pin!(f.hub.keep(Instant::now()));
-        assert!(tokio::time::timeout(pending, &mut keeping).await.is_err());
+        waits(keeping.as_mut()).await;
         let fields = course();
         let mut course = std::pin::pin!(f.hub.send(&mut ana, "pilot", "helm", &fields, None));
-        assert!(tokio::time::timeout(pending, &mut course).await.is_err());
+        waits(course.as_mut()).await;
         drop(sending);
         let ((), sent) = tokio::join!(keeping, course);
         sent.unwrap();
         // ana holds control: the new course stays kept
-        let told = kept_events(&mut events);
-        assert_eq!(told.len(), 1, "{told:?}");
-        assert_eq!(told[0]["reason"], Json::Null, "{told:?}");
-        assert_eq!(f.hub.state().keeps.kept.len(), 1);
+        only_kept_anew(&f, &mut events);
     }
 
     #[tokio::test(start_paused = true)]
@@ -546,24 +559,20 @@ mod tests {
             .unwrap();
         let mut events = f.hub.events();
         let sending = f.hub.sending.lock().await;
-        let pending = Duration::from_millis(10);
         let session = ana.session.clone();
         let mut release = std::pin::pin!(f.hub.lease(&session, "", false));
-        assert!(tokio::time::timeout(pending, &mut release).await.is_err());
+        waits(release.as_mut()).await;
         // control taken again and a kept course sent, which waits behind that neutral and ahead
         // of the release's end of what it kept
         f.hub.lease(&ana.session, "", true).await.unwrap();
         let fields = course();
         let mut helm = std::pin::pin!(f.hub.send(&mut ana, "pilot", "helm", &fields, None));
-        assert!(tokio::time::timeout(pending, &mut helm).await.is_err());
+        waits(helm.as_mut()).await;
         drop(sending);
         let (released, sent) = tokio::join!(release, helm);
         released.unwrap();
         sent.unwrap();
-        let told = kept_events(&mut events);
-        assert_eq!(told.len(), 1, "{told:?}");
-        assert_eq!(told[0]["reason"], Json::Null, "{told:?}");
-        assert_eq!(f.hub.state().keeps.kept.len(), 1);
+        only_kept_anew(&f, &mut events);
     }
 
     #[tokio::test(start_paused = true)]
