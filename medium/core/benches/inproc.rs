@@ -121,9 +121,10 @@ fn main() {
             &format!("in-process 1 -> {subs} / broadcast"),
             ours / bare,
             0.8,
-            "a publication costs about 100 ns before any delivery (its stamp and number, the \
-             subscriptions looked up) and each delivery takes the receiver queue's lock, where \
-             broadcast writes a slot of its ring",
+            "the publisher alone needs about 130 ns a message (its stamp, number and counters, \
+             the subscriptions looked up, the receiver queue's lock) and a receiver 37 ns; the \
+             rest is the cache lines the two cores pass back and forth for each message (see \
+             BENCHMARKS.md)",
         );
     }
     goals.finish();
