@@ -563,9 +563,12 @@ impl Hearing {
         self.subscriptions.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Declares a subscriber on `key` that hands what it hears to the medium: it asks the
-    /// publishers already there for their latest sample (a late joiner gets the current state at
-    /// once), and counts on the medium, by topic, the samples a publisher's numbering says it
+    /// Declares a subscriber on `key` that hands what it hears to the medium: it asks each
+    /// publisher it did not hear from the start (there before it, or first heard later, as when a
+    /// vehicle's link was lost while a publisher of its was made) for what that publisher keeps: a
+    /// data publisher's latest sample (a late joiner gets the current state at once), a
+    /// command-status publisher's last [`STATUS_HISTORY`] (a command's `pending` as well as its
+    /// outcome). It counts on the medium, by topic, the samples a publisher's numbering says it
     /// missed (asking for them again while the publisher still has them).
     async fn declare(&self, session: &Session, key: String) {
         let me = self.clone();
@@ -574,7 +577,7 @@ impl Hearing {
             .history(
                 HistoryConfig::default()
                     .detect_late_publishers()
-                    .max_samples(1),
+                    .max_samples(STATUS_HISTORY),
             )
             .recovery(RecoveryConfig::default().heartbeat())
             .subscriber_detection()

@@ -465,6 +465,67 @@ async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
     shore.close();
 }
 
+/// A command's statuses sent before the shore first heard their publisher (a vehicle whose link to
+/// the router was lost as it took the command, or a console started later): the shore gets each
+/// status the publisher keeps, in order, not only the latest: a command's `pending` as well as its
+/// outcome.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn command_statuses_sent_before_the_shore_heard_their_publisher_arrive_in_order() {
+    let port = free_port();
+    let vehicle = open(
+        "fleet",
+        "auv1",
+        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false"),
+    );
+    let oms = vehicle.attach("oms");
+    for state in ["pending", "acknowledged"] {
+        let status = DataMap::new()
+            .and("command", "pub-1/pub#7")
+            .and("state", state);
+        oms.send("cmd.status", Payload::from(status)).await.unwrap();
+    }
+    // and a position, of which only the latest is kept
+    for lat in [43.0, 43.5] {
+        let position = DataMap::new().and("lat", lat).and("lon", 16.4);
+        oms.send("nav.position", Payload::from(position))
+            .await
+            .unwrap();
+    }
+    let shore = open(
+        "fleet",
+        "shore",
+        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    );
+    let mut heard = shore.attach("console").subscribed("auv1.**").unwrap();
+    let mut states = Vec::new();
+    let mut positions = Vec::new();
+    // (each round takes a message or 1 s)
+    for _ in 0..10 {
+        match timeout(Duration::from_secs(1), heard.recv()).await {
+            Ok(Some(m)) => {
+                let map = m.payload.to_map().unwrap();
+                match m.topic.as_str() {
+                    "auv1.cmd.status" => states.push(map.get_str("state").unwrap().to_string()),
+                    "auv1.nav.position" => positions.push(map.get_f64("lat").unwrap()),
+                    other => panic!("{other}"),
+                }
+            }
+            Ok(None) => panic!("the shore's medium closed"),
+            Err(_) if states.len() >= 2 && !positions.is_empty() => break,
+            Err(_) => {}
+        }
+    }
+    assert_eq!(states, ["pending", "acknowledged"]);
+    assert_eq!(positions, [43.5], "the latest position only");
+    assert!(
+        shore.stats().missed.is_empty(),
+        "{:?}",
+        shore.stats().missed
+    );
+    vehicle.close();
+    shore.close();
+}
+
 /// Runs openssl in `dir`, failing the test with its output when it fails.
 fn openssl(dir: &std::path::Path, args: &[&str]) {
     let out = std::process::Command::new("openssl")
