@@ -915,44 +915,19 @@ impl Inner {
         wait: bool,
         fresh: bool,
     ) -> Result<(), SendError> {
-        match self.send_now(msg, from, wait, fresh) {
-            Sending::Done(result) => result,
-            Sending::Waiting(blocked, check) => {
-                self.wait_for_room(blocked, check).await;
-                Ok(())
-            }
-            Sending::Later(msg) => self.send_later(msg, from, wait, fresh).await,
-        }
-    }
-
-    /// What [`Inner::send`] can do at once, without a future: an in-process medium hands the
-    /// message out here (what a publication costs there is mostly this call).
-    fn send_now(&self, msg: Message, from: u64, wait: bool, fresh: bool) -> Sending {
         if self.closed.load(Ordering::Acquire) {
-            return Sending::Done(Err(self.closed_error()));
+            return Err(self.closed_error());
         }
-        if self.faults.is_some() || self.transport.get().is_some() {
-            return Sending::Later(msg);
+        if self.faults.is_none() && self.transport.get().is_none() {
+            // in-process: handed out at once, waiting only for room in full command queues
+            self.counters.published.fetch_add(1, Ordering::Relaxed);
+            let check = self.check(&msg, fresh);
+            let blocked = self.fan_out(msg, Some(from), wait, check);
+            if !blocked.is_empty() {
+                self.wait_for_room(blocked, check).await;
+            }
+            return Ok(());
         }
-        // in-process: handed out at once, waiting only for room in full command queues
-        self.counters.published.fetch_add(1, Ordering::Relaxed);
-        let check = self.check(&msg, fresh);
-        let blocked = self.fan_out(msg, Some(from), wait, check);
-        if blocked.is_empty() {
-            Sending::Done(Ok(()))
-        } else {
-            Sending::Waiting(blocked, check)
-        }
-    }
-
-    /// The rest of [`Inner::send`] on a medium with a transport or a fault stage.
-    async fn send_later(
-        self: &Arc<Self>,
-        msg: Message,
-        from: u64,
-        wait: bool,
-        fresh: bool,
-    ) -> Result<(), SendError> {
         let (msg, frame) = match self.transport.get() {
             Some(t) => {
                 let frame = t.encode(&msg)?;
@@ -1112,16 +1087,6 @@ impl Inner {
         }
         Ok(())
     }
-}
-
-/// What [`Inner::send_now`] did with a message.
-enum Sending {
-    /// Handed out (or refused).
-    Done(Result<(), SendError>),
-    /// Handed out but for these commands, which wait for room in their queues.
-    Waiting(Vec<(Arc<Queue>, Message)>, Check),
-    /// Not yet: the medium encodes it for its transport or passes it through its fault stage.
-    Later(Message),
 }
 
 /// The way into a medium for what its transport reads from the wire.
@@ -1497,19 +1462,7 @@ impl Interface {
             stamp: Stamp::now(),
             payload: payload.into(),
         };
-        // handed out before any future is made: a message moved into one is copied again at
-        // every level it passes
-        match inner.send_now(msg, self.id, true, true) {
-            Sending::Done(result) => result.map(|()| seq),
-            Sending::Waiting(blocked, check) => {
-                inner.wait_for_room(blocked, check).await;
-                Ok(seq)
-            }
-            Sending::Later(msg) => inner
-                .send_later(msg, self.id, true, true)
-                .await
-                .map(|()| seq),
-        }
+        inner.send(msg, self.id, true, true).await.map(|()| seq)
     }
 
     /// Sends a message that already has a provenance (a bridge forwarding it), keeping it. A

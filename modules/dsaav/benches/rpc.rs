@@ -162,21 +162,31 @@ fn rpc_round_trips(
     .expect("client")
 }
 
+/// The first byte of a ping-pong's datagram from the caller.
+const PING: u8 = 1;
+/// The first byte of the answer.
+const PONG: u8 = 2;
+
+/// A socket on `group` set up as a medium sets its socket up (ttl 0, non-blocking), and the
+/// group's address to send to.
+fn group_socket(group: &str) -> (std::net::UdpSocket, std::net::SocketAddr) {
+    let mut url = seabus_medium::url::MediumUrl::parse(&format!("udp://{group}?ttl=0"))
+        .expect("a group's URL");
+    let endpoint = seabus_medium::net::UdpEndpoint::from_url(&mut url).expect("an endpoint");
+    let (s, dests) = seabus_medium::net::bind(&endpoint).expect("bind");
+    (s, dests[0])
+}
+
 /// A plain UDP ping-pong of `size` bytes over a multicast group as the DSAAV medium uses one (ttl
 /// 0, two sockets set up as two media's, `seabus_medium::net::bind`), each taking its own copy of
 /// what it sends and leaving it: the first byte says who sent.
 fn udp_ping_pong(group: &str, size: usize) -> Vec<Duration> {
-    const PING: u8 = 1;
-    const PONG: u8 = 2;
     let open = || {
-        let mut url = seabus_medium::url::MediumUrl::parse(&format!("udp://{group}?ttl=0"))
-            .expect("a group's URL");
-        let endpoint = seabus_medium::net::UdpEndpoint::from_url(&mut url).expect("an endpoint");
-        let (s, dests) = seabus_medium::net::bind(&endpoint).expect("bind");
+        let (s, to) = group_socket(group);
         s.set_nonblocking(false).expect("blocking");
         s.set_read_timeout(Some(Duration::from_secs(1)))
             .expect("timeout");
-        (s, dests[0])
+        (s, to)
     };
     let ((a, to), (b, _)) = (open(), open());
     std::thread::spawn(move || {
@@ -216,17 +226,7 @@ fn udp_ping_pong(group: &str, size: usize) -> Vec<Duration> {
 /// [`udp_ping_pong`] with each end a tokio socket on a runtime of its own thread, as each end of
 /// a call is: the floor of any end a runtime wakes.
 fn udp_ping_pong_async(group: &str, size: usize) -> Vec<Duration> {
-    const PING: u8 = 1;
-    const PONG: u8 = 2;
-    let open = || {
-        let mut url = seabus_medium::url::MediumUrl::parse(&format!("udp://{group}?ttl=0"))
-            .expect("a group's URL");
-        let endpoint = seabus_medium::net::UdpEndpoint::from_url(&mut url).expect("an endpoint");
-        let (s, dests) = seabus_medium::net::bind(&endpoint).expect("bind");
-        s.set_nonblocking(true).expect("non-blocking");
-        (s, dests[0])
-    };
-    let ((a, to), (b, _)) = (open(), open());
+    let ((a, to), (b, _)) = (group_socket(group), group_socket(group));
     std::thread::spawn(move || {
         pin(End::Answerer);
         runtime().block_on(async move {
