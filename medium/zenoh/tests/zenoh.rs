@@ -22,6 +22,24 @@ fn open(name: &str, node: &str, url: &str) -> Medium {
         .unwrap_or_else(|e| panic!("{url}: {e}"))
 }
 
+/// Vehicle auv1's medium `name`, listening on `port` (`options` added to its URL).
+fn vehicle_on(name: &str, port: u16, options: &str) -> Medium {
+    open(
+        name,
+        "auv1",
+        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false{options}"),
+    )
+}
+
+/// The shore's medium `name`, connecting to the vehicle listening on `port`.
+fn shore_on(name: &str, port: u16) -> Medium {
+    open(
+        name,
+        "shore",
+        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
+    )
+}
+
 async fn wait_link(m: &Medium, up: bool) {
     let mut w = m.watch_link();
     let res = timeout(WAIT, w.wait_for(|s| matches!(s, LinkState::Up) == up)).await;
@@ -64,16 +82,8 @@ async fn send_until_heard(
 
 fn pair(json: bool) -> (Medium, Medium) {
     let port = free_port();
-    let vehicle = open(
-        "net",
-        "auv1",
-        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false&json={json}"),
-    );
-    let shore = open(
-        "net",
-        "shore",
-        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
-    );
+    let vehicle = vehicle_on("net", port, &format!("&json={json}"));
+    let shore = shore_on("net", port);
     (vehicle, shore)
 }
 
@@ -404,11 +414,7 @@ async fn a_vehicle_started_before_its_router_connects_when_the_router_comes() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
     let port = free_port();
-    let vehicle = open(
-        "fleet",
-        "auv1",
-        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false"),
-    );
+    let vehicle = vehicle_on("fleet", port, "");
     let nav = vehicle.attach("nav");
     // published while nobody listens: an old position, then the current one, and a depth
     let old = DataMap::new().and("lat", 43.0).and("lon", 16.0);
@@ -425,11 +431,7 @@ async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
     .unwrap();
     // the shore station starts 10 s after the vehicle
     tokio::time::sleep(Duration::from_secs(10)).await;
-    let shore = open(
-        "fleet",
-        "shore",
-        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
-    );
+    let shore = shore_on("fleet", port);
     let mut heard = shore.attach("console").subscribed("auv1.nav.**").unwrap();
     let joined = tokio::time::Instant::now();
     let mut latest = std::collections::BTreeMap::new();
@@ -472,11 +474,7 @@ async fn a_shore_station_that_joins_late_gets_the_current_state_at_once() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn command_statuses_sent_before_the_shore_heard_their_publisher_arrive_in_order() {
     let port = free_port();
-    let vehicle = open(
-        "fleet",
-        "auv1",
-        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false"),
-    );
+    let vehicle = vehicle_on("fleet", port, "");
     let oms = vehicle.attach("oms");
     for state in ["pending", "acknowledged"] {
         let status = DataMap::new()
@@ -491,11 +489,7 @@ async fn command_statuses_sent_before_the_shore_heard_their_publisher_arrive_in_
             .await
             .unwrap();
     }
-    let shore = open(
-        "fleet",
-        "shore",
-        &format!("zenoh://?connect=tcp/127.0.0.1:{port}&prefix=fleet&scout=false"),
-    );
+    let shore = shore_on("fleet", port);
     let mut heard = shore.attach("console").subscribed("auv1.**").unwrap();
     let mut states = Vec::new();
     let mut positions = Vec::new();
@@ -875,11 +869,7 @@ async fn a_routes_quality_of_service_reaches_the_wire_attribute_by_attribute() {
 async fn a_quality_of_service_declared_later_applies_from_the_next_message() {
     use seabus_medium::qos::{Priority, Qos};
     let port = free_port();
-    let vehicle = open(
-        "fleet",
-        "auv1",
-        &format!("zenoh://?listen=tcp/127.0.0.1:{port}&prefix=fleet/auv1&scout=false"),
-    );
+    let vehicle = vehicle_on("fleet", port, "");
     let other = bare_session(port).await;
     let heard = other.declare_subscriber("fleet/auv1/late/x").await.unwrap();
     let nav = vehicle.attach("nav");
