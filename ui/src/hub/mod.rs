@@ -82,6 +82,9 @@ struct Latest {
 #[derive(Default)]
 struct State {
     latest: HashMap<Topic, Latest>,
+    /// Counts the topics `latest` has taken in: a page works out what it wants of them again
+    /// only when it changes.
+    topics_known: u64,
     version: u64,
     lease: Lease,
     history: History,
@@ -132,6 +135,10 @@ pub struct Client {
     offers: HashMap<String, Offers>,
     /// What the layout binds: topic patterns and the fields wanted (`None`: all).
     interest: Vec<(Pattern, Option<Vec<String>>)>,
+    /// The topics seen that the layout binds, with the fields wanted of each (`None`: all),
+    /// worked out from `interest` when the hub had taken in `wants_at` topics.
+    wants: Vec<(Topic, Option<Vec<String>>)>,
+    wants_at: Option<u64>,
     /// The data version last sent.
     seen: u64,
 }
@@ -189,6 +196,8 @@ impl Hub {
             layout: None,
             offers: HashMap::new(),
             interest: Vec::new(),
+            wants: Vec::new(),
+            wants_at: None,
             seen: 0,
         }
     }
@@ -253,14 +262,20 @@ impl Hub {
             } else {
                 map.clone()
             };
-            st.latest.insert(
-                topic.clone(),
-                Latest {
-                    stamp: stamp.as_secs_f64(),
-                    map,
-                    version,
-                },
-            );
+            let new = st
+                .latest
+                .insert(
+                    topic.clone(),
+                    Latest {
+                        stamp: stamp.as_secs_f64(),
+                        map,
+                        version,
+                    },
+                )
+                .is_none();
+            if new {
+                st.topics_known += 1;
+            }
             changed
         };
         if let Some(e) = changed {

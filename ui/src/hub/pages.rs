@@ -96,6 +96,7 @@ impl Hub {
             };
             match interest.iter_mut().find(|(q, _)| q.as_str() == p.as_str()) {
                 Some((_, fields)) => match (fields.as_mut(), &b.field) {
+                    (Some(list), Some(f)) if list.contains(f) => {}
                     (Some(list), Some(f)) => list.push(f.clone()),
                     _ => *fields = None,
                 },
@@ -143,6 +144,7 @@ impl Hub {
                 "kept": self.state().keeps.json(),
             });
             client.interest = interest;
+            client.wants_at = None;
             client.seen = 0;
             client.layout = Some(layout);
             return message;
@@ -180,7 +182,9 @@ impl Hub {
 
     /// The `data` message with what changed since the client's last one, if anything did, as
     /// JSON text. Written straight from the latest values under the hub's lock: no copy of a
-    /// value is made for a page, however many pages there are.
+    /// value is made for a page, however many pages there are. Which topics the page binds is
+    /// worked out only when the hub has seen a new topic, so a page's cost does not grow with
+    /// the topics on the bus that it does not show.
     pub fn data_for(&self, client: &mut Client) -> Option<String> {
         if client.interest.is_empty() {
             return None;
@@ -189,19 +193,34 @@ impl Hub {
         if st.version == client.seen {
             return None;
         }
-        let topics: Vec<TopicData<'_>> = st
-            .latest
+        if client.wants_at != Some(st.topics_known) {
+            client.wants = st
+                .latest
+                .keys()
+                .filter_map(|t| Some((t.clone(), wanted(&client.interest, t)?)))
+                .collect();
+            client.wants_at = Some(st.topics_known);
+        }
+        let seen = std::mem::replace(&mut client.seen, st.version);
+        let topics: Vec<TopicData<'_>> = client
+            .wants
             .iter()
-            .filter(|(_, latest)| latest.version > client.seen)
-            .filter_map(|(topic, latest)| {
+            .filter_map(|(topic, fields)| {
+                let latest = st.latest.get(topic).filter(|l| l.version > seen)?;
                 Some(TopicData {
                     topic,
                     stamp: latest.stamp,
-                    fields: wanted(&client.interest, topic, &latest.map)?,
+                    fields: match fields {
+                        None => Fields::All(&latest.map),
+                        Some(list) => Fields::These(
+                            list.iter()
+                                .filter_map(|f| Some((f.as_str(), latest.map.get(f)?)))
+                                .collect(),
+                        ),
+                    },
                 })
             })
             .collect();
-        client.seen = st.version;
         if topics.is_empty() {
             return None;
         }
@@ -276,30 +295,28 @@ impl Serialize for Fields<'_> {
     }
 }
 
-/// The fields of `map` (the latest message of `topic`) that `interest` wants, if it wants any:
-/// all of them when a pattern binding the whole message matches, else each field a matching
-/// pattern names, once, in the order first named.
-fn wanted<'a>(interest: &'a Interest, topic: &Topic, map: &'a DataMap) -> Option<Fields<'a>> {
-    let mut wanted: Option<Vec<(&'a str, &'a seabus_medium::Value)>> = None;
+/// The fields of `topic` that `interest` wants, if it wants any: all of them (`None`) when a
+/// pattern binding the whole message matches, else each field a matching pattern names, once, in
+/// the order first named.
+fn wanted(interest: &Interest, topic: &Topic) -> Option<Option<Vec<String>>> {
+    let mut wanted: Option<Vec<String>> = None;
     for (p, fields) in interest {
         if !p.matches(topic.as_str()) {
             continue;
         }
         let out = wanted.get_or_insert_with(Vec::new);
         match fields {
-            None => return Some(Fields::All(map)),
+            None => return Some(None),
             Some(list) => {
                 for f in list {
-                    if let Some(v) = map.get(f)
-                        && !out.iter().any(|(k, _)| *k == f.as_str())
-                    {
-                        out.push((f.as_str(), v));
+                    if !out.contains(f) {
+                        out.push(f.clone());
                     }
                 }
             }
         }
     }
-    wanted.map(Fields::These)
+    wanted.map(Some)
 }
 
 #[cfg(test)]
@@ -396,6 +413,60 @@ mod tests {
                    "nav.speed": {"stamp": 2.0, "fields": {"knots": 2.9, "metres": 1.5}}})
         );
         assert!(data["now"].as_f64().unwrap() > 1.7e9, "{text}");
+    }
+
+    #[test]
+    fn a_bound_topic_first_heard_after_a_page_was_sent_data_reaches_it() {
+        let two = r#"<layout name="two" roles="observer">
+            <readout bind="nav.depth.depth"/><readout bind="nav.speed.knots"/>
+        </layout>"#;
+        let deep =
+            r#"<layout name="deep" roles="observer"><readout bind="nav.depth.depth"/></layout>"#;
+        let f = Fixture::with_layouts(&[("two.xml", two), ("deep.xml", deep)]);
+        let mut ivo = f.hub.connect(f.session("ivo"));
+        assert_eq!(
+            f.hub.open(&mut ivo, "two", &BTreeMap::new())["type"],
+            "layout"
+        );
+        let depth = Topic::new("nav.depth").unwrap();
+        f.hub.observe(
+            &depth,
+            Stamp(1_000_000_000),
+            &DataMap::new().with("depth", 3.5),
+        );
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        assert_eq!(
+            data["topics"],
+            json!({"nav.depth": {"stamp": 1.0, "fields": {"depth": 3.5}}})
+        );
+        let other = Topic::new("nav.heading").unwrap();
+        f.hub.observe(
+            &other,
+            Stamp(2_000_000_000),
+            &DataMap::new().with("yaw", 1.0),
+        );
+        assert_eq!(f.hub.data_for(&mut ivo), None);
+        let speed = Topic::new("nav.speed").unwrap();
+        f.hub.observe(
+            &speed,
+            Stamp(3_000_000_000),
+            &DataMap::new().with("knots", 2.9),
+        );
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        assert_eq!(
+            data["topics"],
+            json!({"nav.speed": {"stamp": 3.0, "fields": {"knots": 2.9}}})
+        );
+        // another layout opened on the same connection: its own topics, from the start
+        assert_eq!(
+            f.hub.open(&mut ivo, "deep", &BTreeMap::new())["type"],
+            "layout"
+        );
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        assert_eq!(
+            data["topics"],
+            json!({"nav.depth": {"stamp": 1.0, "fields": {"depth": 3.5}}})
+        );
     }
 
     #[test]
