@@ -49,6 +49,10 @@ use tokio::time::Instant;
 /// Password checks at once (each takes ~19 MiB for tens of milliseconds).
 pub const PASSWORD_CHECKS: usize = 4;
 
+/// Topics whose latest message the console keeps, at most: beyond, the eighth of them heard
+/// from longest ago are forgotten (a page shows them again when they are next heard).
+pub const LATEST_TOPICS: usize = 4096;
+
 /// What a `<console>` element sets.
 #[derive(Debug, Clone)]
 pub struct Settings {
@@ -85,6 +89,9 @@ struct State {
     /// Counts the topics `latest` has taken in: a page works out what it wants of them again
     /// only when it changes.
     topics_known: u64,
+    /// Topics forgotten to stay within [`LATEST_TOPICS`], and the warning saying so.
+    forgotten: u64,
+    forgetting: seabus_medium::tally::Limiter,
     version: u64,
     lease: Lease,
     history: History,
@@ -94,6 +101,33 @@ struct State {
     keeps: Keeps,
     backlog: Backlog,
     next_conn: u64,
+}
+
+impl State {
+    /// Forgets the eighth of the kept topics heard from longest ago (one sort for every
+    /// `LATEST_TOPICS / 8` new topics, however many there are).
+    fn forget_stalest(&mut self) {
+        let mut heard: Vec<(u64, Topic)> = self
+            .latest
+            .iter()
+            .map(|(t, l)| (l.version, t.clone()))
+            .collect();
+        let n = LATEST_TOPICS / 8;
+        heard.select_nth_unstable_by_key(n, |(v, _)| *v);
+        for (_, t) in &heard[..n] {
+            self.latest.remove(t);
+        }
+        self.forgotten += n as u64;
+        if let Some(held) = self.forgetting.admit(std::time::Instant::now()) {
+            tracing::warn!(
+                component = "console",
+                forgotten = self.forgotten,
+                "more than {LATEST_TOPICS} topics heard: the {n} heard from longest ago are \
+                 forgotten ({} so far){held}",
+                self.forgotten
+            );
+        }
+    }
 }
 
 /// The console's shared state.
@@ -275,6 +309,9 @@ impl Hub {
                 .is_none();
             if new {
                 st.topics_known += 1;
+                if st.latest.len() > LATEST_TOPICS {
+                    st.forget_stalest();
+                }
             }
             changed
         };

@@ -470,6 +470,61 @@ mod tests {
     }
 
     #[test]
+    fn beyond_its_topic_bound_the_console_forgets_the_topics_heard_from_longest_ago() {
+        let two = r#"<layout name="two" roles="observer">
+            <readout bind="nav.depth.depth"/><readout bind="nav.speed.knots"/>
+        </layout>"#;
+        let f = Fixture::with_layouts(&[("two.xml", two)]);
+        let mut ivo = f.hub.connect(f.session("ivo"));
+        assert_eq!(
+            f.hub.open(&mut ivo, "two", &BTreeMap::new())["type"],
+            "layout"
+        );
+        let depth = Topic::new("nav.depth").unwrap();
+        f.hub.observe(
+            &depth,
+            Stamp(1_000_000_000),
+            &DataMap::new().with("depth", 3.5),
+        );
+        let one = DataMap::new().with("x", 1);
+        for i in 0..super::super::LATEST_TOPICS {
+            let t = Topic::new(&format!("flood.t{i}")).unwrap();
+            f.hub.observe(&t, Stamp(2_000_000_000), &one);
+        }
+        let kept = f.hub.state().latest.len();
+        assert_eq!(
+            kept,
+            super::super::LATEST_TOPICS + 1 - super::super::LATEST_TOPICS / 8
+        );
+        assert_eq!(f.hub.state().forgotten, 512);
+        assert!(!f.hub.state().latest.contains_key(&depth));
+        let last = Topic::new(&format!("flood.t{}", super::super::LATEST_TOPICS - 1)).unwrap();
+        assert!(f.hub.state().latest.contains_key(&last));
+        let speed = Topic::new("nav.speed").unwrap();
+        f.hub.observe(
+            &speed,
+            Stamp(3_000_000_000),
+            &DataMap::new().with("knots", 2.9),
+        );
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        assert_eq!(
+            data["topics"],
+            json!({"nav.speed": {"stamp": 3.0, "fields": {"knots": 2.9}}})
+        );
+        // heard again, a forgotten topic is shown again
+        f.hub.observe(
+            &depth,
+            Stamp(4_000_000_000),
+            &DataMap::new().with("depth", 4.0),
+        );
+        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        assert_eq!(
+            data["topics"],
+            json!({"nav.depth": {"stamp": 4.0, "fields": {"depth": 4.0}}})
+        );
+    }
+
+    #[test]
     fn a_health_table_gets_the_snapshot_whole_with_the_media_that_lost_anything() {
         let diag = r#"<layout name="diag" roles="observer"><health/></layout>"#;
         let f = Fixture::with_layouts(&[("diag.xml", diag)]);
