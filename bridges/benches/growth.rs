@@ -32,7 +32,7 @@ fn rss() -> u64 {
 struct Measured {
     /// Seconds per message.
     per_message: f64,
-    /// Resident memory grown from before the system started to the end of the last round.
+    /// Resident memory grown from before the system started to the end of the run.
     grown: u64,
 }
 

@@ -104,7 +104,7 @@ struct State {
 }
 
 impl State {
-    /// Forgets the eighth of the kept topics heard from longest ago (one sort for every
+    /// Forgets the eighth of the kept topics heard from longest ago (one selection for every
     /// `LATEST_TOPICS / 8` new topics, however many there are).
     fn forget_stalest(&mut self) {
         let mut heard: Vec<(u64, Topic)> = self

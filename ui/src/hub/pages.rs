@@ -321,6 +321,7 @@ fn wanted(interest: &Interest, topic: &Topic) -> Option<Option<Vec<String>>> {
 
 #[cfg(test)]
 mod tests {
+    use super::super::LATEST_TOPICS;
     use super::super::testing::Fixture;
     use super::*;
     use seabus_medium::Stamp;
@@ -415,46 +416,55 @@ mod tests {
         assert!(data["now"].as_f64().unwrap() > 1.7e9, "{text}");
     }
 
-    #[test]
-    fn a_bound_topic_first_heard_after_a_page_was_sent_data_reaches_it() {
-        let two = r#"<layout name="two" roles="observer">
+    /// A layout binding one field each of `nav.depth` and `nav.speed`.
+    const TWO: &str = r#"<layout name="two" roles="observer">
             <readout bind="nav.depth.depth"/><readout bind="nav.speed.knots"/>
         </layout>"#;
-        let deep =
-            r#"<layout name="deep" roles="observer"><readout bind="nav.depth.depth"/></layout>"#;
-        let f = Fixture::with_layouts(&[("two.xml", two), ("deep.xml", deep)]);
+
+    /// A fixture with layout `two` and `more`, and a page of `ivo`'s that has opened `two`.
+    fn two_open(more: &[(&str, &str)]) -> (Fixture, Client) {
+        let mut layouts = vec![("two.xml", TWO)];
+        layouts.extend_from_slice(more);
+        let f = Fixture::with_layouts(&layouts);
         let mut ivo = f.hub.connect(f.session("ivo"));
         assert_eq!(
             f.hub.open(&mut ivo, "two", &BTreeMap::new())["type"],
             "layout"
         );
-        let depth = Topic::new("nav.depth").unwrap();
+        (f, ivo)
+    }
+
+    /// The console hears `field` = `value` on `topic`, stamped `secs` after the epoch.
+    fn hear(f: &Fixture, topic: &str, secs: i64, field: &'static str, value: f64) {
+        let map = DataMap::new().with(field, value);
         f.hub.observe(
-            &depth,
-            Stamp(1_000_000_000),
-            &DataMap::new().with("depth", 3.5),
+            &Topic::new(topic).unwrap(),
+            Stamp(secs * 1_000_000_000),
+            &map,
         );
-        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+    }
+
+    /// The topics of the `data` message `client` is sent now.
+    fn topics_sent(f: &Fixture, client: &mut Client) -> Json {
+        let data: Json = serde_json::from_str(&f.hub.data_for(client).unwrap()).unwrap();
+        data["topics"].clone()
+    }
+
+    #[test]
+    fn a_bound_topic_first_heard_after_a_page_was_sent_data_reaches_it() {
+        let deep =
+            r#"<layout name="deep" roles="observer"><readout bind="nav.depth.depth"/></layout>"#;
+        let (f, mut ivo) = two_open(&[("deep.xml", deep)]);
+        hear(&f, "nav.depth", 1, "depth", 3.5);
         assert_eq!(
-            data["topics"],
+            topics_sent(&f, &mut ivo),
             json!({"nav.depth": {"stamp": 1.0, "fields": {"depth": 3.5}}})
         );
-        let other = Topic::new("nav.heading").unwrap();
-        f.hub.observe(
-            &other,
-            Stamp(2_000_000_000),
-            &DataMap::new().with("yaw", 1.0),
-        );
+        hear(&f, "nav.heading", 2, "yaw", 1.0);
         assert_eq!(f.hub.data_for(&mut ivo), None);
-        let speed = Topic::new("nav.speed").unwrap();
-        f.hub.observe(
-            &speed,
-            Stamp(3_000_000_000),
-            &DataMap::new().with("knots", 2.9),
-        );
-        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        hear(&f, "nav.speed", 3, "knots", 2.9);
         assert_eq!(
-            data["topics"],
+            topics_sent(&f, &mut ivo),
             json!({"nav.speed": {"stamp": 3.0, "fields": {"knots": 2.9}}})
         );
         // another layout opened on the same connection: its own topics, from the start
@@ -462,64 +472,35 @@ mod tests {
             f.hub.open(&mut ivo, "deep", &BTreeMap::new())["type"],
             "layout"
         );
-        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
         assert_eq!(
-            data["topics"],
+            topics_sent(&f, &mut ivo),
             json!({"nav.depth": {"stamp": 1.0, "fields": {"depth": 3.5}}})
         );
     }
 
     #[test]
     fn beyond_its_topic_bound_the_console_forgets_the_topics_heard_from_longest_ago() {
-        let two = r#"<layout name="two" roles="observer">
-            <readout bind="nav.depth.depth"/><readout bind="nav.speed.knots"/>
-        </layout>"#;
-        let f = Fixture::with_layouts(&[("two.xml", two)]);
-        let mut ivo = f.hub.connect(f.session("ivo"));
-        assert_eq!(
-            f.hub.open(&mut ivo, "two", &BTreeMap::new())["type"],
-            "layout"
-        );
-        let depth = Topic::new("nav.depth").unwrap();
-        f.hub.observe(
-            &depth,
-            Stamp(1_000_000_000),
-            &DataMap::new().with("depth", 3.5),
-        );
-        let one = DataMap::new().with("x", 1);
-        for i in 0..super::super::LATEST_TOPICS {
-            let t = Topic::new(&format!("flood.t{i}")).unwrap();
-            f.hub.observe(&t, Stamp(2_000_000_000), &one);
+        let (f, mut ivo) = two_open(&[]);
+        hear(&f, "nav.depth", 1, "depth", 3.5);
+        for i in 0..LATEST_TOPICS {
+            hear(&f, &format!("flood.t{i}"), 2, "x", 1.0);
         }
         let kept = f.hub.state().latest.len();
-        assert_eq!(
-            kept,
-            super::super::LATEST_TOPICS + 1 - super::super::LATEST_TOPICS / 8
-        );
+        assert_eq!(kept, LATEST_TOPICS + 1 - LATEST_TOPICS / 8);
         assert_eq!(f.hub.state().forgotten, 512);
+        let depth = Topic::new("nav.depth").unwrap();
         assert!(!f.hub.state().latest.contains_key(&depth));
-        let last = Topic::new(&format!("flood.t{}", super::super::LATEST_TOPICS - 1)).unwrap();
+        let last = Topic::new(&format!("flood.t{}", LATEST_TOPICS - 1)).unwrap();
         assert!(f.hub.state().latest.contains_key(&last));
-        let speed = Topic::new("nav.speed").unwrap();
-        f.hub.observe(
-            &speed,
-            Stamp(3_000_000_000),
-            &DataMap::new().with("knots", 2.9),
-        );
-        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        hear(&f, "nav.speed", 3, "knots", 2.9);
         assert_eq!(
-            data["topics"],
+            topics_sent(&f, &mut ivo),
             json!({"nav.speed": {"stamp": 3.0, "fields": {"knots": 2.9}}})
         );
         // heard again, a forgotten topic is shown again
-        f.hub.observe(
-            &depth,
-            Stamp(4_000_000_000),
-            &DataMap::new().with("depth", 4.0),
-        );
-        let data: Json = serde_json::from_str(&f.hub.data_for(&mut ivo).unwrap()).unwrap();
+        hear(&f, "nav.depth", 4, "depth", 4.0);
         assert_eq!(
-            data["topics"],
+            topics_sent(&f, &mut ivo),
             json!({"nav.depth": {"stamp": 4.0, "fields": {"depth": 4.0}}})
         );
     }
