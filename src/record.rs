@@ -644,7 +644,15 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
         }
     };
     replay.bar.finish_and_clear();
+    // what the medium still holds goes out, in order, before the process ends
+    let flushed = tokio::time::timeout(crate::LINK_WAIT, medium.flush())
+        .await
+        .is_ok();
     eprintln!("{}", replay.summary(started.elapsed()));
+    if !flushed {
+        eprintln!("seabus replay: not all sent within {:?}", crate::LINK_WAIT);
+        return ExitCode::from(NOT_SENT);
+    }
     match end {
         PassEnd::Damaged(file, d) => {
             eprintln!(
