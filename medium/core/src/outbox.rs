@@ -17,6 +17,7 @@
 
 use crate::medium::Ingress;
 use crate::url::{MediumUrl, UrlError};
+use arc_swap::ArcSwapOption;
 use bytes::Bytes;
 use socket2::SockAddr;
 use std::collections::VecDeque;
@@ -181,7 +182,37 @@ impl Shared {
     }
 }
 
+/// What became of a datagram handed to the queue.
+enum Queued {
+    /// It waits in the queue, for the outbox's task or the next batch.
+    Waits,
+    /// It filled a batch, taken for the caller to send.
+    Batch(VecDeque<Outgoing>),
+    /// The queue had no room: handed back.
+    Full(Outgoing),
+}
+
 impl Shared {
+    /// Puts `d` in the queue at `at` when it has room, taking the batch it fills when nobody
+    /// sends from the queue, or waking the outbox's task for the first datagram waiting.
+    fn queue_up(&self, d: Outgoing, at: Instant) -> Queued {
+        let mut st = self.lock();
+        if st.queue.len() >= CAPACITY {
+            return Queued::Full(d);
+        }
+        st.queue.push_back(d);
+        if st.oldest.is_none() {
+            st.oldest = Some(at);
+        }
+        if st.queue.len() >= BATCH && !st.sending {
+            return Queued::Batch(Shared::take(&mut st));
+        }
+        if st.queue.len() == 1 && !st.sending {
+            self.wake.notify_one();
+        }
+        Queued::Waits
+    }
+
     /// How many datagrams of a batch starting with `first` a send call dealt with: those it sent,
     /// or the first, which failed (counted and logged).
     fn went(&self, sent: io::Result<usize>, first: &Outgoing) -> usize {
@@ -231,21 +262,17 @@ impl Drop for Taken<'_> {
 
 /// A transport's outbox until its medium closes.
 #[derive(Default)]
-pub struct Held(Mutex<Option<Arc<Outbox>>>);
+pub struct Held(ArcSwapOption<Outbox>);
 
 impl Held {
     /// Holding `outbox`.
     pub fn new(outbox: Outbox) -> Held {
-        Held(Mutex::new(Some(Arc::new(outbox))))
-    }
-
-    fn slot(&self) -> std::sync::MutexGuard<'_, Option<Arc<Outbox>>> {
-        self.0.lock().unwrap_or_else(|p| p.into_inner())
+        Held(ArcSwapOption::from_pointee(outbox))
     }
 
     /// The outbox; `None` once closed.
     pub fn get(&self) -> Option<Arc<Outbox>> {
-        self.slot().clone()
+        self.0.load_full()
     }
 
     /// [`Outbox::flush`], at once once closed.
@@ -258,7 +285,7 @@ impl Held {
 
     /// Lets the outbox go: what waits is sent once the sends under way end ([`Outbox`]'s drop).
     pub fn close(&self) {
-        self.slot().take();
+        self.0.store(None);
     }
 }
 
@@ -352,39 +379,25 @@ impl Outbox {
 
     /// Puts `d` in the queue at `now`, waiting for room; a sender that fills a batch sends it.
     /// True when it waited or sent one (`now` is then past).
-    async fn enqueue(&self, d: Outgoing, now: Instant) -> bool {
-        let mut d = Some(d);
+    async fn enqueue(&self, mut d: Outgoing, now: Instant) -> bool {
         let mut at = now;
         let mut waited = false;
         loop {
-            let room = self.shared.room.notified();
-            tokio::pin!(room);
-            room.as_mut().enable();
-            let batch = {
-                let mut st = self.shared.lock();
-                if st.queue.len() >= CAPACITY {
-                    None
-                } else {
-                    st.queue.extend(d.take());
-                    if st.oldest.is_none() {
-                        st.oldest = Some(at);
-                    }
-                    if st.queue.len() >= BATCH && !st.sending {
-                        Some(Shared::take(&mut st))
-                    } else {
-                        if st.queue.len() == 1 && !st.sending {
-                            self.shared.wake.notify_one();
-                        }
-                        return waited;
-                    }
-                }
-            };
-            match batch {
-                Some(batch) => {
+            match self.shared.queue_up(d, at) {
+                Queued::Waits => return waited,
+                Queued::Batch(batch) => {
                     self.shared.send_taken(batch).await;
                     return true;
                 }
-                None => {
+                Queued::Full(back) => {
+                    d = back;
+                    let room = self.shared.room.notified();
+                    tokio::pin!(room);
+                    room.as_mut().enable();
+                    // room made between the look and the registration is not waited for
+                    if self.shared.lock().queue.len() < CAPACITY {
+                        continue;
+                    }
                     room.await;
                     waited = true;
                     at = Instant::now();
@@ -593,6 +606,52 @@ mod tests {
         tokio::time::sleep(Duration::from_millis(5)).await;
         assert_eq!(numbers(&waiting(&rx)), (sent..n).collect::<Vec<_>>());
         assert_eq!(outbox.waiting(), 0);
+        assert_eq!(medium.stats().tx_errors, 0);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_sender_finding_the_queue_full_waits_for_room_and_nothing_is_lost() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Arc::new(Outbox::new(tx, &medium.ingress(), TEST_QUIET));
+        // somebody is sending from the queue (a sender whose batch met a full socket): nothing
+        // leaves at once, and the queue fills
+        outbox.shared.lock().sending = true;
+        let n = CAPACITY as u32 + 5;
+        let sender = {
+            let outbox = outbox.clone();
+            tokio::spawn(async move {
+                for i in 0..n {
+                    outbox.send(&[datagram(i, to)]).await.unwrap();
+                }
+            })
+        };
+        for _ in 0..100 {
+            tokio::task::yield_now().await;
+        }
+        assert!(
+            !sender.is_finished(),
+            "a sender waits while the queue is full"
+        );
+        assert_eq!(outbox.waiting(), CAPACITY);
+        assert!(waiting(&rx).is_empty());
+        // the batch under way ends: the queue is taken and sent, and the sender goes on
+        let batch = Shared::take(&mut outbox.shared.lock());
+        outbox.shared.send_taken(batch).await;
+        tokio::time::timeout(Duration::from_secs(5), sender)
+            .await
+            .expect("the sender goes on once there is room")
+            .unwrap();
+        outbox.flush().await;
+        let mut got = Vec::new();
+        for _ in 0..100 {
+            got.extend(numbers(&waiting(&rx)));
+            if got.len() >= n as usize {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(2)).await;
+        }
+        assert_eq!(got, (0..n).collect::<Vec<_>>());
         assert_eq!(medium.stats().tx_errors, 0);
     }
 

@@ -106,6 +106,15 @@ impl Payload {
         })
     }
 
+    /// The payload as bytes: borrowed when it is a byte array, else encoded (for a transport that
+    /// copies them into its frame, which need not share or convert the payload).
+    pub fn to_bytes(&self) -> Result<std::borrow::Cow<'_, [u8]>, ConvertError> {
+        match self {
+            Payload::Bytes(b) => Ok(std::borrow::Cow::Borrowed(b)),
+            other => Ok(std::borrow::Cow::Owned(binary::encode(&*other.to_map()?)?)),
+        }
+    }
+
     /// The payload as a datamap (converted when needed).
     pub fn to_map(&self) -> Result<Arc<DataMap>, ConvertError> {
         match self {
@@ -261,6 +270,23 @@ mod tests {
         // a payload already in the asked format is never touched
         assert_eq!(raw.convert(Format::Bytes).unwrap(), raw);
         assert_eq!(doc.convert(Format::Xml).unwrap(), doc);
+    }
+
+    #[test]
+    fn bytes_are_lent_as_they_are_and_a_map_is_encoded() {
+        let raw = Payload::from(vec![1u8, 2, 3]);
+        let lent = raw.to_bytes().unwrap();
+        assert!(matches!(lent, std::borrow::Cow::Borrowed(_)));
+        assert_eq!(lent.as_ptr(), raw.as_bytes().unwrap().as_ptr());
+        let map = DataMap::new().with("depth", 12.5).with("ok", true);
+        let payload = Payload::from(map.clone());
+        let encoded = payload.to_bytes().unwrap();
+        assert!(matches!(encoded, std::borrow::Cow::Owned(_)));
+        assert_eq!(binary::decode(&encoded).unwrap(), map);
+        assert!(matches!(
+            xml("<mission><wp/></mission>").to_bytes(),
+            Err(ConvertError::NotXmlMap(_))
+        ));
     }
 
     #[test]

@@ -37,7 +37,7 @@ use seabus_medium::medium::{
 use seabus_medium::message::{Kind, Message, Origin, Provenance, Stamp};
 use seabus_medium::net::{self, RECV_CHUNK, RecvBatch};
 use seabus_medium::outbox::{self, Outbox, Outgoing};
-use seabus_medium::payload::{Format, Payload};
+use seabus_medium::payload::Payload;
 use seabus_medium::topic::{ChannelRegex, Pattern, Topic};
 use seabus_medium::url::{MediumUrl, UrlError};
 use socket2::{Domain, Protocol, SockRef, Socket, Type};
@@ -353,14 +353,13 @@ impl Transport for LcmTransport {
     /// The frame is the channel, a NUL, and the message bytes; headers are added as it is sent.
     fn encode(&self, msg: &Message) -> Result<Bytes, SendError> {
         let channel = msg.topic.as_str();
-        let payload = msg
+        let bytes = msg
             .payload
-            .convert(Format::Bytes)
+            .to_bytes()
             .map_err(|source| SendError::Convert {
                 medium: self.name.to_string(),
                 source,
             })?;
-        let bytes = payload.as_bytes().map_or(&[][..], |b| &b[..]);
         wire::check(channel, bytes.len()).map_err(|e| match e {
             wire::EncodeError::TooLarge(size) => SendError::TooLarge {
                 medium: self.name.to_string(),
@@ -375,7 +374,7 @@ impl Transport for LcmTransport {
         let mut frame = BytesMut::with_capacity(channel.len() + 1 + bytes.len());
         frame.extend_from_slice(channel.as_bytes());
         frame.extend_from_slice(&[0]);
-        frame.extend_from_slice(bytes);
+        frame.extend_from_slice(&bytes);
         Ok(frame.freeze())
     }
 
