@@ -125,6 +125,8 @@ struct State {
     streak: u32,
     /// when the oldest datagram waiting was queued
     oldest: Option<Instant>,
+    /// flushed while a send was under way: what waits goes, without waiting, as that send ends
+    flushing: bool,
 }
 
 struct Shared {
@@ -213,6 +215,20 @@ impl Shared {
         Queued::Waits
     }
 
+    /// Sends everything waiting at once, without waiting for room: what the socket does not take
+    /// is counted as failed ([`Outbox::flush_now`]).
+    fn send_all_now(&self) {
+        let batch: Vec<Outgoing> = {
+            let mut st = self.lock();
+            st.oldest = None;
+            st.queue.drain(..).collect()
+        };
+        let mut at = 0;
+        while at < batch.len() {
+            at += self.went(send_now(&self.socket, &batch[at..]), &batch[at]);
+        }
+    }
+
     /// How many datagrams of a batch starting with `first` a send call dealt with: those it sent,
     /// or the first, which failed (counted and logged).
     fn went(&self, sent: io::Result<usize>, first: &Outgoing) -> usize {
@@ -241,7 +257,7 @@ impl Drop for Taken<'_> {
         let mut batch = std::mem::take(&mut self.batch);
         let unsent = batch.split_off(self.at.min(batch.len()));
         batch.clear();
-        let waiting = {
+        let (waiting, flushing) = {
             let mut st = self.shared.lock();
             st.sending = false;
             if !unsent.is_empty() {
@@ -251,10 +267,12 @@ impl Drop for Taken<'_> {
                 st.oldest = Some(Instant::now());
             }
             st.spare = batch;
-            !st.queue.is_empty()
+            (!st.queue.is_empty(), st.flushing)
         };
         self.shared.room.notify_waiters();
-        if waiting {
+        if flushing {
+            self.shared.send_all_now();
+        } else if waiting {
             self.shared.wake.notify_one();
         }
     }
@@ -308,6 +326,7 @@ impl Outbox {
                 last: None,
                 streak: 0,
                 oldest: None,
+                flushing: false,
             }),
             wake: Notify::new(),
             room: Notify::new(),
@@ -436,19 +455,18 @@ impl Outbox {
     }
 
     /// Sends what waits without waiting for room (a medium closing); what the socket does not
-    /// take is counted as failed.
+    /// take is counted as failed. While a send from the queue is under way (the outbox's task
+    /// on another thread), what waits goes as that send ends, after it: datagrams leave in the
+    /// order they were handed over.
     pub fn flush_now(&self) {
-        let batch: Vec<Outgoing> = {
+        {
             let mut st = self.shared.lock();
-            st.oldest = None;
-            st.queue.drain(..).collect()
-        };
-        let mut at = 0;
-        while at < batch.len() {
-            at += self
-                .shared
-                .went(send_now(&self.shared.socket, &batch[at..]), &batch[at]);
+            if st.sending {
+                st.flushing = true;
+                return;
+            }
         }
+        self.shared.send_all_now();
     }
 }
 
@@ -652,6 +670,32 @@ mod tests {
             tokio::time::sleep(Duration::from_millis(2)).await;
         }
         assert_eq!(got, (0..n).collect::<Vec<_>>());
+        assert_eq!(medium.stats().tx_errors, 0);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn what_waits_when_the_outbox_is_dropped_goes_after_the_send_under_way() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        // the outbox's task (on another thread) is sending datagrams 0 to 9, taken from the
+        // queue; 10 to 14 came after them and wait
+        outbox.shared.lock().sending = true;
+        for i in 10..15 {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        assert_eq!(outbox.waiting(), 5);
+        let shared = outbox.shared.clone();
+        drop(outbox);
+        assert!(
+            waiting(&rx).is_empty(),
+            "nothing overtakes the send under way"
+        );
+        // that send ends: its datagrams, then those that waited
+        let under_way: VecDeque<Outgoing> = (0..10).map(|i| datagram(i, to)).collect();
+        shared.send_taken(under_way).await;
+        assert_eq!(numbers(&waiting(&rx)), (0..15).collect::<Vec<_>>());
+        assert!(shared.lock().queue.is_empty());
         assert_eq!(medium.stats().tx_errors, 0);
     }
 
