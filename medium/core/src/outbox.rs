@@ -200,7 +200,15 @@ impl Shared {
     fn queue_up(&self, d: Outgoing, at: Instant) -> Queued {
         let mut st = self.lock();
         if st.queue.len() >= CAPACITY {
-            return Queued::Full(d);
+            if st.sending {
+                return Queued::Full(d);
+            }
+            // full, and nobody sends from it (the outbox's task has not run yet, or is gone with
+            // its medium): this sender sends what waits, and `d` waits after it
+            let batch = Shared::take(&mut st);
+            st.queue.push_back(d);
+            st.oldest = Some(at);
+            return Queued::Batch(batch);
         }
         st.queue.push_back(d);
         if st.oldest.is_none() {
@@ -454,11 +462,11 @@ impl Outbox {
         self.shared.lock().queue.len()
     }
 
-    /// Sends what waits without waiting for room (a medium closing); what the socket does not
-    /// take is counted as failed. While a send from the queue is under way (the outbox's task
-    /// on another thread), what waits goes as that send ends, after it: datagrams leave in the
-    /// order they were handed over.
-    pub fn flush_now(&self) {
+    /// Sends what waits without waiting for room (the outbox dropped: its medium closing); what
+    /// the socket does not take is counted as failed. While a send from the queue is under way
+    /// (the outbox's task on another thread), what waits goes as that send ends, after it:
+    /// datagrams leave in the order they were handed over.
+    fn flush_now(&self) {
         {
             let mut st = self.shared.lock();
             if st.sending {
@@ -671,6 +679,30 @@ mod tests {
         }
         assert_eq!(got, (0..n).collect::<Vec<_>>());
         assert_eq!(medium.stats().tx_errors, 0);
+    }
+
+    #[tokio::test(flavor = "current_thread")]
+    async fn a_full_queue_nobody_sends_from_is_sent_by_the_next_sender() {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        // the medium closes: the outbox's task is gone, and a send under way leaves the queue full
+        medium.close();
+        tokio::task::yield_now().await;
+        outbox.shared.lock().sending = true;
+        let n = CAPACITY as u32;
+        for i in 0..n {
+            outbox.send(&[datagram(i, to)]).await.unwrap();
+        }
+        outbox.shared.lock().sending = false;
+        assert_eq!(outbox.waiting(), CAPACITY);
+        // the next sender does not wait for room nobody would make: it sends what waits first
+        tokio::time::timeout(Duration::from_secs(5), outbox.send(&[datagram(n, to)]))
+            .await
+            .expect("a sender never waits on a full queue nobody sends from")
+            .unwrap();
+        outbox.flush().await;
+        assert_eq!(numbers(&waiting(&rx)), (0..=n).collect::<Vec<_>>());
     }
 
     #[tokio::test(flavor = "current_thread")]
