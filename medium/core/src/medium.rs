@@ -1701,4 +1701,57 @@ mod tests {
             .originate(Topic::new("w").unwrap(), DataMap::new().into());
         assert_eq!(rx.try_recv().unwrap().provenance.seq, 4);
     }
+
+    #[test]
+    fn a_receiver_that_parks_is_woken_by_every_push_from_another_thread() {
+        // the receiver keeps catching up and waiting on one runtime while a thread of its own
+        // publishes, pausing now and then: a push that misses a waiting receiver leaves it
+        // asleep with messages waiting, and it has not taken them all 5 s after the last
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap();
+        let bus = Medium::in_process("bus", &Node::new("n"));
+        let n = 20_000u64;
+        let mut port = bus
+            .attach_with("rx", n as usize, 16)
+            .subscribed("t")
+            .unwrap();
+        let receiver = rt.spawn(async move {
+            let mut got = 0u64;
+            while got < n {
+                let Some(m) = port.recv().await else { break };
+                got += 1;
+                assert_eq!(m.provenance.seq, got, "in order, none lost");
+            }
+            got
+        });
+        let publisher = bus.attach("tx");
+        std::thread::spawn(move || {
+            let local = tokio::runtime::Builder::new_current_thread()
+                .build()
+                .unwrap();
+            local.block_on(async {
+                for i in 0..n {
+                    publisher
+                        .send("t", Payload::from(Vec::new()))
+                        .await
+                        .unwrap();
+                    if i % 64 == 0 {
+                        std::thread::yield_now();
+                    }
+                    if i % 2_000 == 0 {
+                        std::thread::sleep(std::time::Duration::from_millis(1));
+                    }
+                }
+            });
+        })
+        .join()
+        .unwrap();
+        let got = rt.block_on(async {
+            tokio::time::timeout(std::time::Duration::from_secs(5), receiver).await
+        });
+        assert_eq!(got.expect("every message taken").unwrap(), n);
+    }
 }

@@ -20,7 +20,7 @@ use crate::loss::Losses;
 use crate::message::{Kind, Message};
 use atomic_waker::AtomicWaker;
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering, fence};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::task::{Context, Poll};
 use tokio::sync::Notify;
@@ -60,6 +60,9 @@ struct State {
     commands: VecDeque<Message>,
     seen: Dedup,
     closed: bool,
+    /// the receiver found nothing and waits to be woken: the push that finds it set wakes it
+    /// (read and set under the lock both take anyway, so neither needs a fence)
+    parked: bool,
 }
 
 /// Counters kept by a queue.
@@ -78,9 +81,6 @@ pub(crate) struct Queue {
     /// data messages waiting, readable without the lock
     data_len: AtomicUsize,
     waker: AtomicWaker,
-    /// the receiver found nothing and waits to be woken; a push reads it (not writing a line the
-    /// receiver shares) and wakes the receiver only then
-    parked: AtomicBool,
     space: Notify,
     closed: AtomicBool,
     data_cap: usize,
@@ -98,11 +98,11 @@ impl Queue {
                 commands: VecDeque::new(),
                 seen: Dedup::new(),
                 closed: false,
+                parked: false,
             }),
             commands: AtomicUsize::new(0),
             data_len: AtomicUsize::new(0),
             waker: AtomicWaker::new(),
-            parked: AtomicBool::new(false),
             space: Notify::new(),
             closed: AtomicBool::new(false),
             data_cap: data_cap.max(1),
@@ -146,12 +146,12 @@ impl Queue {
         }
         let fresh = check == Check::Fresh;
         let (origin, seq) = (msg.provenance.origin.id, msg.provenance.seq);
-        let result = {
+        let (result, wake) = {
             let mut st = self.lock();
             if st.closed {
                 return Pushed::Closed;
             }
-            match msg.kind {
+            let result = match msg.kind {
                 Kind::Data => {
                     let seen = if fresh {
                         Seen::New
@@ -206,15 +206,13 @@ impl Queue {
                     self.commands.store(st.commands.len(), Ordering::Release);
                     Pushed::Queued
                 }
-            }
+            };
+            (result, std::mem::take(&mut st.parked))
         };
         if let Pushed::DroppedOldest = result {
             self.dropped(1);
         }
-        // the message is in before `parked` is read; the receiver sets `parked` before it looks
-        // again (see `poll_next`): one of the two sees the other
-        fence(Ordering::SeqCst);
-        if self.parked.load(Ordering::Relaxed) && self.parked.swap(false, Ordering::AcqRel) {
+        if wake {
             self.waker.wake();
         }
         result
@@ -296,16 +294,21 @@ impl Queue {
             return Poll::Ready(self.next(batch));
         }
         self.waker.register(cx.waker());
-        self.parked.store(true, Ordering::Relaxed);
-        fence(Ordering::SeqCst);
-        // a push may have landed between the first look and the registration
-        match self.next(batch) {
-            Some(m) => {
-                self.parked.store(false, Ordering::Relaxed);
-                Poll::Ready(Some(m))
+        // a push that lands from here on finds `parked` set and wakes the waker just registered;
+        // one that landed before is found now
+        let found = {
+            let mut st = self.lock();
+            let empty = st.data.is_empty() && st.commands.is_empty();
+            if empty && !st.closed {
+                st.parked = true;
             }
-            None if self.closed.load(Ordering::Acquire) => Poll::Ready(self.next(batch)),
-            None => Poll::Pending,
+            !empty || st.closed
+        };
+        if found {
+            // (none when closed with nothing left)
+            Poll::Ready(self.next(batch))
+        } else {
+            Poll::Pending
         }
     }
 
