@@ -5,7 +5,8 @@
 //! How the parts fit:
 //!
 //! - [`message`] — a [`Message`] has a [`Topic`], a [`Kind`] (data or command), a [`Provenance`]
-//!   (origin node and medium, per-origin sequence number, hop count), a [`Stamp`] and a [`Payload`].
+//!   (origin node and medium, per-origin sequence number, hop count), a [`Stamp`] (the wall clock
+//!   as [`clock`] reads it cheaply) and a [`Payload`].
 //! - [`payload`] — a payload is bytes, a named [`DataMap`] ([`datamap`]) or XML text; receivers state the
 //!   [`Format`] they accept and get it converted, losslessly, through the compact binary form
 //!   ([`binary`]), the XML form ([`xmlform`]) and JSON ([`json`]).
@@ -36,6 +37,7 @@
 
 pub mod binary;
 pub mod caps;
+pub mod clock;
 pub mod csv;
 pub mod datagram;
 pub mod datamap;

@@ -87,21 +87,7 @@ pub struct Stamp(pub i64);
 impl Stamp {
     /// The current wall-clock time.
     pub fn now() -> Stamp {
-        let mut ts = libc::timespec {
-            tv_sec: 0,
-            tv_nsec: 0,
-        };
-        // SAFETY: `ts` is a valid timespec for the call to fill, and CLOCK_REALTIME always
-        // exists, so the call cannot fail. (The clock read directly: `SystemTime::now` and its
-        // `duration_since` cost as much again on a publication.)
-        unsafe { libc::clock_gettime(libc::CLOCK_REALTIME, &mut ts) };
-        // (both fields are 32 bits wide on some 32-bit targets)
-        #[allow(clippy::unnecessary_cast)]
-        Stamp(
-            (ts.tv_sec as i64)
-                .saturating_mul(1_000_000_000)
-                .saturating_add(ts.tv_nsec as i64),
-        )
+        Stamp(crate::clock::now_ns())
     }
 
     /// Seconds since the epoch as a float.
