@@ -144,6 +144,10 @@ mod counter {
     #[cold]
     fn anchor() -> Option<i64> {
         let origin = origin()?;
+        if read(libc::CLOCK_MONOTONIC) - origin.1 < super::CALIBRATION_NS {
+            // the rate is not known yet
+            return None;
+        }
         let mono = together(libc::CLOCK_MONOTONIC);
         let (ticks, ns) = together(libc::CLOCK_REALTIME);
         let anchor = rate(origin, mono).and_then(|r| Anchor::new(ticks, ns, r));
