@@ -1702,6 +1702,39 @@ mod tests {
         assert_eq!(rx.try_recv().unwrap().provenance.seq, 4);
     }
 
+    #[tokio::test]
+    async fn a_topic_sent_again_reaches_whoever_subscribes_meanwhile_and_not_who_left() {
+        let bus = Medium::in_process("bus", &Node::new("n"));
+        let tx = bus.attach("tx");
+        let depth = Topic::new("nav.depth").unwrap();
+        let data = || DataMap::new().with("m", 3.5);
+        let mut a = bus.attach("a").subscribed("nav.*").unwrap();
+        tx.send(&depth, data()).await.unwrap();
+        assert!(a.try_recv().is_ok());
+        let mut b = bus.attach("b");
+        b.subscribe_kind("nav.depth", Some(Kind::Command)).unwrap();
+        tx.send(&depth, data()).await.unwrap();
+        assert!(a.try_recv().is_ok());
+        assert!(b.try_recv().is_err(), "b takes commands only");
+        tx.command(&depth, data()).await.unwrap();
+        assert_eq!(a.try_recv().unwrap().kind, Kind::Command);
+        assert_eq!(b.try_recv().unwrap().kind, Kind::Command);
+        assert!(a.unsubscribe("nav.*"));
+        tx.send(&depth, data()).await.unwrap();
+        assert!(a.try_recv().is_err(), "a left");
+        // the same name made apart is the same topic; another is not
+        b.subscribe("nav.depth").unwrap();
+        tx.send(Topic::new("nav.depth").unwrap(), data())
+            .await
+            .unwrap();
+        assert_eq!(b.try_recv().unwrap().topic, depth);
+        tx.send("nav.depths", data()).await.unwrap();
+        assert!(b.try_recv().is_err());
+        drop(b);
+        tx.send(&depth, data()).await.unwrap();
+        assert_eq!(bus.stats().delivered, 5);
+    }
+
     #[test]
     fn a_receiver_that_parks_is_woken_by_every_push_from_another_thread() {
         // the receiver keeps catching up and waiting on one runtime while a thread of its own
