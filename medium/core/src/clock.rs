@@ -10,10 +10,13 @@
 //! slews as it slews the wall clock, but never steps) over the whole life of the process, so the
 //! rate only improves; each new anchor takes in whatever the time service did to the wall clock
 //! since the last. Within a span the stamp can be off the system clock by the difference between
-//! the clock's current slew and its average: at the largest slew Linux allows (500 ppm), 5 µs.
+//! the clock's current slew and its average (at most 1 000 ppm apart: 10 µs in a span), and a
+//! step of the clock shows in each thread within a span.
 //!
-//! Elsewhere, in the first [`CALIBRATION_NS`] of the process, and whenever the counter seems to
-//! have gone back or far ahead (a virtual machine moved, a host resumed), the clock is read.
+//! Elsewhere, in the first [`CALIBRATION_NS`] of the process, and whenever a new measurement of the
+//! counter's rate disagrees with the last by more than 1 % or the counter has gone back (a host
+//! resumed, a virtual machine moved: the rate is then measured again), the clock is read. Whether
+//! the kernel still keeps its time on the counter is looked at again every second.
 //!
 //! What may depend on it: [`crate::message::Stamp::now`] reads it; nothing else needs to.
 
@@ -44,8 +47,11 @@ fn read(clock: libc::clockid_t) -> i64 {
 
 /// Longest a thread scales the counter from one reading of the system clock: 10 ms.
 pub const ANCHOR_SPAN_NS: i64 = 10_000_000;
-/// How long the counter's rate is measured before it is used: 10 ms.
-pub const CALIBRATION_NS: i64 = 10_000_000;
+/// How long the counter's rate is measured before it is used: 100 ms.
+pub const CALIBRATION_NS: i64 = 100_000_000;
+/// Most a new measurement of the counter's rate may differ from the last, relatively, before
+/// the counter is taken to have jumped and is measured again.
+const MAX_RATE_CHANGE: f64 = 0.01;
 
 /// A reading of the system clock and the counter together, and how to go on from it.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -87,11 +93,42 @@ fn rate(first: (u64, i64), last: (u64, i64)) -> Option<f64> {
     (ticks > 0 && ns >= CALIBRATION_NS).then(|| ns as f64 / ticks as f64)
 }
 
+/// What a measurement of the counter's rate says.
+#[derive(Debug, PartialEq)]
+enum Measured {
+    /// Nanoseconds per tick.
+    Rate(f64),
+    /// Not measured for long enough yet.
+    Wait,
+    /// The counter went back or jumped: measure again from now.
+    Again,
+}
+
+/// The counter's rate from `origin` to `now` (each the counter and the monotonic clock), checked
+/// against the `last` rate measured.
+fn measure(origin: (u64, i64), now: (u64, i64), last: Option<f64>) -> Measured {
+    let forward = now.0 >= origin.0 && now.1 >= origin.1;
+    if forward && now.1 - origin.1 < CALIBRATION_NS {
+        return Measured::Wait;
+    }
+    match rate(origin, now) {
+        // (a counter between 10 MHz and 100 GHz)
+        Some(r)
+            if (0.01..=100.0).contains(&r)
+                && last.is_none_or(|l| ((r - l) / l).abs() <= MAX_RATE_CHANGE) =>
+        {
+            Measured::Rate(r)
+        }
+        _ => Measured::Again,
+    }
+}
+
 #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
 mod counter {
-    use super::{Anchor, rate, read};
+    use super::{Anchor, read};
+    use super::{CALIBRATION_NS, Measured, measure};
     use std::cell::Cell;
-    use std::sync::OnceLock;
+    use std::sync::Mutex;
 
     fn ticks() -> u64 {
         // SAFETY: RDTSC exists on every x86-64 CPU and only reads the counter
@@ -114,18 +151,32 @@ mod counter {
         (best.1, best.2)
     }
 
-    /// The counter and the monotonic clock when the process first stamped; `None` when the
-    /// kernel does not keep its time on the counter (the counter is then not trusted).
-    pub(super) fn origin() -> Option<(u64, i64)> {
-        static ORIGIN: OnceLock<Option<(u64, i64)>> = OnceLock::new();
-        *ORIGIN.get_or_init(|| {
-            let source = std::fs::read_to_string(
-                "/sys/devices/system/clocksource/clocksource0/current_clocksource",
-            )
-            .ok()?;
-            (source.trim() == "tsc").then(|| together(libc::CLOCK_MONOTONIC))
-        })
+    /// Whether the kernel keeps its time on the counter (the counter is trusted only then).
+    pub(super) fn on_counter() -> bool {
+        std::fs::read_to_string("/sys/devices/system/clocksource/clocksource0/current_clocksource")
+            .is_ok_and(|source| source.trim() == "tsc")
     }
+
+    /// How often whether the kernel keeps its time on the counter is looked at again: 1 s.
+    const CHECK_EVERY_NS: i64 = 1_000_000_000;
+
+    /// The process's measurement of the counter.
+    struct Calibration {
+        /// the counter and the monotonic clock when the measurement began
+        origin: Option<(u64, i64)>,
+        /// the last rate measured
+        rate: Option<f64>,
+        /// whether the counter is trusted, and when that was looked at (monotonic)
+        trusted: bool,
+        checked_at: Option<i64>,
+    }
+
+    static CALIBRATION: Mutex<Calibration> = Mutex::new(Calibration {
+        origin: None,
+        rate: None,
+        trusted: false,
+        checked_at: None,
+    });
 
     thread_local! {
         pub(super) static ANCHOR: Cell<Option<Anchor>> = const { Cell::new(None) };
@@ -140,18 +191,55 @@ mod counter {
         anchor()
     }
 
-    /// Reads the clock, anchoring this thread there once the counter's rate is known.
-    #[cold]
-    fn anchor() -> Option<i64> {
-        let origin = origin()?;
-        if read(libc::CLOCK_MONOTONIC) - origin.1 < super::CALIBRATION_NS {
-            // the rate is not known yet
+    /// The counter's rate as measured now; `None` while it cannot be used (not trusted, or being
+    /// measured).
+    fn current_rate() -> Option<f64> {
+        let mut c = CALIBRATION.lock().unwrap_or_else(|p| p.into_inner());
+        let mono = read(libc::CLOCK_MONOTONIC);
+        if c.checked_at
+            .is_none_or(|t| mono.saturating_sub(t) >= CHECK_EVERY_NS)
+        {
+            c.checked_at = Some(mono);
+            c.trusted = on_counter();
+            if !c.trusted {
+                c.origin = None;
+                c.rate = None;
+            }
+        }
+        if !c.trusted {
             return None;
         }
-        let mono = together(libc::CLOCK_MONOTONIC);
+        let Some(origin) = c.origin else {
+            c.origin = Some(together(libc::CLOCK_MONOTONIC));
+            return None;
+        };
+        if (0..CALIBRATION_NS).contains(&(mono - origin.1)) {
+            return None;
+        }
+        let now = together(libc::CLOCK_MONOTONIC);
+        match measure(origin, now, c.rate) {
+            Measured::Rate(r) => {
+                c.rate = Some(r);
+                Some(r)
+            }
+            Measured::Wait => None,
+            Measured::Again => {
+                c.origin = Some(now);
+                c.rate = None;
+                None
+            }
+        }
+    }
+
+    /// Reads the clock, anchoring this thread there when the counter's rate is known.
+    #[cold]
+    fn anchor() -> Option<i64> {
+        let Some(rate) = current_rate() else {
+            ANCHOR.with(|a| a.set(None));
+            return None;
+        };
         let (ticks, ns) = together(libc::CLOCK_REALTIME);
-        let anchor = rate(origin, mono).and_then(|r| Anchor::new(ticks, ns, r));
-        ANCHOR.with(|a| a.set(anchor));
+        ANCHOR.with(|a| a.set(Anchor::new(ticks, ns, rate)));
         Some(ns)
     }
 }
@@ -177,22 +265,57 @@ mod tests {
 
     #[test]
     fn the_rate_is_measured_over_the_calibration_time_at_least() {
-        assert_eq!(rate((0, 0), (30_000_000, 9_999_999)), None);
-        assert_eq!(rate((0, 0), (30_000_000, 10_000_000)), Some(1.0 / 3.0));
+        assert_eq!(rate((0, 0), (300_000_000, 99_999_999)), None);
+        assert_eq!(rate((0, 0), (300_000_000, 100_000_000)), Some(1.0 / 3.0));
         // a counter or a clock that went back gives no rate
-        assert_eq!(rate((10, 0), (5, 20_000_000)), None);
-        assert_eq!(rate((0, 20_000_000), (30_000_000, 0)), None);
+        assert_eq!(rate((10, 0), (5, 200_000_000)), None);
+        assert_eq!(rate((0, 200_000_000), (300_000_000, 0)), None);
+    }
+
+    #[test]
+    fn a_rate_is_used_once_measured_long_enough_and_measured_again_after_a_jump() {
+        let origin = (1_000, 0);
+        // a 1 GHz counter, 50 ms in: wait
+        assert_eq!(
+            measure(origin, (1_000 + 50_000_000, 50_000_000), None),
+            Measured::Wait
+        );
+        let at = |ns: i64, ticks: u64| (1_000 + ticks, ns);
+        assert_eq!(
+            measure(origin, at(200_000_000, 200_000_000), None),
+            Measured::Rate(1.0)
+        );
+        // slewed by 500 ppm: still the counter's rate
+        assert_eq!(
+            measure(origin, at(200_100_000, 200_000_000), Some(1.0)),
+            Measured::Rate(1.0005)
+        );
+        // 2 % off the last measurement: the counter jumped
+        assert_eq!(
+            measure(origin, at(204_000_000, 200_000_000), Some(1.0)),
+            Measured::Again
+        );
+        // behind the origin (a counter reset by a resumed host), or a rate no counter has
+        assert_eq!(
+            measure(origin, (500, 300_000_000), Some(1.0)),
+            Measured::Again
+        );
+        assert_eq!(measure(origin, (500, 10), None), Measured::Again);
+        assert_eq!(
+            measure(origin, at(200_000_000, 2_000), None),
+            Measured::Again
+        );
     }
 
     #[test]
     fn a_stamp_follows_the_system_clock() {
-        // 200 ms of stamps on one thread, past the calibration and several anchors, each between
+        // 300 ms of stamps on one thread, past the calibration and several anchors, each between
         // two readings of the system clock (with room for the counter read out of order)
         let slack = 20_000;
         let start = read(libc::CLOCK_MONOTONIC);
         let mut previous = i64::MIN;
         let mut stamps = 0u64;
-        while read(libc::CLOCK_MONOTONIC) - start < 200_000_000 && stamps < 50_000_000 {
+        while read(libc::CLOCK_MONOTONIC) - start < 300_000_000 && stamps < 80_000_000 {
             let before = read(libc::CLOCK_REALTIME);
             let stamp = now_ns();
             let after = read(libc::CLOCK_REALTIME);
@@ -210,7 +333,7 @@ mod tests {
         assert!(stamps > 1_000);
         // where the kernel keeps time on the counter, the stamps were scaled from it
         #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
-        if counter::origin().is_some() {
+        if counter::on_counter() {
             assert!(counter::ANCHOR.with(std::cell::Cell::get).is_some());
         }
     }

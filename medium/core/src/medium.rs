@@ -1486,7 +1486,17 @@ impl Interface {
                         return Ok(m);
                     }
                 }
-                None if self.queue.is_closed() => return Err(TryRecvError::Closed),
+                None if self.queue.is_closed() => {
+                    // a push made before the close is in by now: looked for once more
+                    match self.queue.next(&mut self.batch) {
+                        Some(m) => {
+                            if let Some(m) = self.admit(m) {
+                                return Ok(m);
+                            }
+                        }
+                        None => return Err(TryRecvError::Closed),
+                    }
+                }
                 None => return Err(TryRecvError::Empty),
             }
         }
