@@ -414,9 +414,12 @@ async fn a_dead_man_command_goes_neutral_once_when_its_re_sends_stop() {
     send(&mut ana, json!({"type": "lease", "action": "take"})).await;
     next_where(&mut ana, "lease", |v| v["holder"] == "ana").await;
     let drive = json!({"type": "drive", "layout": "pilot", "command": "course", "fields": {"speed": 2, "heading": 30}});
+    // every 300 ms: a re-send within the command's three periods (5 Hz: 600 ms) keeps it alive,
+    // and one at least 0.8 of a period (160 ms) after the last published is published, with
+    // room for the hub taking one late and the next on time
     for _ in 0..5 {
         send(&mut ana, drive.clone()).await;
-        tokio::time::sleep(Duration::from_millis(200)).await;
+        tokio::time::sleep(Duration::from_millis(300)).await;
     }
     // the page stops (frozen): within three periods the neutral command goes, once
     let got = received(&mut d, Duration::from_millis(1500)).await;
