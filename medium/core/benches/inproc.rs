@@ -93,6 +93,12 @@ fn messages() -> usize {
 }
 
 fn main() {
+    // in a process's first moments stamps read the clock while the counter they are scaled from
+    // is measured (seabus_medium::clock): the rounds run after that, as a running vehicle's do
+    let _ = Stamp::now();
+    std::thread::sleep(std::time::Duration::from_nanos(
+        seabus_medium::clock::CALIBRATION_NS as u64 + 10_000_000,
+    ));
     let rounds = scale(5, 3);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
