@@ -563,6 +563,14 @@ mod tests {
         (medium, tx, rx)
     }
 
+    /// [`pair`] with an outbox on the sending socket, and where the receiving one listens.
+    fn opened() -> (Medium, Outbox, std::net::UdpSocket, SocketAddr) {
+        let (medium, tx, rx) = pair();
+        let to = rx.local_addr().unwrap();
+        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        (medium, outbox, rx, to)
+    }
+
     /// Everything waiting on `rx` now.
     fn waiting(rx: &std::net::UdpSocket) -> Vec<Vec<u8>> {
         let mut got = Vec::new();
@@ -588,9 +596,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn a_lone_datagram_leaves_before_send_returns() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (_medium, outbox, rx, to) = opened();
         for i in 0..3 {
             outbox.send(&[datagram(i, to)]).await.unwrap();
             // no task has run in between: the sender's own call sent it
@@ -615,9 +621,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn a_stream_goes_in_batches_in_order_and_its_tail_when_the_sender_waits() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (medium, outbox, rx, to) = opened();
         let n = 3 * BATCH as u32 + 5;
         for i in 0..n {
             outbox.send(&[datagram(i, to)]).await.unwrap();
@@ -637,9 +641,8 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn a_sender_finding_the_queue_full_waits_for_room_and_nothing_is_lost() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Arc::new(Outbox::new(tx, &medium.ingress(), TEST_QUIET));
+        let (medium, outbox, rx, to) = opened();
+        let outbox = Arc::new(outbox);
         // somebody is sending from the queue (a sender whose batch met a full socket): nothing
         // leaves at once, and the queue fills
         outbox.shared.lock().sending = true;
@@ -683,9 +686,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn a_full_queue_nobody_sends_from_is_sent_by_the_next_sender() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (medium, outbox, rx, to) = opened();
         // the medium closes: the outbox's task is gone, and a send under way leaves the queue full
         medium.close();
         tokio::task::yield_now().await;
@@ -707,9 +708,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn what_waits_when_the_outbox_is_dropped_goes_after_the_send_under_way() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (medium, outbox, rx, to) = opened();
         // the outbox's task (on another thread) is sending datagrams 0 to 9, taken from the
         // queue; 10 to 14 came after them and wait
         outbox.shared.lock().sending = true;
@@ -733,9 +732,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn what_waited_goes_before_the_next_datagram_and_all_goes_when_the_outbox_is_dropped() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (_medium, outbox, rx, to) = opened();
         let stream = STREAM + 3;
         for i in 0..stream {
             outbox.send(&[datagram(i, to)]).await.unwrap();
@@ -764,9 +761,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn flush_returns_once_a_streams_tail_is_sent() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (_medium, outbox, rx, to) = opened();
         let n = BATCH as u32 + 3;
         for i in 0..n {
             outbox.send(&[datagram(i, to)]).await.unwrap();
@@ -781,9 +776,7 @@ mod tests {
 
     #[tokio::test(flavor = "current_thread")]
     async fn failures_are_returned_when_sent_at_once_and_counted_when_sent_from_the_queue() {
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (medium, outbox, rx, to) = opened();
         // larger than any UDP datagram
         let huge = Outgoing::new(&[], Bytes::from(vec![0u8; 70_000]), to);
         let e = outbox.send(std::slice::from_ref(&huge)).await.unwrap_err();
@@ -805,9 +798,7 @@ mod tests {
     async fn a_batch_given_up_midway_goes_back_to_the_front_and_the_outbox_goes_on() {
         // a sender whose future is dropped while it waits for room in the socket (a timeout
         // around its send) leaves the rest of the batch it took to whoever sends next
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (_medium, outbox, rx, to) = opened();
         for i in 0..STREAM + 4 {
             outbox.send(&[datagram(i, to)]).await.unwrap();
         }
@@ -834,9 +825,7 @@ mod tests {
     #[tokio::test(flavor = "current_thread")]
     async fn what_waited_a_gap_goes_with_the_next_datagram_of_a_stream() {
         // a stream whose sends come within the gap, while the oldest waiting passes it
-        let (medium, tx, rx) = pair();
-        let to = rx.local_addr().unwrap();
-        let outbox = Outbox::new(tx, &medium.ingress(), TEST_QUIET);
+        let (_medium, outbox, rx, to) = opened();
         let n = STREAM + 8;
         for i in 0..n {
             outbox.send(&[datagram(i, to)]).await.unwrap();
