@@ -265,30 +265,13 @@ fn seabus_from_raw(url: &str, size: usize, n: usize, rate: f64, senders: usize) 
     seen
 }
 
-/// What seabus's receiver lost from one sender, by run: none is the target.
-#[derive(Default)]
-struct Losses(Vec<String>);
-
-impl Losses {
-    fn count(&mut self, run: &str, sent: usize, got: usize) {
-        if got < sent {
-            self.0.push(format!("{run}: {} of {sent} lost", sent - got));
-        }
-    }
-
-    /// In the smoke run, a loss fails the program (after the goals are reported).
-    fn finish(self, goals: Goals) {
-        let failed = seabus_bench::smoke() && !self.0.is_empty();
-        if failed {
-            eprintln!(
-                "smoke run: seabus's LCM receiver lost messages:\n  {}",
-                self.0.join("\n  ")
-            );
-        }
-        goals.finish();
-        if failed {
-            std::process::exit(1);
-        }
+/// A loss by seabus's receiver in one run (none is the target) fails the smoke run.
+fn count_lost(goals: &mut Goals, run: &str, sent: usize, got: usize) {
+    if got < sent {
+        goals.fail(format!(
+            "seabus's LCM receiver lost messages, {run}: {} of {sent} lost",
+            sent - got
+        ));
     }
 }
 
@@ -298,7 +281,6 @@ fn main() {
     let sb_url = format!("{}&recv_buf_size=8388608", url());
     println!("LCM on loopback multicast, ttl 0: liblcm (C, its defaults) vs seabus's LCM medium");
     let mut goals = Goals::new();
-    let mut losses = Losses::default();
 
     let n = scale(300_000, 100_000);
     let (mut c_rates, mut s_rates, mut c_got, mut s_got) = (Vec::new(), Vec::new(), 0, 0);
@@ -313,10 +295,10 @@ fn main() {
         s_rates.push(s.rate());
         s_sent.push(s.offered);
         let p = seabus_from_raw(&sb_url, 64, n, f64::INFINITY, 1);
-        losses.count("64 B unpaced, 1 plain socket", n, p.count);
+        count_lost(&mut goals, "64 B unpaced, 1 plain socket", n, p.count);
         p_sent.push(p.offered);
     }
-    losses.count("64 B unpaced, seabus sender", n * ROUNDS, s_got);
+    count_lost(&mut goals, "64 B unpaced, seabus sender", n * ROUNDS, s_got);
     let (s_sent, p_sent) = (common::median(s_sent), common::median(p_sent));
     println!(
         "  64 B unpaced, senders' rates: liblcm {}   seabus {}   a plain socket (prepared datagrams, sendmmsg) {}",
@@ -342,7 +324,12 @@ fn main() {
          bursts, without yielding",
     );
     let paced = seabus(&sb_url, 64, n, Some(300_000.0));
-    losses.count("64 B at 300k msg/s, seabus sender", n, paced.count);
+    count_lost(
+        &mut goals,
+        "64 B at 300k msg/s, seabus sender",
+        n,
+        paced.count,
+    );
     println!(
         "  64 B paced at 300k msg/s from a seabus sender (it reached {}): seabus delivered {} of {n}, lost {}",
         common::rate(paced.offered),
@@ -358,7 +345,12 @@ fn main() {
             n - raw.count
         );
         if senders == 1 {
-            losses.count("64 B at 300k msg/s, 1 plain socket", n, raw.count);
+            count_lost(
+                &mut goals,
+                "64 B at 300k msg/s, 1 plain socket",
+                n,
+                raw.count,
+            );
         }
     }
 
@@ -384,7 +376,7 @@ fn main() {
     let n = scale(10_000, 2_000);
     let mut c_lat = c_lcm(64, n, Some(2_000.0)).latencies;
     let s_run = seabus(&sb_url, 64, n, Some(2_000.0));
-    losses.count("64 B at 2 kHz, seabus sender", n, s_run.count);
+    count_lost(&mut goals, "64 B at 2 kHz, seabus sender", n, s_run.count);
     let mut s_lat = s_run.latencies;
     c_lat.sort();
     s_lat.sort();
@@ -396,5 +388,5 @@ fn main() {
         common::quantile_us(&s_lat, 0.99)
     );
     goals.at_most("64 B latency p50 at 2 kHz, seabus / liblcm", s50 / c50, 1.0);
-    losses.finish(goals);
+    goals.finish();
 }
