@@ -212,7 +212,6 @@ fn main() {
         "UDP on loopback, {n} messages per run, unpaced rates the median of {ROUNDS} (raw std::net::UdpSocket pair vs seabus UDP medium):"
     );
     let mut goals = Goals::new();
-    let mut lost = Vec::new();
     for size in [64usize, 1024] {
         // raw and seabus alternate, three rounds each; the medians are compared
         let (mut raw_rates, mut sb_rates, mut raw_lost, mut sb_lost) =
@@ -241,7 +240,10 @@ fn main() {
             n - paced.count
         );
         if paced.count < n {
-            lost.push(format!("{size} B: {} of {n} lost", n - paced.count));
+            goals.fail(format!(
+                "seabus lost messages paced at half the raw rate, {size} B: {} of {n} lost",
+                n - paced.count
+            ));
         }
         let (mut raw_lat, mut sb_lat, mut async_lat) = (Vec::new(), Vec::new(), Vec::new());
         for _ in 0..lat_runs {
@@ -287,15 +289,5 @@ fn main() {
             why,
         );
     }
-    let failed = seabus_bench::smoke() && !lost.is_empty();
-    if failed {
-        eprintln!(
-            "smoke run: seabus lost messages paced at half the raw rate:\n  {}",
-            lost.join("\n  ")
-        );
-    }
     goals.finish();
-    if failed {
-        std::process::exit(1);
-    }
 }
