@@ -23,9 +23,8 @@
 /// Nanoseconds since the Unix epoch, now.
 pub fn now_ns() -> i64 {
     #[cfg(all(target_arch = "x86_64", target_os = "linux"))]
-    if let Some(ns) = counter::now_ns() {
-        return ns;
-    }
+    return counter::now_ns();
+    #[cfg(not(all(target_arch = "x86_64", target_os = "linux")))]
     read(libc::CLOCK_REALTIME)
 }
 
@@ -129,6 +128,7 @@ mod counter {
     use super::{CALIBRATION_NS, Measured, measure};
     use std::cell::Cell;
     use std::sync::Mutex;
+    use std::sync::atomic::{AtomicI64, Ordering};
 
     fn ticks() -> u64 {
         // SAFETY: RDTSC exists on every x86-64 CPU and only reads the counter
@@ -178,22 +178,27 @@ mod counter {
         checked_at: None,
     });
 
+    /// Until when (the system clock, ns) stamps read the clock without looking at the
+    /// calibration: while the counter is not trusted, or its rate is being measured, every stamp
+    /// would otherwise take the calibration's lock.
+    static READ_UNTIL: AtomicI64 = AtomicI64::new(i64::MIN);
+
     thread_local! {
         pub(super) static ANCHOR: Cell<Option<Anchor>> = const { Cell::new(None) };
     }
 
-    /// The wall clock scaled from this thread's anchor; `None` when the clock must be read.
-    pub(super) fn now_ns() -> Option<i64> {
+    /// The wall clock, scaled from this thread's anchor when it can be.
+    pub(super) fn now_ns() -> i64 {
         let now = ticks();
         if let Some(ns) = ANCHOR.with(Cell::get).and_then(|a| a.at(now)) {
-            return Some(ns);
+            return ns;
         }
         anchor()
     }
 
-    /// The counter's rate as measured now; `None` while it cannot be used (not trusted, or being
-    /// measured).
-    fn current_rate() -> Option<f64> {
+    /// The counter's rate as measured now, or how long (ns) it cannot be used for (not trusted,
+    /// or being measured).
+    fn current_rate() -> Result<f64, i64> {
         let mut c = CALIBRATION.lock().unwrap_or_else(|p| p.into_inner());
         let mono = read(libc::CLOCK_MONOTONIC);
         if c.checked_at
@@ -207,40 +212,53 @@ mod counter {
             }
         }
         if !c.trusted {
-            return None;
+            return Err(CHECK_EVERY_NS);
         }
         let Some(origin) = c.origin else {
             c.origin = Some(together(libc::CLOCK_MONOTONIC));
-            return None;
+            return Err(CALIBRATION_NS);
         };
-        if (0..CALIBRATION_NS).contains(&(mono - origin.1)) {
-            return None;
+        let measuring = mono - origin.1;
+        if (0..CALIBRATION_NS).contains(&measuring) {
+            return Err(CALIBRATION_NS - measuring);
         }
         let now = together(libc::CLOCK_MONOTONIC);
         match measure(origin, now, c.rate) {
             Measured::Rate(r) => {
                 c.rate = Some(r);
-                Some(r)
+                Ok(r)
             }
-            Measured::Wait => None,
+            Measured::Wait => Err(CALIBRATION_NS - (now.1 - origin.1)),
             Measured::Again => {
                 c.origin = Some(now);
                 c.rate = None;
-                None
+                Err(CALIBRATION_NS)
             }
         }
     }
 
     /// Reads the clock, anchoring this thread there when the counter's rate is known.
     #[cold]
-    fn anchor() -> Option<i64> {
-        let Some(rate) = current_rate() else {
+    fn anchor() -> i64 {
+        let wall = read(libc::CLOCK_REALTIME);
+        // (a wall clock stepped back leaves a wait longer than any given: looked at again)
+        let left = READ_UNTIL.load(Ordering::Relaxed).saturating_sub(wall);
+        if left > 0 && left <= CHECK_EVERY_NS {
             ANCHOR.with(|a| a.set(None));
-            return None;
-        };
-        let (ticks, ns) = together(libc::CLOCK_REALTIME);
-        ANCHOR.with(|a| a.set(Anchor::new(ticks, ns, rate)));
-        Some(ns)
+            return wall;
+        }
+        match current_rate() {
+            Ok(rate) => {
+                let (ticks, ns) = together(libc::CLOCK_REALTIME);
+                ANCHOR.with(|a| a.set(Anchor::new(ticks, ns, rate)));
+                ns
+            }
+            Err(wait) => {
+                READ_UNTIL.store(wall.saturating_add(wait), Ordering::Relaxed);
+                ANCHOR.with(|a| a.set(None));
+                wall
+            }
+        }
     }
 }
 

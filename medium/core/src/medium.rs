@@ -1480,23 +1480,16 @@ impl Interface {
     /// Takes the next message if one is waiting.
     pub fn try_recv(&mut self) -> Result<Message, TryRecvError> {
         loop {
+            // closed before the look: every push made before the close is in, so finding
+            // nothing is the end
+            let closed = self.queue.is_closed();
             match self.queue.next(&mut self.batch) {
                 Some(m) => {
                     if let Some(m) = self.admit(m) {
                         return Ok(m);
                     }
                 }
-                None if self.queue.is_closed() => {
-                    // a push made before the close is in by now: looked for once more
-                    match self.queue.next(&mut self.batch) {
-                        Some(m) => {
-                            if let Some(m) = self.admit(m) {
-                                return Ok(m);
-                            }
-                        }
-                        None => return Err(TryRecvError::Closed),
-                    }
-                }
+                None if closed => return Err(TryRecvError::Closed),
                 None => return Err(TryRecvError::Empty),
             }
         }
