@@ -135,8 +135,8 @@ fn throughput(goals: &mut Goals) {
     );
     println!("  bare nmea::parse_str                              {bare:>9.0} sentences/s");
     println!("  seabus: frame, check, topic, parse, to datasets   {ours:>9.0} sentences/s");
-    // where seabus's time goes: what is left of the bare parse's time once the sentence is
-    // parsed, against what the drivers' readings take
+    // where seabus's time goes: up to a parsed sentence (set beside the bare parse), then the
+    // drivers' readings
     let ns = |rate: f64| 1e9 / rate;
     println!(
         "  of which framing, checksum, topic and parse {:.0} ns a sentence (bare parse_str {:.0} \

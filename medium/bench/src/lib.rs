@@ -151,6 +151,16 @@ impl Goals {
         self.failures.push(what);
     }
 
+    /// A run where nothing may be lost: `got` of `sent` arrived. A loss is a failure
+    /// ([`Goals::fail`]) named by `what`; true when nothing was lost.
+    pub fn none_lost(&mut self, what: &str, sent: usize, got: usize) -> bool {
+        if got >= sent {
+            return true;
+        }
+        self.fail(format!("{what}: {} of {sent} lost", sent - got));
+        false
+    }
+
     /// What fails the smoke run: every collapsed ratio and every failure, one line each.
     fn failed(&self) -> Vec<String> {
         let collapsed = self.outcomes.iter().filter(|o| o.collapsed()).map(line);
@@ -248,5 +258,14 @@ mod tests {
                 "run 2: 3 of 100 lost"
             ]
         );
+    }
+
+    #[test]
+    fn a_loss_is_a_failure_named_with_how_many_of_how_many() {
+        let mut g = Goals::new();
+        assert!(g.none_lost("paced run", 100, 100));
+        assert!(g.failed().is_empty());
+        assert!(!g.none_lost("paced run", 100, 97));
+        assert_eq!(g.failed(), ["paced run: 3 of 100 lost"]);
     }
 }
