@@ -10,7 +10,7 @@
 mod common;
 use common::*;
 use serde_json::Value as Json;
-use std::io::{BufRead, BufReader, Read};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::mpsc;
@@ -277,7 +277,9 @@ fn a_quiet_topic_is_unadvertised_junk_is_answered_or_disconnected_and_shown_in_t
         .unwrap();
     assert!(steady.status.success(), "{}", stderr(&steady));
     // the watch ends with the steady topic's last message, before the sweep could take it
-    drop(watcher.stdin.take());
+    let mut input = watcher.stdin.take().unwrap();
+    writeln!(input, "lab.steady 39").unwrap();
+    drop(input);
     let mut rest = String::new();
     watched.read_to_string(&mut rest).unwrap();
     let out = watcher.wait_with_output().unwrap();

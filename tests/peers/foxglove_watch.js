@@ -7,6 +7,8 @@
 //   node foxglove_watch.js URL JUNK_SECONDS
 //
 // Prints "watching" once both connections are open; the watch lasts until standard input closes.
+// A line "TOPIC N" on standard input makes the end wait (3 s at most) until N messages of TOPIC
+// have arrived, as the last ones sent may still be on their way when the sender exits.
 // Then it prints one JSON object: {"events": [{"t": ms, "event": "advertise"|"unadvertise",
 // "topic": …}], "messages": {topic: [ms, …]}, "logs": [{level, name, message, file, line}],
 // "junk": {"statuses": N, "sent": N, "garbage_at": ms, "closed_at": ms|null}}
@@ -81,9 +83,20 @@ const opened = (which) => {
   watchFrom = Date.now();
   console.log("watching");
   // the watch ends when whoever started it closes its standard input
+  let input = "";
+  process.stdin.on("data", (chunk) => {
+    input += chunk;
+  });
   process.stdin.on("end", () => {
-    console.log(JSON.stringify(out));
-    process.exit(0);
+    const [topic, count] = input.trim().split(/\s+/);
+    const until = Date.now() + 3000;
+    const finish = () => {
+      const have = (out.messages[topic] || []).length;
+      if (topic && have < Number(count) && Date.now() < until) return setTimeout(finish, 20);
+      console.log(JSON.stringify(out));
+      process.exit(0);
+    };
+    finish();
   });
   process.stdin.resume();
   setTimeout(() => {
