@@ -325,13 +325,44 @@ pub async fn take_control(c: &Client, user: &str) {
         .click()
         .await
         .expect("clicked");
+    // the page says what taking control keeps, and takes it once confirmed
+    confirm_take(c).await;
     until(
         c,
         Duration::from_secs(5),
         "control",
-        &format!("return window.seabusConsole.state().lease === '{user}';"),
+        &format!(
+            "const s = window.seabusConsole.state(); return s.lease === '{user}' && s.inControl;"
+        ),
     )
     .await;
+}
+
+/// Confirms the open take-control dialog; what it said (title, text, kept values).
+pub async fn confirm_take(c: &Client) -> Json {
+    until(
+        c,
+        Duration::from_secs(5),
+        "the take-control dialog",
+        "const d = document.querySelector('[data-testid=confirm-dialog]');
+         return d.open && /^Take control/.test(d.querySelector('h2').textContent);",
+    )
+    .await;
+    let said = js(
+        c,
+        "const d = document.querySelector('[data-testid=confirm-dialog]');
+         return {title: d.querySelector('h2').textContent,
+                 text: document.getElementById('confirm-text').textContent,
+                 fields: document.getElementById('confirm-fields').textContent};",
+    )
+    .await;
+    c.find(Locator::Css("[data-testid=confirm-ok]"))
+        .await
+        .expect("the dialog's take button")
+        .click()
+        .await
+        .expect("clicked");
+    said
 }
 
 /// Sets a slider to `value` and lets go of it, as a user dragging it does.

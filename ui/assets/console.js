@@ -44,7 +44,7 @@ function consolePage() {
     conn: $('connection'), userName: $('user-name'), userRoles: $('user-roles'),
     edit: $('edit-toggle'), designer: $('designer'), toasts: $('toasts'),
     dialog: $('confirm-dialog'), dialogTitle: $('confirm-title'), dialogText: $('confirm-text'), dialogFields: $('confirm-fields'),
-    holdBox: $('hold-indicator'), kept: $('kept'),
+    holdBox: $('hold-indicator'), kept: $('kept'), stop: $('header-stop'),
   };
 
   const S = {
@@ -53,7 +53,11 @@ function consolePage() {
     leaseRole: 'pilot', designerRole: 'designer',
     // the control of the layout's vehicle (or the console's one control), and every vehicle's
     // by name ('' for the console's one)
-    lease: { holder: null, since: null },
+    lease: { holder: null, session: null, since: null },
+    // this page's log-in (control is held by one log-in) and the console's origin on the bus
+    session: null, origin: null,
+    // who commanded each topic's last values, and since when: {TOPIC: {by, since}}
+    commandedBy: {},
     leases: {},
     node: null,
     layoutName: null, layout: null, layoutError: null,
@@ -93,7 +97,9 @@ function consolePage() {
     },
     history: () => S.history,
     /** Who controls `vehicle` ('' for the console's one control): {holder, since}. */
-    leaseOf: (vehicle) => S.leases[vehicle || ''] || { holder: null, since: null },
+    leaseOf: (vehicle) => S.leases[vehicle || ''] || { holder: null, session: null, since: null },
+    /** Whether this log-in holds the open layout's control (not another log-in of the user). */
+    inControl: () => inControl(S.lease),
     /** The node the console runs on (a fleet table leaves it out). */
     node: () => S.node,
     /** Opens layout `name` for `vars` (a fleet table's vehicle): the page's address says which. */
@@ -118,8 +124,9 @@ function consolePage() {
       if (!ctx.canCommandAny()) return { ok: false, why: 'observer', hidden: true };
       const role = ctx.commandRole(n);
       if (!ctx.hasRole(role)) return { ok: false, why: `needs role ${role}`, hidden: false };
-      if (c.lease !== false && S.lease.holder !== S.user) {
-        return { ok: false, why: 'take control first', hidden: false };
+      if (c.lease !== false && !inControl(S.lease)) {
+        const why = S.lease.holder && S.lease.holder === S.user ? 'you have control in another log-in' : 'take control first';
+        return { ok: false, why, hidden: false };
       }
       if (S.conn !== 'connected') return { ok: false, why: 'disconnected', hidden: false };
       return { ok: true, why: '', hidden: false };
@@ -158,6 +165,9 @@ function consolePage() {
     },
     send: sendCommand,
     setAndSend(n, f, v) { return sendCommand(n, f ? { [f]: v } : {}); },
+    /** The layout's safe action (a command marked `safe`, the stop), or null. */
+    safeCommand,
+    sendSafe,
     hold: holdCommand,
     sendMsg,
     toast,
@@ -282,6 +292,8 @@ function consolePage() {
     attempt = 0;
     S.helloSeen = true;
     S.user = m.user || null;
+    S.session = m.session ?? null;
+    S.origin = m.origin || null;
     S.roles = Array.isArray(m.roles) ? m.roles.map(String) : String(m.roles || '').split(/\s+/).filter(Boolean);
     if (m.lease_role) S.leaseRole = String(m.lease_role);
     if (m.designer_role) S.designerRole = String(m.designer_role);
@@ -357,6 +369,7 @@ function consolePage() {
     S.pending = {};
     S.chosen = m.chosen && typeof m.chosen === 'object' ? m.chosen : {};
     S.commanded = m.commanded && typeof m.commanded === 'object' ? m.commanded : {};
+    S.commandedBy = m.commanded_by && typeof m.commanded_by === 'object' ? m.commanded_by : {};
     S.kept = {};
     for (const k of Array.isArray(m.kept) ? m.kept : []) if (k && k.topic) S.kept[k.topic] = k;
     if (!S.layouts.some((l) => l.name === L.name)) {
@@ -412,33 +425,38 @@ function consolePage() {
   /** Keeps a `lease` message's holder under its vehicle. */
   function rememberLease(l) {
     if (!l || typeof l !== 'object') return;
-    S.leases[l.vehicle || ''] = { holder: l.holder ?? null, since: l.since ?? null };
+    S.leases[l.vehicle || ''] = { holder: l.holder ?? null, session: l.session ?? null, since: l.since ?? null };
+  }
+
+  /** Whether lease `l` is held by this page's log-in. */
+  function inControl(l) {
+    return !!l.holder && l.holder === S.user && l.session !== null && l.session === S.session;
   }
 
   function setLease(l) {
-    if (l && typeof l === 'object') S.lease = { holder: l.holder ?? null, since: l.since ?? null };
-    else S.lease = { holder: l || null, since: null };
+    S.lease = { holder: l.holder ?? null, session: l.session ?? null, since: l.since ?? null };
     const h = S.lease.holder;
-    ui.holder.textContent = h ? (h === S.user ? `you (${h})` : h) : 'free';
-    ui.holder.className = `lease-holder ${h ? (h === S.user ? 'mine' : 'other') : 'none'}`;
+    const mine = inControl(S.lease);
+    ui.holder.textContent = h ? (mine ? `you (${h})` : h === S.user ? `you, in another log-in (${h})` : h) : 'free';
+    ui.holder.className = `lease-holder ${h ? (mine ? 'mine' : 'other') : 'none'}`;
     ui.holder.title = h && S.lease.since ? `since ${new Date(Number(S.lease.since) * 1000).toLocaleTimeString()}` : '';
     ui.holder.dataset.holder = h || '';
     const mayTake = S.roles.includes(S.leaseRole);
     // a layout that commands nothing under control (a fleet table) offers none to take
     const controlled = Object.values((S.layout && S.layout.commands) || {}).some((c) => c.lease !== false);
-    ui.take.hidden = !mayTake || h === S.user || (S.layout && !controlled);
+    ui.take.hidden = !mayTake || mine || (S.layout && !controlled);
     ui.take.disabled = !!h || S.conn !== 'connected';
     const vehicle = layoutVehicle();
-    ui.take.title = h ? `${h} holds control` : `take control of ${vehicle || 'the vehicle'}`;
+    ui.take.title = h ? (h === S.user ? 'you hold control in another log-in' : `${h} holds control`) : `take control of ${vehicle || 'the vehicle'}`;
     ui.controlLabel.textContent = vehicle ? `Control of ${vehicle}` : 'Control';
-    ui.release.hidden = h !== S.user || !S.user;
-    if (h !== S.user) inputs.stopAll(false);
+    ui.release.hidden = !mine;
+    if (!mine) inputs.stopAll(false);
     updatePermissions();
   }
 
   function onLease(m) {
     rememberLease(m);
-    if ((m.vehicle || '') === layoutVehicle()) setLease({ holder: m.holder, since: m.since });
+    if ((m.vehicle || '') === layoutVehicle()) setLease(m);
     for (const w of widgets) if (w.onLease) w.onLease();
   }
 
@@ -492,6 +510,14 @@ function consolePage() {
   function fieldValue(n, f) {
     const c = ctx.command(n);
     if (!c || !f) return { value: undefined, source: 'unknown' };
+    // a field no control chooses is the layout's own (a button's `set`, or the command's
+    // declared value): never what was last commanded on the topic, which may be another
+    // button's value (a start after a stop)
+    const chosen = S.chosen[n] || [];
+    if (!chosen.includes(f)) {
+      if (c.fields && c.fields[f] !== undefined) return { value: c.fields[f], source: 'layout' };
+      return { value: undefined, source: 'unknown' };
+    }
     const changed = S.fields[n];
     if (changed && changed[f] !== undefined) return { value: changed[f], source: 'changed' };
     const p = S.pending[n];
@@ -506,8 +532,6 @@ function consolePage() {
       if (fresh && typeof v === 'number' && Number.isFinite(v)) return { value: ctx.clamp(n, f, v), source: 'measured' };
       return { value: undefined, source: 'unknown' };
     }
-    const chosen = S.chosen[n] || [];
-    if (!chosen.includes(f) && c.fields && c.fields[f] !== undefined) return { value: c.fields[f], source: 'layout' };
     return { value: undefined, source: 'unknown' };
   }
 
@@ -517,10 +541,12 @@ function consolePage() {
     const c = ctx.command(name);
     const values = [];
     const unknown = [];
+    const chosen = S.chosen[name] || [];
     for (const f of Object.keys((c && c.fields) || {})) {
       const v = set[f] !== undefined ? set[f] : fieldValue(name, f).value;
       if (v === undefined) unknown.push(f);
-      else values.push({ field: f, value: v, changed: set[f] !== undefined });
+      // a button's own value is the layout's, not a change the pilot made
+      else values.push({ field: f, value: v, changed: set[f] !== undefined && chosen.includes(f) });
     }
     return { values, unknown };
   }
@@ -528,6 +554,7 @@ function consolePage() {
   function onCommanded(m) {
     if (!m.topic || !m.fields || typeof m.fields !== 'object') return;
     S.commanded[m.topic] = m.fields;
+    if (m.by !== undefined) S.commandedBy[m.topic] = { by: m.by, since: m.since };
     for (const [n, c] of Object.entries((S.layout && S.layout.commands) || {})) {
       if (c && c.topic === m.topic) delete S.pending[n];
     }
@@ -619,7 +646,13 @@ function consolePage() {
     const vehicle = layoutVehicle();
     return vehicle ? { type: 'lease', action, vehicle } : { type: 'lease', action };
   };
-  ui.take.addEventListener('click', () => sendMsg(leaseMsg('take')));
+  ui.take.addEventListener('click', () => takeDialog());
+  if (ui.stop) {
+    ui.stop.addEventListener('click', () => {
+      const name = safeCommand();
+      if (name) { inputs.stopAll(true); sendSafe(name); }
+    });
+  }
   ui.release.addEventListener('click', () => {
     inputs.stopAll(true);
     sendMsg(leaseMsg('release'));
@@ -646,7 +679,11 @@ function consolePage() {
     const e = tree ? renderNode(ctx, tree) : null;
     ui.root.replaceChildren(e || el('p', { class: 'placeholder', text: S.layout ? 'This layout shows nothing for your roles.' : 'Waiting for the layout…' }));
     inputs.attach(S.layout);
+    // the kept-command bar has its room before anything is kept: nothing moves when it shows
+    const keeps = Object.values((S.layout && S.layout.commands) || {}).some((c) => c && c.keep_ms);
+    document.body.classList.toggle('has-kept', keeps);
     showKept(true);
+    showStop();
     for (const w of widgets) w.tick();
     ctx.redrawSoon();
   }
@@ -654,6 +691,21 @@ function consolePage() {
   function updatePermissions() {
     for (const w of widgets) if (w.permissions) w.permissions();
     if (ui.take) ui.take.disabled = !!S.lease.holder || S.conn !== 'connected';
+    showStop();
+  }
+
+  /** The header's stop: there whenever the layout has a safe action the user may send, so that
+   * it is reachable without scrolling on every layout; off (saying why) while it cannot go. */
+  function showStop() {
+    if (!ui.stop) return;
+    const name = safeCommand();
+    const a = name ? ctx.access(name) : null;
+    ui.stop.hidden = !name || a.hidden || !ctx.hasRole(ctx.commandRole(name));
+    if (ui.stop.hidden) return;
+    ui.stop.textContent = `${name} (Esc)`;
+    ui.stop.dataset.command = name;
+    ui.stop.disabled = !a.ok;
+    ui.stop.title = a.ok ? `send ${name} now (Escape sends it too)` : a.why;
   }
 
   function syncInputs() {
@@ -661,6 +713,8 @@ function consolePage() {
   }
 
   setInterval(() => { for (const w of widgets) w.tick(); showKept(); }, 250);
+  // the safe action: an input being changed (a slider dragged) sends nothing when let go
+  document.addEventListener('seabus:safe', () => { for (const w of widgets) if (w.onSafe) w.onSafe(); });
   window.addEventListener('resize', () => ctx.redrawSoon());
 
   // ------------------------------------------------------------ commands
@@ -713,6 +767,27 @@ function consolePage() {
     syncInputs();
   }
 
+  function safeCommand() {
+    const cmds = (S.layout && S.layout.commands) || {};
+    return Object.keys(cmds).find((n) => cmds[n] && cmds[n].safe) || null;
+  }
+
+  /** The safe action, at once and as the layout declares it: nothing the pilot changed and did
+   * not send goes with it or after it (every change is forgotten). */
+  function sendSafe(name) {
+    const a = ctx.access(name);
+    if (!a.ok) { toast(`${name}: ${a.why}`, 'warn'); return false; }
+    safeEpoch++;
+    for (const h of [...holding]) h.cancel();
+    if (ui.dialog.open) ui.dialog.close('cancel');
+    S.fields = {};
+    syncInputs();
+    const ok = sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields: {} });
+    if (ok) wentOut(name, {});
+    else toast(`${name} not sent: disconnected`, 'error');
+    return ok;
+  }
+
   /** Sends a command with some fields set, asking first when it needs confirmation. */
   function sendCommand(name, set) {
     const p = prepare(name, set || {});
@@ -729,8 +804,11 @@ function consolePage() {
   }
 
   async function armAndSend(name, fields) {
+    const epoch = safeEpoch;
     try {
       const id = await arm(name);
+      // the safe action went while it was being armed: what was confirmed before it does not follow it
+      if (epoch !== safeEpoch) throw new Error(`${safeCommand()} sent meanwhile`);
       if (sendMsg({ type: 'send', layout: ctx.layoutName(), command: name, fields, confirmed: id })) wentOut(name, fields);
       else dropChanges(name);
     } catch (e) {
@@ -742,7 +820,11 @@ function consolePage() {
   /** Press and hold: arms at once, sends when held for the hold time, nothing when let go early. */
   function holdCommand(name, set, cb) {
     const p = prepare(name, set || {});
-    const end = () => { try { cb && cb.end && cb.end(); } catch (e) { /* */ } };
+    let handle = null;
+    const end = () => {
+      holding.delete(handle);
+      try { cb && cb.end && cb.end(); } catch (e) { /* */ }
+    };
     if (!p) { end(); return { cancel() {} }; }
     const holdMs = ctx.holdMs(name) + HOLD_MARGIN_MS;
     const t0 = performance.now();
@@ -771,7 +853,7 @@ function consolePage() {
       else dropChanges(name);
       end();
     }
-    return {
+    handle = {
       cancel() {
         if (done || cancelled) return;
         cancelled = true;
@@ -781,6 +863,8 @@ function consolePage() {
       },
       get done() { return done; },
     };
+    holding.add(handle);
+    return handle;
   }
   ctx.holdIndicator = (text) => {
     ui.holdBox.querySelector('.hold-text').textContent = text;
@@ -791,6 +875,11 @@ function consolePage() {
       end() { ui.holdBox.hidden = true; fill.style.width = '0'; },
     };
   };
+
+  // the holds under way (a button or key held to send): the safe action cancels them
+  const holding = new Set();
+  // counts the safe actions sent: a confirmed command armed before one is not sent after it
+  let safeEpoch = 0;
 
   let dialogBusy = false;
   function confirmDialog(name, c, fields) {
@@ -852,6 +941,68 @@ function consolePage() {
     d.querySelector('[value="cancel"]').focus();
   }
 
+  /** What taking control keeps, for each kept command of the layout: the values the vehicle
+   * was last commanded (as the server would build them: the layout's own value for a field no
+   * control chooses), who commanded them and since when; `fields` null when nothing (or not
+   * every field) was commanded. */
+  function keptOnTake() {
+    const out = [];
+    for (const [n, c] of Object.entries((S.layout && S.layout.commands) || {})) {
+      if (!c || !c.keep_ms || c.lease === false) continue;
+      const chosen = S.chosen[n] || [];
+      const cmd = S.commanded[c.topic];
+      let fields = cmd ? {} : null;
+      for (const f of Object.keys(c.fields || {})) {
+        if (!fields) break;
+        const v = chosen.includes(f) ? cmd[f] : c.fields[f];
+        if (v === undefined) fields = null;
+        else fields[f] = v;
+      }
+      out.push({ name: n, topic: c.topic, fields, by: S.commandedBy[c.topic] || null, everyMs: c.keep_ms });
+    }
+    return out;
+  }
+
+  /** Asks before control is taken, saying what the vehicle will do: each kept command goes on
+   * with the course it was last commanded (by whom, since when), held by the console; with
+   * nothing commanded, the vehicle does what it does without commands until one is sent. The
+   * server takes control only if those are still the vehicle's last commanded values. */
+  function takeDialog() {
+    if (dialogBusy) return;
+    dialogBusy = true;
+    const d = ui.dialog;
+    const okBtn = d.querySelector('[value="ok"]');
+    const vehicle = layoutVehicle() || 'the vehicle';
+    const kept = keptOnTake();
+    const keep = {};
+    const lines = [];
+    for (const k of kept) {
+      if (!k.fields) {
+        lines.push(`${k.name}: nothing commanded on ${k.topic} yet, so nothing is kept.`);
+        continue;
+      }
+      keep[k.name] = k.fields;
+      const by = k.by && k.by.by ? (k.by.by === S.origin ? 'this console' : k.by.by) : 'an earlier command';
+      const since = k.by && k.by.since ? ` at ${new Date(Number(k.by.since) * 1000).toLocaleTimeString()}` : '';
+      const values = Object.entries(k.fields).map(([f, v]) => `${f} = ${fmtValue(v)}`).join(', ');
+      lines.push(`${k.name} kept: ${values}\n   (commanded by ${by}${since}; sent again every ${(k.everyMs / 1000).toFixed(1)} s until you change it or release control)`);
+    }
+    ui.dialogTitle.textContent = `Take control of ${vehicle}?`;
+    ui.dialogText.textContent = Object.keys(keep).length
+      ? `Whatever commands ${vehicle} now may step back: the console goes on with its last course.`
+      : `Whatever commands ${vehicle} now may step back, and nothing is kept: ${vehicle} goes on as it does without commands (its own timeout and safe action) until you send one.`;
+    ui.dialogFields.textContent = lines.join('\n');
+    okBtn.textContent = 'Take control';
+    d.addEventListener('close', function closed() {
+      d.removeEventListener('close', closed);
+      dialogBusy = false;
+      if (d.returnValue === 'ok') sendMsg({ ...leaseMsg('take'), keep });
+    });
+    d.returnValue = '';
+    d.showModal();
+    d.querySelector('[value="cancel"]').focus();
+  }
+
   // ------------------------------------------------------------ toasts
 
   function toast(text, kind) {
@@ -868,6 +1019,7 @@ function consolePage() {
       return {
         layout: S.layout ? S.layout.name : S.layoutName,
         lease: S.lease.holder,
+        inControl: inControl(S.lease),
         vehicle: layoutVehicle(),
         // the vehicles someone controls ('' for the console's one control), with who
         leases: Object.fromEntries(Object.entries(S.leases).filter(([, v]) => v.holder).map(([k, v]) => [k, v.holder])),

@@ -150,8 +150,40 @@ export function createInputs(ctx) {
     return typeof b.key === 'string' && b.key.length === 1 && ev.key.length === 1 && b.key.toLowerCase() === ev.key.toLowerCase();
   }
 
+  /** The keys bound to the layout's safe action (a stop); Escape sends it when no key of the
+   * layout is bound to Escape. */
+  function safeKeys(ev) {
+    const safe = keys.filter((b) => keyMatches(b, ev) && isSafe(b));
+    if (safe.length || ev.key !== 'Escape' || keys.some((b) => keyMatches(b, ev))) return safe;
+    const name = ctx.safeCommand();
+    return name ? [{ key: 'Escape', command: name }] : [];
+  }
+  function isSafe(b) {
+    const r = ref(b);
+    const c = r && cmdOf(r.name);
+    return !!(c && c.safe && !r.field);
+  }
+
+  /** The safe action, from every state of the page: a dialog open (it is cancelled), the focus
+   * in an input (what was typed is not sent), a slider being dragged (it sends nothing when let
+   * go), a held key or stick (released first). */
+  function safeAction(ev, list) {
+    ev.preventDefault();
+    if (ev.repeat) return;
+    stopAll(true);
+    const open = document.querySelector('dialog[open]');
+    if (open) open.close('cancel');
+    document.dispatchEvent(new CustomEvent('seabus:safe'));
+    for (const b of list) {
+      const r = ref(b);
+      if (r) ctx.sendSafe(r.name);
+    }
+  }
+
   function onKeyDown(ev) {
     if (!layout || ev.ctrlKey || ev.metaKey || ev.altKey) return;
+    const safe = safeKeys(ev);
+    if (safe.length) { safeAction(ev, safe); return; }
     if (editable(ev.target)) return;
     if ((ev.key === ' ' || ev.key === 'Enter') && ev.target instanceof Element && ev.target.closest('button, a, [role="tab"]')) return;
     if (document.querySelector('dialog[open]')) return;

@@ -1427,6 +1427,8 @@ function input(ctx, node, kind) {
   const max = num(node.max, lim.max);
   const step = num(node.step, undefined);
   let control, sync;
+  // what the safe action does to the input while it is being changed
+  let safeStop = null;
   const controls = [];
 
   if (kind === 'button') {
@@ -1475,12 +1477,28 @@ function input(ctx, node, kind) {
     r.step = step !== undefined ? String(step) : 'any';
     const out = el('output', { class: 'input-value', 'data-testid': 'input-value' });
     let dragging = false;
+    // a drag the safe action cut short: nothing goes when it is let go
+    let abandoned = false;
     const show = () => { out.textContent = fmtValue(parseFloat(r.value), node.precision); };
+    // the knob moves only when it is dragged (or by keys): a click on the track beside it would
+    // send wherever the click landed
+    r.addEventListener('pointerdown', (ev) => {
+      abandoned = false;
+      if (r.disabled || ev.button !== 0 || onKnob(r, ev)) return;
+      ev.preventDefault();
+      r.focus();
+    });
     r.addEventListener('input', () => { dragging = true; show(); });
     r.addEventListener('change', () => {
       dragging = false;
+      if (abandoned) { abandoned = false; sync(); return; }
       ctx.setAndSend(ref.name, ref.field, parseFloat(r.value));
     });
+    safeStop = () => {
+      abandoned = dragging;
+      dragging = false;
+      sync();
+    };
     sync = () => {
       if (dragging) return;
       const v = ctx.fieldValue(ref.name, ref.field);
@@ -1553,6 +1571,7 @@ function input(ctx, node, kind) {
     node, el: e,
     update() {},
     tick() {},
+    onSafe() { if (safeStop) safeStop(); },
     permissions() {
       let a = ctx.access(ref.name);
       // a slider with no known value would send wherever the browser put its knob
@@ -1584,6 +1603,17 @@ function input(ctx, node, kind) {
   w.permissions();
   w.sync();
   return e;
+}
+
+/** Whether a pointer event on range input `r` is on its knob (within the knob's width of where
+ * the value puts it), rather than elsewhere on the track. */
+function onKnob(r, ev) {
+  const box = r.getBoundingClientRect();
+  const min = parseFloat(r.min), max = parseFloat(r.max), v = parseFloat(r.value);
+  const knob = 16; // Chromium's and Firefox's default knob, in CSS pixels
+  const f = max > min && Number.isFinite(v) ? (v - min) / (max - min) : 0;
+  const x = box.left + knob / 2 + f * (box.width - knob);
+  return Math.abs(ev.clientX - x) <= knob;
 }
 
 function c2label(ctx, ref) {

@@ -52,14 +52,24 @@ pub fn sessions_beside(users: &Path) -> PathBuf {
     users.with_file_name(name)
 }
 
-/// A logged-in user.
+/// A logged-in user: one log-in (a user logged in twice, in two browsers, has two).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Session {
     /// The user's name.
     pub user: String,
     /// The user's roles.
     pub roles: Vec<String>,
+    /// Which log-in this is, among the console's sessions since it started: what holds control,
+    /// and what a page is told of its own (never the token or its hash).
+    pub id: u64,
     expires: SystemTime,
+}
+
+/// Numbers the sessions of a console's run.
+static NEXT_SESSION: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+fn next_session() -> u64 {
+    NEXT_SESSION.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 impl Session {
@@ -303,6 +313,7 @@ impl Sessions {
                     Session {
                         user: s.user,
                         roles,
+                        id: next_session(),
                         expires,
                     },
                 );
@@ -340,6 +351,7 @@ impl Sessions {
             Session {
                 user: user.to_string(),
                 roles: roles.to_vec(),
+                id: next_session(),
                 expires: now + SESSION_LIFETIME,
             },
         );

@@ -427,7 +427,29 @@ pub async fn handle(hub: &Hub, client: &mut Client, text: &str) -> Vec<Json> {
             if !vehicle.is_empty() && !crate::layout::is_name(&vehicle) {
                 return vec![error(format!("`{vehicle}` is not a vehicle name"))];
             }
-            match hub.lease(&client.session, &vehicle, take).await {
+            // what the page showed the pilot would be kept on taking control: {COMMAND: fields}
+            let keep: Result<Vec<(String, DataMap)>, String> = match msg.get("keep") {
+                None | Some(Json::Null) => Ok(Vec::new()),
+                Some(Json::Object(o)) if take => o
+                    .iter()
+                    .map(|(k, v)| {
+                        serde_json::from_value::<DataMap>(v.clone())
+                            .map(|f| (k.clone(), f))
+                            .map_err(|e| format!("keep.{k}: {e}"))
+                    })
+                    .collect(),
+                Some(_) => Err("keep: an object of commands and their fields, on take".into()),
+            };
+            let keep = match keep {
+                Ok(k) => k,
+                Err(e) => return vec![error(e)],
+            };
+            let done = if take {
+                hub.take_keeping(client, &vehicle, &keep).await
+            } else {
+                hub.lease(&client.session, &vehicle, false).await
+            };
+            match done {
                 Ok(()) => Vec::new(),
                 Err(e) => vec![error(e), hub.vehicle_lease_json(&vehicle)],
             }

@@ -409,7 +409,10 @@ async fn a_crafted_message_overriding_a_buttons_fixed_field_is_refused() {
 async fn a_dead_man_command_goes_neutral_once_when_its_re_sends_stop() {
     let s = setup().await;
     let mut d = driver(&s.bus);
-    let mut ana = connect(&s, "ana", "ana-password").await;
+    let (_, cookie, _) = login(s.addr, "ana", "ana-password").await;
+    let cookie = cookie.unwrap();
+    let mut ana = open_ws(s.addr, Some(&cookie)).await.unwrap();
+    next(&mut ana, "hello").await;
     open(&mut ana, "pilot").await;
     send(&mut ana, json!({"type": "lease", "action": "take"})).await;
     next_where(&mut ana, "lease", |v| v["holder"] == "ana").await;
@@ -453,8 +456,10 @@ async fn a_dead_man_command_goes_neutral_once_when_its_re_sends_stop() {
         .collect();
     assert_eq!(speeds, [0.0], "neutral once when the connection closed");
 
-    // an explicit release: neutral once, at once
-    let mut ana = connect(&s, "ana", "ana-password").await;
+    // the page connects again (its log-in keeps control for the grace): an explicit release
+    // goes neutral once, at once
+    let mut ana = open_ws(s.addr, Some(&cookie)).await.unwrap();
+    next(&mut ana, "hello").await;
     open(&mut ana, "pilot").await;
     send(&mut ana, drive.clone()).await;
     send(
@@ -654,4 +659,64 @@ async fn logging_out_releases_control_and_re_sends_are_held_to_the_rate() {
             .any(|m| field(m, "speed").and_then(|v| v.as_f64()) == Some(0.0)),
         "{got:?}"
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn control_belongs_to_the_log_in_that_took_it_not_to_its_user() {
+    let s = setup().await;
+    let mut d = driver(&s.bus);
+    // the same pilot logged in twice (two machines): each log-in has its own session
+    let (_, first_cookie, _) = login(s.addr, "ana", "ana-password").await;
+    let mut first = open_ws(s.addr, Some(&first_cookie.unwrap())).await.unwrap();
+    let first_hello = next(&mut first, "hello").await;
+    let (_, second_cookie, _) = login(s.addr, "ana", "ana-password").await;
+    let second_cookie = second_cookie.unwrap();
+    let mut second = open_ws(s.addr, Some(&second_cookie)).await.unwrap();
+    let second_hello = next(&mut second, "hello").await;
+    assert_ne!(first_hello["session"], second_hello["session"]);
+    open(&mut first, "pilot").await;
+    open(&mut second, "pilot").await;
+    send(&mut first, json!({"type": "lease", "action": "take"})).await;
+    let taken = next_where(&mut second, "lease", |v| v["holder"] == "ana").await;
+    assert_eq!(taken["session"], first_hello["session"]);
+    // the second log-in neither takes control nor commands
+    refused_with(
+        &mut second,
+        json!({"type": "lease", "action": "take"}),
+        "you have control in another log-in",
+    )
+    .await;
+    refused_with(
+        &mut second,
+        json!({"type": "send", "layout": "pilot", "command": "course",
+               "fields": {"heading": 10, "speed": 1}}),
+        "another log-in",
+    )
+    .await;
+    assert!(
+        received(&mut d, Duration::from_millis(200))
+            .await
+            .is_empty()
+    );
+    // its log-out leaves the first log-in's control
+    let (status, _) = http(
+        s.addr,
+        format!(
+            "GET /logout HTTP/1.1\r\nHost: {}\r\nCookie: {second_cookie}\r\nConnection: close\r\n\r\n",
+            s.addr
+        ),
+    )
+    .await;
+    assert_eq!(status, 303);
+    send(
+        &mut first,
+        json!({"type": "drive", "layout": "pilot", "command": "course",
+               "fields": {"heading": 20, "speed": 1}}),
+    )
+    .await;
+    let got = received(&mut d, Duration::from_millis(300)).await;
+    assert!(!got.is_empty(), "the first log-in still commands");
+    assert_eq!(field(&got[0], "heading"), Some(Value::from(20)));
+    send(&mut first, json!({"type": "lease", "action": "release"})).await;
+    next_where(&mut first, "lease", |v| v["holder"].is_null()).await;
 }

@@ -39,6 +39,9 @@ pub enum CommandError {
     /// Another user holds control.
     #[error("no control: {0} has it")]
     ControlHeldBy(String),
+    /// The same user holds control in another log-in.
+    #[error("no control: you have it in another log-in")]
+    ControlElsewhere,
     /// No one holds control.
     #[error("no control: take control first")]
     NoControl,
@@ -165,6 +168,8 @@ pub(super) type DriveKey = (u64, String, String);
 #[derive(Debug, Clone)]
 pub(super) struct Drive {
     pub(super) user: String,
+    /// The log-in it is sent under.
+    pub(super) session: u64,
     /// The vehicle whose control it is sent under (`""`: the console's one control).
     vehicle: String,
     name: String,
@@ -279,9 +284,10 @@ impl Hub {
             return Err(CommandError::RoleNeeded(role.to_string()));
         }
         if decl.lease {
-            match self.state().lease.holder(decl.vehicle()) {
-                Some(u) if u == session.user => {}
-                Some(u) => return Err(CommandError::ControlHeldBy(u.to_string())),
+            match self.state().lease.holding(decl.vehicle()) {
+                Some(h) if h.session == session.id => {}
+                Some(h) if h.user == session.user => return Err(CommandError::ControlElsewhere),
+                Some(h) => return Err(CommandError::ControlHeldBy(h.user.clone())),
                 None => return Err(CommandError::NoControl),
             }
         }
@@ -318,7 +324,7 @@ impl Hub {
                 self.sending_instead(decl);
                 let user = &client.session.user;
                 let (id, seq) = self.publish(user, command, &topic, fields.clone()).await?;
-                self.sent(user, decl, &fields, seq);
+                self.sent(&client.session, decl, &fields, seq);
                 Ok(id)
             }
             Err(reason) => {
@@ -423,6 +429,7 @@ impl Hub {
         let now = Instant::now();
         let drive = Drive {
             user: client.session.user.clone(),
+            session: client.session.id,
             vehicle: decl.vehicle().to_string(),
             name: command.to_string(),
             topic,
@@ -554,12 +561,12 @@ mod tests {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut ana = f.pilot("ana").await;
-        let refused = send(&f, &mut ana, "stop", DataMap::new(), None).await;
+        let refused = send(&f, &mut ana, "abort", DataMap::new(), None).await;
         assert_eq!(refused, Err(CommandError::NotConfirmed));
         assert_eq!(refused.unwrap_err().to_string(), "not confirmed");
         // an arm of another command does not confirm it either
         let start = f.hub.arm(&ana, "pilot", "start").unwrap();
-        let refused = send(&f, &mut ana, "stop", DataMap::new(), Some(start)).await;
+        let refused = send(&f, &mut ana, "abort", DataMap::new(), Some(start)).await;
         assert_eq!(
             refused.unwrap_err().to_string(),
             "not confirmed: arm it first"
@@ -567,7 +574,7 @@ mod tests {
         assert!(waiting(&mut driver).is_empty());
         let refusal = |reason: &str| {
             (
-                "stop".to_string(),
+                "abort".to_string(),
                 "refused".to_string(),
                 reason.to_string(),
             )
@@ -586,14 +593,14 @@ mod tests {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut ana = f.pilot("ana").await;
-        let arm = f.hub.arm(&ana, "pilot", "stop").unwrap();
-        send(&f, &mut ana, "stop", DataMap::new(), Some(arm))
+        let arm = f.hub.arm(&ana, "pilot", "abort").unwrap();
+        send(&f, &mut ana, "abort", DataMap::new(), Some(arm))
             .await
             .unwrap();
         let sent = waiting(&mut driver);
         assert_eq!(sent.len(), 1);
-        assert_eq!(field(&sent[0], "action"), Some(Value::from("stop")));
-        let again = send(&f, &mut ana, "stop", DataMap::new(), Some(arm)).await;
+        assert_eq!(field(&sent[0], "action"), Some(Value::from("abort")));
+        let again = send(&f, &mut ana, "abort", DataMap::new(), Some(arm)).await;
         assert_eq!(again, Err(CommandError::NotArmed));
         assert!(waiting(&mut driver).is_empty());
     }
@@ -603,19 +610,19 @@ mod tests {
         let f = Fixture::new();
         let mut driver = f.driver();
         let mut ana = f.pilot("ana").await;
-        // the stop button sends the declared `action=stop`; a page that fixes `abort` is refused
-        let arm = f.hub.arm(&ana, "pilot", "stop").unwrap();
+        // the abort button sends the declared `action=abort`; a page that fixes `surface` is refused
+        let arm = f.hub.arm(&ana, "pilot", "abort").unwrap();
         let forged = send(
             &f,
             &mut ana,
-            "stop",
-            DataMap::new().with("action", "abort"),
+            "abort",
+            DataMap::new().with("action", "surface"),
             Some(arm),
         )
         .await;
         assert_eq!(
             forged.unwrap_err().to_string(),
-            "field `action` is set by the layout's controls, and none of them sends \"abort\""
+            "field `action` is set by the layout's controls, and none of them sends \"surface\""
         );
         assert!(
             waiting(&mut driver).is_empty(),
@@ -655,7 +662,7 @@ mod tests {
             .filter(|c| c["state"] == "refused")
             .map(|c| c["command"].as_str().unwrap().to_string())
             .collect();
-        assert_eq!(refused, ["stop", "camera"]);
+        assert_eq!(refused, ["abort", "camera"]);
     }
 
     #[tokio::test(start_paused = true)]
@@ -697,19 +704,20 @@ mod tests {
         let refused = f.hub.arm(&ana, "pilot", "course").unwrap_err();
         assert_eq!(refused.to_string(), "`course` needs no confirmation");
         for _ in 0..ARMS_PER_CONNECTION {
-            f.hub.arm(&ana, "pilot", "stop").unwrap();
+            f.hub.arm(&ana, "pilot", "abort").unwrap();
         }
-        let refused = f.hub.arm(&ana, "pilot", "stop").unwrap_err();
+        let refused = f.hub.arm(&ana, "pilot", "abort").unwrap_err();
         assert_eq!(
             refused.to_string(),
             "too many commands waiting for confirmation"
         );
-        // another connection has arms of its own
-        let other = f.client("ana");
-        f.hub.arm(&other, "pilot", "stop").unwrap();
+        // another connection of the same log-in has arms of its own
+        let mut other = f.hub.connect(ana.session.clone());
+        f.hub.open(&mut other, "pilot", &Default::default());
+        f.hub.arm(&other, "pilot", "abort").unwrap();
         // expired arms make room
         tokio::time::advance(ARM_LIFETIME).await;
-        f.hub.arm(&ana, "pilot", "stop").unwrap();
+        f.hub.arm(&ana, "pilot", "abort").unwrap();
     }
 
     #[tokio::test]
@@ -772,7 +780,7 @@ mod tests {
         let both = DataMap::new().with("heading", 90).with("speed", 2);
         send(&f, &mut ana, "course", both, None).await.unwrap();
         // another page of another pilot starts from what was commanded, not from its layout
-        f.hub.lease(&f.session("ana"), "", false).await.unwrap();
+        f.hub.lease(&ana.session, "", false).await.unwrap();
         let mut bo = f.pilot("bo").await;
         send(&f, &mut bo, "course", set("heading", 45), None)
             .await
@@ -843,10 +851,10 @@ mod tests {
     async fn a_bad_re_send_of_a_running_drive_is_refused_without_a_history_entry() {
         let f = Fixture::new();
         let mut ana = f.pilot("ana").await;
-        let stop = drive(&f, &mut ana, "stop", DataMap::new()).await;
+        let stop = drive(&f, &mut ana, "abort", DataMap::new()).await;
         assert_eq!(
             stop.unwrap_err().to_string(),
-            "`stop` is not a dead-man command (no rate)"
+            "`abort` is not a dead-man command (no rate)"
         );
         let ahead = DataMap::new().with("heading", 10).with("speed", 2);
         drive(&f, &mut ana, "course", ahead).await.unwrap();

@@ -18,6 +18,7 @@
 use super::history::Ack;
 use super::lease::Lease;
 use super::{Hub, now_s};
+use crate::auth::Session;
 use crate::layout::CommandDecl;
 use seabus_medium::{DataMap, Kind, SendError, Topic, Value};
 use serde_json::{Value as Json, json};
@@ -43,6 +44,8 @@ type Heard = (Topic, String, u64, DataMap);
 #[derive(Debug, Default)]
 pub(super) struct Commanded {
     values: HashMap<Topic, DataMap>,
+    /// Who commanded each topic's values (an origin), and since when (seconds since the epoch).
+    by: HashMap<Topic, (String, f64)>,
     order: VecDeque<Topic>,
     own: VecDeque<u64>,
     /// Commands of the console's own origin, told from its own once no send is under way.
@@ -50,20 +53,28 @@ pub(super) struct Commanded {
 }
 
 impl Commanded {
-    /// Records `fields` commanded on `topic`: whether they differ from the last.
-    pub(super) fn record(&mut self, topic: &Topic, fields: &DataMap) -> bool {
+    /// Records `fields` commanded on `topic` by `by`: whether they differ from the last.
+    pub(super) fn record(&mut self, topic: &Topic, fields: &DataMap, by: &str) -> bool {
         if self.values.get(topic) == Some(fields) {
             return false;
         }
+        self.by.insert(topic.clone(), (by.to_string(), now_s()));
         if self.values.insert(topic.clone(), fields.clone()).is_none() {
             self.order.push_back(topic.clone());
             if self.order.len() > COMMANDED_TOPICS
                 && let Some(old) = self.order.pop_front()
             {
                 self.values.remove(&old);
+                self.by.remove(&old);
             }
         }
         true
+    }
+
+    /// Who commanded `topic`'s last values, and since when they stand: `{by, since}`.
+    pub(super) fn by_json(&self, topic: &Topic) -> Option<Json> {
+        let (by, since) = self.by.get(topic)?;
+        Some(json!({"by": by, "since": since}))
     }
 
     /// The values last commanded on `topic`.
@@ -88,6 +99,8 @@ impl Commanded {
 #[derive(Debug, Clone)]
 pub(super) struct Kept {
     pub(super) user: String,
+    /// The log-in it is kept for.
+    pub(super) session: u64,
     /// The vehicle whose control it is kept under (`""`: the console's one control).
     vehicle: String,
     name: String,
@@ -113,7 +126,19 @@ impl Kept {
 
     /// Whether its sender holds control of its vehicle.
     pub(super) fn in_control(&self, lease: &Lease) -> bool {
-        lease.holder(&self.vehicle) == Some(self.user.as_str())
+        lease.holds(&self.vehicle, self.session)
+    }
+
+    /// Whether `fields` command what it keeps: each of its fields with the same value (numbers
+    /// compared as numbers: another sender's `90` is the kept `90.0`).
+    fn same_as(&self, fields: &DataMap) -> bool {
+        self.fields
+            .iter()
+            .all(|(k, v)| match (v.as_f64(), fields.get(k)) {
+                (Some(x), Some(w)) => w.as_f64() == Some(x),
+                (None, w) => w == Some(v),
+                (Some(_), None) => false,
+            })
     }
 
     /// What pages are shown of it: while kept its values, once ended when and why.
@@ -207,19 +232,27 @@ impl Hub {
             .publish_numbered(Kind::Command, topic.clone(), fields.clone())
             .await?;
         self.state().commanded.sent(seq);
-        self.commanded(topic, fields);
+        self.commanded(topic, fields, &self.origin);
         Ok(seq)
     }
 
-    /// Records `fields` as the values last commanded on `topic`, and tells every page when they
-    /// changed.
-    pub(super) fn commanded(&self, topic: &Topic, fields: &DataMap) {
-        let changed = self.state().commanded.record(topic, fields);
-        if changed {
+    /// Records `fields` as the values last commanded on `topic` by origin `by`, and tells every
+    /// page when they changed (with who commanded them, and since when).
+    pub(super) fn commanded(&self, topic: &Topic, fields: &DataMap, by: &str) {
+        let changed = {
+            let mut st = self.state();
+            st.commanded
+                .record(topic, fields, by)
+                .then(|| st.commanded.by_json(topic))
+                .flatten()
+        };
+        if let Some(by) = changed {
             self.broadcast(&json!({
                 "type": "commanded",
                 "topic": topic.as_str(),
                 "fields": fields,
+                "by": by["by"],
+                "since": by["since"],
             }));
         }
     }
@@ -244,11 +277,12 @@ impl Hub {
         self.others_command(topic, origin, fields);
     }
 
-    /// Another sender's command on `topic`: the last commanded, and the end of keeping there.
+    /// Another sender's command on `topic`: the last commanded, and the end of keeping there —
+    /// unless it commands what is kept (a helm's last course, sent as the console took it over).
     fn others_command(&self, topic: &Topic, origin: &str, fields: &DataMap) {
-        self.commanded(topic, fields);
+        self.commanded(topic, fields, origin);
         self.stop_keeping(
-            |k| &k.topic == topic,
+            |k| &k.topic == topic && !k.same_as(fields),
             &format!("{topic} commanded by {origin}"),
         );
     }
@@ -307,9 +341,9 @@ impl Hub {
         }
     }
 
-    /// After `user` sent `decl` as bus message `seq` with `fields`: a kept command starts,
+    /// After `session`'s user sent `decl` as bus message `seq` with `fields`: a kept command starts,
     /// unless a dead-man command is driving its topic (which then owns it).
-    pub(super) fn sent(&self, user: &str, decl: &CommandDecl, fields: &DataMap, seq: u64) {
+    pub(super) fn sent(&self, session: &Session, decl: &CommandDecl, fields: &DataMap, seq: u64) {
         let Some(period) = decl.keep else {
             return;
         };
@@ -321,7 +355,8 @@ impl Hub {
             }
             st.keeps.generations += 1;
             let mut k = Kept {
-                user: user.to_string(),
+                user: session.user.clone(),
+                session: session.id,
                 vehicle: decl.vehicle().to_string(),
                 name: decl.name.clone(),
                 topic: decl.topic.clone(),
@@ -428,8 +463,8 @@ impl Hub {
 
 #[cfg(test)]
 mod tests {
-    use super::super::Client;
     use super::super::testing::{Fixture, field, waiting};
+    use super::super::{Client, CommandError, LeaseError};
     use super::*;
     use seabus_medium::{Message, Stamp};
 
@@ -679,9 +714,8 @@ mod tests {
         let mut events = f.hub.events();
         let mut ana = kept_helm(&f).await;
         run_for(&f, 2).await;
-        let arm = f.hub.arm(&ana, "pilot", "stop").unwrap();
         f.hub
-            .send(&mut ana, "pilot", "stop", &DataMap::new(), Some(arm))
+            .send(&mut ana, "pilot", "stop", &DataMap::new(), None)
             .await
             .unwrap();
         let ended = kept_events(&mut events).pop().unwrap();
@@ -730,5 +764,101 @@ mod tests {
             _ = f.hub.read(reader) => panic!("the bus closed"),
             _ = test => {}
         }
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn taking_control_keeps_the_course_a_helm_commanded_as_the_page_showed_it() {
+        let f = Fixture::new();
+        let mut driver = f.driver();
+        let mut events = f.hub.events();
+        // a helm module commands the course; nobody has control
+        let topic = Topic::new("cmd.helm").unwrap();
+        f.hub.heard_command(&topic, "auv/helm", 7, &course());
+        let ana = f.client("ana");
+        // the page showed another course than the vehicle's last: control is not taken
+        let shown = course().with("speed", 1.0);
+        let refused = f
+            .hub
+            .take_keeping(&ana, "", &[("helm".into(), shown)])
+            .await;
+        let refused = refused.unwrap_err().to_string();
+        assert!(
+            refused.starts_with("control not taken: helm changed while you confirmed (now "),
+            "{refused}"
+        );
+        assert_eq!(f.hub.lease_json()["holder"], Json::Null);
+        // nor for a command that is not kept
+        let not_kept = f
+            .hub
+            .take_keeping(&ana, "", &[("course".into(), DataMap::new())])
+            .await;
+        assert_eq!(
+            not_kept.unwrap_err().to_string(),
+            "control not taken: `course` is not a kept command of this layout under this control"
+        );
+        assert!(waiting(&mut driver).is_empty(), "nothing was sent");
+        // as shown: control is taken and the course goes at once, then every second
+        f.hub
+            .take_keeping(&ana, "", &[("helm".into(), course())])
+            .await
+            .unwrap();
+        assert_eq!(f.hub.lease_json()["holder"], "ana");
+        let first = waiting(&mut driver);
+        assert_eq!(helms(&first).len(), 1, "{first:?}");
+        assert_eq!(helms(&first)[0].payload.as_map(), Some(&course()));
+        only_kept_anew(&f, &mut events);
+        // the helm sending its last course again as it steps back does not end the keeping
+        f.hub.heard_command(&topic, "auv/helm", 8, &course());
+        run_for(&f, 3).await;
+        let again = waiting(&mut driver);
+        assert!(helms(&again).len() >= 2, "{again:?}");
+        assert!(
+            helms(&again)
+                .iter()
+                .all(|m| m.payload.as_map() == Some(&course()))
+        );
+        assert!(kept_events(&mut events).is_empty(), "still kept");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn another_log_in_of_the_holder_neither_commands_nor_ends_its_control() {
+        let f = Fixture::new();
+        let mut driver = f.driver();
+        let mut ana = kept_helm(&f).await;
+        // the same pilot logs in again elsewhere
+        let mut again = f.client("ana");
+        assert_ne!(again.session.id, ana.session.id);
+        let taken = f.hub.lease(&again.session, "", true).await;
+        assert_eq!(taken, Err(LeaseError::HeldElsewhere));
+        let sent = f
+            .hub
+            .send(
+                &mut again,
+                "pilot",
+                "helm",
+                &course().with("speed", 0.5),
+                None,
+            )
+            .await;
+        assert_eq!(sent, Err(CommandError::ControlElsewhere));
+        // its log-out leaves the first log-in's control and its kept course
+        waiting(&mut driver);
+        f.hub.release_everything(&again.session).await;
+        f.hub.disconnect(&again).await;
+        run_for(&f, 3).await;
+        assert_eq!(f.hub.lease_json()["session"], ana.session.id);
+        let kept = waiting(&mut driver);
+        assert!(helms(&kept).len() >= 2, "{kept:?}");
+        assert!(
+            helms(&kept)
+                .iter()
+                .all(|m| m.payload.as_map() == Some(&course()))
+        );
+        // the holder still commands
+        let slower = course().with("speed", 0.5);
+        f.hub
+            .send(&mut ana, "pilot", "helm", &slower, None)
+            .await
+            .unwrap();
     }
 }

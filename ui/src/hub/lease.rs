@@ -1,13 +1,19 @@
-//! The control lease: at most one user holds control, taken and released explicitly by a user
-//! with the lease role, and released when its holder's last connection has been closed for
-//! [`LEASE_GRACE`]. Every page is told who holds it, and so is the bus ([`CONTROL_TOPIC`]).
+//! The control lease: at most one log-in holds control, taken and released explicitly by a user
+//! with the lease role, and released when that log-in ends or its last connection has been
+//! closed for [`LEASE_GRACE`] (a page reloaded keeps it). Another log-in of the same user (another
+//! browser) does not hold it: control belongs to the session that took it. Every page is told
+//! who holds it, and so is the bus ([`CONTROL_TOPIC`]).
+//!
+//! Taking control may keep what the vehicle was last commanded (the page shows it first, and the
+//! pilot confirms): a helm that steps back while someone has control then leaves the vehicle on
+//! the course it was on, held by the console, instead of letting its keep-alive lapse.
 //!
 //! A fleet console holds one lease per vehicle: a layout written for one vehicle
 //! (`<layout vehicle="${vehicle}">`) sends its commands under that vehicle's control, which is
 //! taken and released on its own (one pilot may fly auv1 while another flies auv2). Layouts
 //! without a vehicle share the console's one control (the vehicle `""` here).
 
-use super::{Hub, now_s};
+use super::{Client, Hub, now_s};
 use crate::auth::Session;
 use seabus_medium::DataMap;
 use serde_json::{Value as Json, json};
@@ -21,7 +27,7 @@ pub const LEASE_GRACE: Duration = Duration::from_secs(10);
 pub const CONTROL_TOPIC: &str = "console.control";
 
 /// Why control cannot be taken or released.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum LeaseError {
     /// The user lacks the lease role.
     #[error("taking control needs role {0}")]
@@ -29,21 +35,51 @@ pub enum LeaseError {
     /// Another user holds control.
     #[error("{0} has control; they must release it")]
     HeldBy(String),
+    /// The same user holds control in another log-in (another browser, another machine).
+    #[error("you have control in another log-in; release it there")]
+    HeldElsewhere,
     /// Only the holder releases control.
     #[error("you do not have control")]
     NotHolder,
+    /// What the page showed would be kept is no longer what the vehicle was last commanded.
+    #[error("control not taken: {command} changed while you confirmed (now {now}); look again")]
+    Changed {
+        /// The command the page showed.
+        command: String,
+        /// What it would keep now.
+        now: String,
+    },
+    /// What the page asked to keep is not a kept command of its layout.
+    #[error("control not taken: {0}")]
+    NotKept(String),
 }
 
-/// Who holds control of each vehicle, since when, and the open connections of each user.
+/// Who holds control: one log-in of a user.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(super) struct Holder {
+    pub(super) user: String,
+    pub(super) session: u64,
+}
+
+impl Holder {
+    pub(super) fn of(session: &Session) -> Holder {
+        Holder {
+            user: session.user.clone(),
+            session: session.id,
+        }
+    }
+}
+
+/// Who holds control of each vehicle, since when, and the open connections of each log-in.
 #[derive(Debug, Default)]
 pub(super) struct Lease {
     /// For each vehicle held (`""`: the console's one control), the holder and when they took
     /// control (seconds since the epoch).
-    holders: BTreeMap<String, (String, f64)>,
-    /// Open connections per user.
-    connections: HashMap<String, usize>,
-    /// When the last connection of a user with none open closed.
-    gone_since: HashMap<String, Instant>,
+    holders: BTreeMap<String, (Holder, f64)>,
+    /// Open connections per session.
+    connections: HashMap<u64, usize>,
+    /// When the last connection of a session with none open closed.
+    gone_since: HashMap<u64, Instant>,
 }
 
 /// The vehicle a lease message names: `null` for the console's one control.
@@ -67,18 +103,30 @@ pub(super) fn control_topic(vehicle: &str) -> String {
 
 impl Lease {
     /// The user holding control of `vehicle` (`""`: the console's one control).
+    #[cfg(test)]
     pub(super) fn holder(&self, vehicle: &str) -> Option<&str> {
-        self.holders.get(vehicle).map(|(u, _)| u.as_str())
+        self.holders.get(vehicle).map(|(h, _)| h.user.as_str())
     }
 
-    /// The `lease` message of `vehicle`.
+    /// Who holds control of `vehicle`.
+    pub(super) fn holding(&self, vehicle: &str) -> Option<&Holder> {
+        self.holders.get(vehicle).map(|(h, _)| h)
+    }
+
+    /// Whether session `session` holds control of `vehicle`.
+    pub(super) fn holds(&self, vehicle: &str, session: u64) -> bool {
+        self.holding(vehicle).is_some_and(|h| h.session == session)
+    }
+
+    /// The `lease` message of `vehicle`: its holder's name and log-in (`session`, which a page
+    /// compares with its own).
     pub(super) fn json(&self, vehicle: &str) -> Json {
         let v = vehicle_json(vehicle);
         match self.holders.get(vehicle) {
-            Some((u, since)) => {
-                json!({"type": "lease", "vehicle": v, "holder": u, "since": since})
-            }
-            None => json!({"type": "lease", "vehicle": v, "holder": null, "since": null}),
+            Some((h, since)) => json!({"type": "lease", "vehicle": v, "holder": h.user,
+                                       "session": h.session, "since": since}),
+            None => json!({"type": "lease", "vehicle": v, "holder": null, "session": null,
+                           "since": null}),
         }
     }
 
@@ -89,77 +137,82 @@ impl Lease {
 
     /// What [`CONTROL_TOPIC`] carries for `vehicle`: `holder` (empty when free) and `since`.
     fn control(&self, vehicle: &str) -> DataMap {
-        let (holder, since) = self.holders.get(vehicle).cloned().unwrap_or_default();
+        let (holder, since) = self
+            .holders
+            .get(vehicle)
+            .map(|(h, since)| (h.user.clone(), *since))
+            .unwrap_or_default();
         DataMap::new().with("holder", holder).with("since", since)
     }
 
-    /// A connection of `user` opened.
-    pub(super) fn connected(&mut self, user: &str) {
-        *self.connections.entry(user.to_string()).or_default() += 1;
-        self.gone_since.remove(user);
+    /// A connection of session `session` opened.
+    pub(super) fn connected(&mut self, session: u64) {
+        *self.connections.entry(session).or_default() += 1;
+        self.gone_since.remove(&session);
     }
 
-    /// A connection of `user` closed at `now`.
-    pub(super) fn disconnected(&mut self, user: &str, now: Instant) {
-        if let Some(n) = self.connections.get_mut(user) {
+    /// A connection of session `session` closed at `now`.
+    pub(super) fn disconnected(&mut self, session: u64, now: Instant) {
+        if let Some(n) = self.connections.get_mut(&session) {
             *n = n.saturating_sub(1);
             if *n == 0 {
-                self.connections.remove(user);
-                self.gone_since.insert(user.to_string(), now);
+                self.connections.remove(&session);
+                self.gone_since.insert(session, now);
             }
         }
     }
 
-    /// `user` takes control of `vehicle` at `since`: true when they did, false when they held it
-    /// already.
+    /// `holder` takes control of `vehicle` at `since`: true when they did, false when they held
+    /// it already.
     pub(super) fn take(
         &mut self,
         vehicle: &str,
-        user: &str,
+        holder: &Holder,
         since: f64,
     ) -> Result<bool, LeaseError> {
-        match self.holder(vehicle) {
-            Some(h) if h == user => Ok(false),
-            Some(h) => Err(LeaseError::HeldBy(h.to_string())),
+        match self.holding(vehicle) {
+            Some(h) if h == holder => Ok(false),
+            Some(h) if h.user == holder.user => Err(LeaseError::HeldElsewhere),
+            Some(h) => Err(LeaseError::HeldBy(h.user.clone())),
             None => {
                 self.holders
-                    .insert(vehicle.to_string(), (user.to_string(), since));
+                    .insert(vehicle.to_string(), (holder.clone(), since));
                 Ok(true)
             }
         }
     }
 
-    /// `user` releases control of `vehicle`.
-    pub(super) fn release(&mut self, vehicle: &str, user: &str) -> Result<(), LeaseError> {
-        if self.holder(vehicle) != Some(user) {
+    /// `holder` releases control of `vehicle`.
+    pub(super) fn release(&mut self, vehicle: &str, holder: &Holder) -> Result<(), LeaseError> {
+        if self.holding(vehicle) != Some(holder) {
             return Err(LeaseError::NotHolder);
         }
         self.holders.remove(vehicle);
         Ok(())
     }
 
-    /// The vehicles `user` controls.
-    pub(super) fn held_by(&self, user: &str) -> Vec<String> {
+    /// The vehicles `holder` controls.
+    pub(super) fn held_by(&self, holder: &Holder) -> Vec<String> {
         self.holders
             .iter()
-            .filter(|(_, (u, _))| u == user)
+            .filter(|(_, (h, _))| h == holder)
             .map(|(v, _)| v.clone())
             .collect()
     }
 
-    /// Releases the control held by users who have had no connection open for [`LEASE_GRACE`]
-    /// at `now`; returns each vehicle released with who held it.
-    pub(super) fn expire(&mut self, now: Instant) -> Vec<(String, String)> {
-        let gone = |user: &str| {
+    /// Releases the control held by sessions that have had no connection open for
+    /// [`LEASE_GRACE`] at `now`; returns each vehicle released with who held it.
+    pub(super) fn expire(&mut self, now: Instant) -> Vec<(String, Holder)> {
+        let gone = |session: u64| {
             self.gone_since
-                .get(user)
+                .get(&session)
                 .is_some_and(|t| now.duration_since(*t) >= LEASE_GRACE)
         };
-        let released: Vec<(String, String)> = self
+        let released: Vec<(String, Holder)> = self
             .holders
             .iter()
-            .filter(|(_, (u, _))| gone(u))
-            .map(|(v, (u, _))| (v.clone(), u.clone()))
+            .filter(|(_, (h, _))| gone(h.session))
+            .map(|(v, (h, _))| (v.clone(), h.clone()))
             .collect();
         for (v, _) in &released {
             self.holders.remove(v);
@@ -184,55 +237,136 @@ impl Hub {
         json!({"type": "leases", "held": self.state().lease.all_json()})
     }
 
-    /// Takes or releases control of `vehicle` (`""`: the console's one control) for `session`.
-    /// Releasing stops the holder's dead-man and kept commands of that vehicle (their neutral
-    /// goes once).
+    /// Takes or releases control of `vehicle` (`""`: the console's one control) for `session`'s
+    /// log-in, keeping nothing. Releasing stops the holder's dead-man and kept commands of that
+    /// vehicle (their neutral goes once).
     pub async fn lease(
         &self,
         session: &Session,
         vehicle: &str,
         take: bool,
     ) -> Result<(), LeaseError> {
+        if take {
+            return self.take_control(session, None, vehicle, &[]).await;
+        }
+        let holder = Holder::of(session);
         let stopped = {
             let mut st = self.state();
-            if take {
-                if !session.has(&self.settings.lease_role) {
-                    return Err(LeaseError::RoleNeeded(self.settings.lease_role.clone()));
-                }
-                if !st.lease.take(vehicle, &session.user, now_s())? {
-                    return Ok(());
-                }
-                Vec::new()
-            } else {
-                st.lease.release(vehicle, &session.user)?;
-                st.drives
-                    .take(|_, d| d.user == session.user && d.vehicle() == vehicle)
-            }
+            st.lease.release(vehicle, &holder)?;
+            st.drives
+                .take(|_, d| d.session == session.id && d.vehicle() == vehicle)
         };
-        tracing::info!(
-            component = "console",
-            user = %session.user,
-            vehicle,
-            "{} control",
-            if take { "took" } else { "released" }
-        );
+        tracing::info!(component = "console", user = %session.user, vehicle, "released control");
         self.lease_changed(vehicle).await;
         self.neutral(stopped, "control released").await;
-        if !take {
-            let user = &session.user;
-            self.end_kept(
-                // not one kept since under control taken again
-                |k, lease| &k.user == user && k.vehicle() == vehicle && !k.in_control(lease),
-                "control released",
-            )
-            .await;
+        self.end_kept(
+            // not one kept since under control taken again
+            |k, lease| k.session == session.id && k.vehicle() == vehicle && !k.in_control(lease),
+            "control released",
+        )
+        .await;
+        Ok(())
+    }
+
+    /// Takes control of `vehicle` for `client`'s log-in and keeps what the vehicle was last
+    /// commanded on each of `keep`'s commands (kept commands of the client's layout), so that
+    /// the vehicle goes on as it was when whatever commanded it steps back. `keep` holds the
+    /// values the page showed the pilot before they confirmed: when the vehicle's last commanded
+    /// values are no longer those, control is not taken (the page shows them again).
+    pub async fn take_keeping(
+        &self,
+        client: &Client,
+        vehicle: &str,
+        keep: &[(String, DataMap)],
+    ) -> Result<(), LeaseError> {
+        self.take_control(&client.session, Some(client), vehicle, keep)
+            .await
+    }
+
+    async fn take_control(
+        &self,
+        session: &Session,
+        client: Option<&Client>,
+        vehicle: &str,
+        keep: &[(String, DataMap)],
+    ) -> Result<(), LeaseError> {
+        if !session.has(&self.settings.lease_role) {
+            return Err(LeaseError::RoleNeeded(self.settings.lease_role.clone()));
+        }
+        // what is kept goes out before anything else can be decided (a take keeping nothing does
+        // not wait for commands on their way)
+        let _sending = if keep.is_empty() {
+            None
+        } else {
+            Some(self.sending.lock().await)
+        };
+        let kept = {
+            let mut st = self.state();
+            let mut kept = Vec::new();
+            for (name, shown) in keep {
+                let decl = client
+                    .and_then(|c| c.layout.as_ref())
+                    .and_then(|l| l.commands.get(name))
+                    .filter(|d| d.keep.is_some() && d.lease && d.vehicle() == vehicle)
+                    .ok_or_else(|| {
+                        LeaseError::NotKept(format!(
+                            "`{name}` is not a kept command of this layout under this control"
+                        ))
+                    })?;
+                let chosen = client
+                    .and_then(|c| c.offers.get(name))
+                    .map(|o| o.free.clone())
+                    .unwrap_or_default();
+                let now = st
+                    .commanded
+                    .get(&decl.topic)
+                    .and_then(|c| decl.build(c, &DataMap::new(), &chosen).ok());
+                // each field as the page showed it, and no other
+                let same = |now: &DataMap| {
+                    now.len() == shown.len()
+                        && shown
+                            .iter()
+                            .all(|(k, v)| decl.fit(k, v).is_ok_and(|v| now.get(k) == Some(&v)))
+                };
+                match now {
+                    Some(now) if same(&now) => kept.push((decl.clone(), now)),
+                    now => {
+                        return Err(LeaseError::Changed {
+                            command: name.clone(),
+                            now: now.map_or("nothing commanded".to_string(), |n| n.to_string()),
+                        });
+                    }
+                }
+            }
+            if !st.lease.take(vehicle, &Holder::of(session), now_s())? {
+                return Ok(());
+            }
+            kept
+        };
+        tracing::info!(component = "console", user = %session.user, vehicle, "took control");
+        self.lease_changed(vehicle).await;
+        for (decl, fields) in kept {
+            self.sending_instead(&decl);
+            match self
+                .publish(&session.user, &decl.name, &decl.topic, fields.clone())
+                .await
+            {
+                Ok((_, seq)) => self.sent(session, &decl, &fields, seq),
+                Err(e) => tracing::warn!(
+                    component = "console",
+                    user = %session.user,
+                    command = %decl.name,
+                    "not kept on taking control: {e}"
+                ),
+            }
         }
         Ok(())
     }
 
-    /// Releases every vehicle `session`'s user controls (a log-out).
+    /// Releases every vehicle `session`'s log-in controls (its log-out): another log-in of the
+    /// same user keeps what it holds.
     pub async fn release_everything(&self, session: &Session) {
-        let held = self.state().lease.held_by(&session.user);
+        let held = self.state().lease.held_by(&Holder::of(session));
         for vehicle in held {
             let _ = self.lease(session, &vehicle, false).await;
         }
@@ -260,25 +394,34 @@ mod tests {
     use super::*;
     use std::time::Duration;
 
+    /// `ana` (session 1) or `bo` (session 2).
+    fn holder(user: &str) -> Holder {
+        let session = if user == "ana" { 1 } else { 2 };
+        Holder {
+            user: user.to_string(),
+            session,
+        }
+    }
+
     #[test]
     fn control_is_taken_and_released_by_its_holder() {
         let mut lease = Lease::default();
-        assert_eq!(lease.take("", "ana", 1.0), Ok(true));
+        assert_eq!(lease.take("", &holder("ana"), 1.0), Ok(true));
         assert_eq!(lease.holder(""), Some("ana"));
         assert_eq!(
             lease.json(""),
-            json!({"type": "lease", "vehicle": null, "holder": "ana", "since": 1.0})
+            json!({"type": "lease", "vehicle": null, "holder": "ana", "session": 1, "since": 1.0})
         );
         // taking it again changes nothing, not even since when
-        assert_eq!(lease.take("", "ana", 2.0), Ok(false));
+        assert_eq!(lease.take("", &holder("ana"), 2.0), Ok(false));
         assert_eq!(lease.json("")["since"], 1.0);
-        assert_eq!(lease.release("", "ana"), Ok(()));
+        assert_eq!(lease.release("", &holder("ana")), Ok(()));
         assert_eq!(lease.holder(""), None);
         assert_eq!(
             lease.json(""),
-            json!({"type": "lease", "vehicle": null, "holder": null, "since": null})
+            json!({"type": "lease", "vehicle": null, "holder": null, "session": null, "since": null})
         );
-        let again = lease.release("", "ana").unwrap_err();
+        let again = lease.release("", &holder("ana")).unwrap_err();
         assert_eq!(again, LeaseError::NotHolder);
         assert_eq!(again.to_string(), "you do not have control");
     }
@@ -286,35 +429,35 @@ mod tests {
     #[test]
     fn a_second_user_is_refused_until_the_holder_releases() {
         let mut lease = Lease::default();
-        lease.take("", "ana", 1.0).unwrap();
-        let refused = lease.take("", "bo", 2.0).unwrap_err();
+        lease.take("", &holder("ana"), 1.0).unwrap();
+        let refused = lease.take("", &holder("bo"), 2.0).unwrap_err();
         assert_eq!(refused, LeaseError::HeldBy("ana".into()));
         assert_eq!(refused.to_string(), "ana has control; they must release it");
-        assert_eq!(lease.release("", "bo"), Err(LeaseError::NotHolder));
+        assert_eq!(lease.release("", &holder("bo")), Err(LeaseError::NotHolder));
         assert_eq!(lease.holder(""), Some("ana"));
-        lease.release("", "ana").unwrap();
-        assert_eq!(lease.take("", "bo", 3.0), Ok(true));
+        lease.release("", &holder("ana")).unwrap();
+        assert_eq!(lease.take("", &holder("bo"), 3.0), Ok(true));
         assert_eq!(lease.holder(""), Some("bo"));
     }
 
     #[tokio::test(start_paused = true)]
     async fn control_is_released_10_s_after_the_holders_last_connection_closes() {
         let mut lease = Lease::default();
-        lease.connected("ana");
-        lease.connected("ana");
-        lease.take("", "ana", 1.0).unwrap();
-        lease.disconnected("ana", Instant::now());
+        lease.connected(1);
+        lease.connected(1);
+        lease.take("", &holder("ana"), 1.0).unwrap();
+        lease.disconnected(1, Instant::now());
         tokio::time::advance(Duration::from_secs(60)).await;
         // one connection is still open
         assert!(lease.expire(Instant::now()).is_empty());
-        lease.disconnected("ana", Instant::now());
+        lease.disconnected(1, Instant::now());
         tokio::time::advance(LEASE_GRACE - Duration::from_millis(1)).await;
         assert!(lease.expire(Instant::now()).is_empty());
         assert_eq!(lease.holder(""), Some("ana"));
         tokio::time::advance(Duration::from_millis(1)).await;
         assert_eq!(
             lease.expire(Instant::now()),
-            [(String::new(), "ana".to_string())]
+            [(String::new(), holder("ana"))]
         );
         assert_eq!(lease.holder(""), None);
         assert!(lease.expire(Instant::now()).is_empty());
@@ -323,11 +466,11 @@ mod tests {
     #[tokio::test(start_paused = true)]
     async fn a_holder_back_within_the_grace_keeps_control() {
         let mut lease = Lease::default();
-        lease.connected("ana");
-        lease.take("", "ana", 1.0).unwrap();
-        lease.disconnected("ana", Instant::now());
+        lease.connected(1);
+        lease.take("", &holder("ana"), 1.0).unwrap();
+        lease.disconnected(1, Instant::now());
         tokio::time::advance(Duration::from_secs(9)).await;
-        lease.connected("ana");
+        lease.connected(1);
         tokio::time::advance(Duration::from_secs(60)).await;
         assert!(lease.expire(Instant::now()).is_empty());
         assert_eq!(lease.holder(""), Some("ana"));
@@ -356,8 +499,9 @@ mod tests {
         assert_eq!(
             shown,
             [
-                json!({"type": "lease", "vehicle": null, "holder": "ana", "since": shown[0]["since"]}),
-                json!({"type": "lease", "vehicle": null, "holder": null, "since": null}),
+                json!({"type": "lease", "vehicle": null, "holder": "ana",
+                       "session": client.session.id, "since": shown[0]["since"]}),
+                json!({"type": "lease", "vehicle": null, "holder": null, "session": null, "since": null}),
             ]
         );
     }
@@ -431,6 +575,7 @@ mod tests {
         assert_eq!(
             f.hub.vehicle_lease_json("auv1"),
             json!({"type": "lease", "vehicle": "auv1", "holder": "ana",
+                   "session": ana.session.id,
                    "since": f.hub.vehicle_lease_json("auv1")["since"]})
         );
         assert_eq!(f.hub.vehicle_lease_json("auv2")["holder"], "bo");

@@ -223,7 +223,7 @@ impl Hub {
     pub fn connect(&self, session: Session) -> Client {
         let mut st = self.state();
         st.next_conn += 1;
-        st.lease.connected(&session.user);
+        st.lease.connected(session.id);
         Client {
             conn: st.next_conn,
             session,
@@ -240,7 +240,7 @@ impl Hub {
     pub async fn disconnect(&self, client: &Client) {
         let stopped = {
             let mut st = self.state();
-            st.lease.disconnected(&client.session.user, Instant::now());
+            st.lease.disconnected(client.session.id, Instant::now());
             st.drives.take(|k, _| k.0 == client.conn)
         };
         self.neutral(stopped, "the connection closed").await;
@@ -258,12 +258,12 @@ impl Hub {
                 .lease
                 .expire(now)
                 .into_iter()
-                .map(|(vehicle, user)| {
+                .map(|(vehicle, holder)| {
                     // its kept commands end in `keep`, which sees no holder
                     let drives = st
                         .drives
-                        .take(|_, d| d.user == user && d.vehicle() == vehicle);
-                    tracing::info!(component = "console", user = %user, vehicle, "control released: disconnected");
+                        .take(|_, d| d.session == holder.session && d.vehicle() == vehicle);
+                    tracing::info!(component = "console", user = %holder.user, vehicle, "control released: disconnected");
                     (vehicle, drives)
                 })
                 .collect();

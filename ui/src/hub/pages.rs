@@ -67,6 +67,10 @@ impl Hub {
         json!({
             "type": "hello",
             "user": client.session.user,
+            // which log-in this page is: control is held by one (`lease`'s `session`)
+            "session": client.session.id,
+            // the console's own origin on the bus (`commanded`'s `by` when it sent the values)
+            "origin": self.origin,
             "roles": client.session.roles,
             "layouts": self.layouts_for(&client.session),
             "lease": self.lease_json(),
@@ -141,6 +145,7 @@ impl Hub {
                 "producers": producers,
                 "chosen": chosen,
                 "commanded": self.commanded_for(&layout),
+                "commanded_by": self.commanded_by(&layout),
                 "kept": self.state().keeps.json(),
             });
             client.interest = interest;
@@ -161,7 +166,14 @@ impl Hub {
         let mut out: Vec<Json> = self
             .commanded_for(layout)
             .into_iter()
-            .map(|(topic, fields)| json!({"type": "commanded", "topic": topic, "fields": fields}))
+            .map(|(topic, fields)| {
+                let by = Topic::new(&topic)
+                    .ok()
+                    .and_then(|t| self.state().commanded.by_json(&t))
+                    .unwrap_or_default();
+                json!({"type": "commanded", "topic": topic, "fields": fields,
+                       "by": by["by"], "since": by["since"]})
+            })
             .collect();
         out.extend(self.state().keeps.json());
         out
@@ -177,6 +189,17 @@ impl Hub {
                 let fields = st.commanded.get(&c.topic)?;
                 Some((c.topic.to_string(), json!(fields)))
             })
+            .collect()
+    }
+
+    /// Who commanded the values last commanded on the topics of `layout`'s commands, and since
+    /// when they stand: `{TOPIC: {by, since}}`.
+    fn commanded_by(&self, layout: &Layout) -> Map<String, Json> {
+        let st = self.state();
+        layout
+            .commands
+            .values()
+            .filter_map(|c| Some((c.topic.to_string(), st.commanded.by_json(&c.topic)?)))
             .collect()
     }
 
@@ -555,8 +578,10 @@ mod tests {
         assert_eq!(
             again[0],
             json!({"type": "commanded", "topic": "cmd.helm",
-                   "fields": {"heading": 90, "depth": 5.0, "speed": 1.5}})
+                   "fields": {"heading": 90, "depth": 5.0, "speed": 1.5},
+                   "by": f.hub.origin, "since": again[0]["since"]})
         );
+        assert!(again[0]["since"].as_f64().unwrap() > 1.0e9, "{again:?}");
         assert_eq!(
             (&again[1]["type"], &again[1]["command"], &again[1]["user"]),
             (&json!("kept"), &json!("helm"), &json!("ana"))

@@ -8,13 +8,14 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::time::Duration;
 
-/// The layout the tests open: a dead-man command, a held one, a confirmed one, one that needs no
+/// The layout the tests open: a dead-man command, a held one, a confirmed one, the safe action, one that needs no
 /// control, one only a `captain` may send and one the console keeps (its depth measured).
 pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot observer">
   <command name="course" topic="cmd.course" fields="heading=0, speed=0" rate="5Hz"
            neutral="speed=0" max.speed="3"/>
   <command name="start" topic="cmd.mission" fields="action=start" confirm="hold" hold="300ms"/>
-  <command name="stop" topic="cmd.mission" fields="action=stop" confirm="dialog" safe="true"/>
+  <command name="abort" topic="cmd.mission" fields="action=abort" confirm="dialog"/>
+  <command name="stop" topic="cmd.mission" fields="action=stop" safe="true"/>
   <command name="camera" topic="cmd.camera" fields="on=false, note=x" lease="false"/>
   <command name="anchor" topic="cmd.anchor" fields="drop=true" role="captain"/>
   <command name="helm" topic="cmd.helm" fields="heading=0, depth=0.0, speed=0.0" keep="1s"
@@ -24,6 +25,7 @@ pub const PILOT: &str = r#"<layout name="pilot" title="Pilot" roles="pilot obser
     <slider command="course.heading" min="0" max="360"/>
     <slider command="course.speed" min="0" max="3"/>
     <button command="start"/>
+    <button command="abort"/>
     <button command="stop"/>
     <toggle command="camera.on"/>
     <button command="anchor"/>

@@ -190,6 +190,16 @@ pub(super) fn read_command(el: &Element) -> Result<CommandDecl, FileError> {
              (remove lease=\"false\")",
         ));
     }
+    if let (true, false, Some(a)) = (
+        decl.safe,
+        matches!(decl.confirm, Confirm::None),
+        el.attr("confirm"),
+    ) {
+        return Err(a.error(
+            "the safe action goes at once, from every state of the page (Escape, the header's \
+             stop): it takes no confirmation (remove confirm)",
+        ));
+    }
     // where a contradiction between attributes is shown when the one to blame is not written
     let fallback = el.attrs.first().unwrap_or(t);
     bounds_ordered(&decl, el, fallback)?;
