@@ -7,6 +7,7 @@
 #[path = "../common/mod.rs"]
 mod common;
 mod harness;
+mod safety;
 
 use common::{
     Running, add_user, assert_logs_in, group, one_time_password, seabus, spy_json, wait_for_line,

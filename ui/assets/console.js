@@ -554,7 +554,7 @@ function consolePage() {
   function onCommanded(m) {
     if (!m.topic || !m.fields || typeof m.fields !== 'object') return;
     S.commanded[m.topic] = m.fields;
-    if (m.by !== undefined) S.commandedBy[m.topic] = { by: m.by, since: m.since };
+    if (m.by !== undefined) S.commandedBy[m.topic] = { by: m.by, console: m.console, since: m.since };
     for (const [n, c] of Object.entries((S.layout && S.layout.commands) || {})) {
       if (c && c.topic === m.topic) delete S.pending[n];
     }
@@ -982,7 +982,7 @@ function consolePage() {
         continue;
       }
       keep[k.name] = k.fields;
-      const by = k.by && k.by.by ? (k.by.by === S.origin ? 'this console' : k.by.by) : 'an earlier command';
+      const by = k.by && k.by.by ? (k.by.console ? 'this console' : k.by.by) : 'an earlier command';
       const since = k.by && k.by.since ? ` at ${new Date(Number(k.by.since) * 1000).toLocaleTimeString()}` : '';
       const values = Object.entries(k.fields).map(([f, v]) => `${f} = ${fmtValue(v)}`).join(', ');
       lines.push(`${k.name} kept: ${values}\n   (commanded by ${by}${since}; sent again every ${(k.everyMs / 1000).toFixed(1)} s until you change it or release control)`);
@@ -1020,6 +1020,8 @@ function consolePage() {
         layout: S.layout ? S.layout.name : S.layoutName,
         lease: S.lease.holder,
         inControl: inControl(S.lease),
+        session: S.session,
+        origin: S.origin,
         vehicle: layoutVehicle(),
         // the vehicles someone controls ('' for the console's one control), with who
         leases: Object.fromEntries(Object.entries(S.leases).filter(([, v]) => v.holder).map(([k, v]) => [k, v.holder])),

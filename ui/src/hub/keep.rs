@@ -44,8 +44,10 @@ type Heard = (Topic, String, u64, DataMap);
 #[derive(Debug, Default)]
 pub(super) struct Commanded {
     values: HashMap<Topic, DataMap>,
-    /// Who commanded each topic's values (an origin), and since when (seconds since the epoch).
-    by: HashMap<Topic, (String, f64)>,
+    /// Who commanded each topic's values (an origin, and whether the console itself sent them:
+    /// a module on the console's own medium shares its origin), and since when (seconds since
+    /// the epoch).
+    by: HashMap<Topic, (String, bool, f64)>,
     order: VecDeque<Topic>,
     own: VecDeque<u64>,
     /// Commands of the console's own origin, told from its own once no send is under way.
@@ -53,12 +55,20 @@ pub(super) struct Commanded {
 }
 
 impl Commanded {
-    /// Records `fields` commanded on `topic` by `by`: whether they differ from the last.
-    pub(super) fn record(&mut self, topic: &Topic, fields: &DataMap, by: &str) -> bool {
+    /// Records `fields` commanded on `topic` by origin `by` (`console`: the console's own):
+    /// whether they differ from the last.
+    pub(super) fn record(
+        &mut self,
+        topic: &Topic,
+        fields: &DataMap,
+        by: &str,
+        console: bool,
+    ) -> bool {
         if self.values.get(topic) == Some(fields) {
             return false;
         }
-        self.by.insert(topic.clone(), (by.to_string(), now_s()));
+        self.by
+            .insert(topic.clone(), (by.to_string(), console, now_s()));
         if self.values.insert(topic.clone(), fields.clone()).is_none() {
             self.order.push_back(topic.clone());
             if self.order.len() > COMMANDED_TOPICS
@@ -71,10 +81,10 @@ impl Commanded {
         true
     }
 
-    /// Who commanded `topic`'s last values, and since when they stand: `{by, since}`.
+    /// Who commanded `topic`'s last values, and since when they stand: `{by, console, since}`.
     pub(super) fn by_json(&self, topic: &Topic) -> Option<Json> {
-        let (by, since) = self.by.get(topic)?;
-        Some(json!({"by": by, "since": since}))
+        let (by, console, since) = self.by.get(topic)?;
+        Some(json!({"by": by, "console": console, "since": since}))
     }
 
     /// The values last commanded on `topic`.
@@ -232,17 +242,18 @@ impl Hub {
             .publish_numbered(Kind::Command, topic.clone(), fields.clone())
             .await?;
         self.state().commanded.sent(seq);
-        self.commanded(topic, fields, &self.origin);
+        self.commanded(topic, fields, &self.origin, true);
         Ok(seq)
     }
 
-    /// Records `fields` as the values last commanded on `topic` by origin `by`, and tells every
-    /// page when they changed (with who commanded them, and since when).
-    pub(super) fn commanded(&self, topic: &Topic, fields: &DataMap, by: &str) {
+    /// Records `fields` as the values last commanded on `topic` by origin `by` (`console`: the
+    /// console's own), and tells every page when they changed (with who commanded them, and
+    /// since when).
+    pub(super) fn commanded(&self, topic: &Topic, fields: &DataMap, by: &str, console: bool) {
         let changed = {
             let mut st = self.state();
             st.commanded
-                .record(topic, fields, by)
+                .record(topic, fields, by, console)
                 .then(|| st.commanded.by_json(topic))
                 .flatten()
         };
@@ -252,6 +263,7 @@ impl Hub {
                 "topic": topic.as_str(),
                 "fields": fields,
                 "by": by["by"],
+                "console": by["console"],
                 "since": by["since"],
             }));
         }
@@ -280,7 +292,7 @@ impl Hub {
     /// Another sender's command on `topic`: the last commanded, and the end of keeping there —
     /// unless it commands what is kept (a helm's last course, sent as the console took it over).
     fn others_command(&self, topic: &Topic, origin: &str, fields: &DataMap) {
-        self.commanded(topic, fields, origin);
+        self.commanded(topic, fields, origin, false);
         self.stop_keeping(
             |k| &k.topic == topic && !k.same_as(fields),
             &format!("{topic} commanded by {origin}"),

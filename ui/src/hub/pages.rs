@@ -172,7 +172,7 @@ impl Hub {
                     .and_then(|t| self.state().commanded.by_json(&t))
                     .unwrap_or_default();
                 json!({"type": "commanded", "topic": topic, "fields": fields,
-                       "by": by["by"], "since": by["since"]})
+                       "by": by["by"], "console": by["console"], "since": by["since"]})
             })
             .collect();
         out.extend(self.state().keeps.json());
@@ -579,7 +579,7 @@ mod tests {
             again[0],
             json!({"type": "commanded", "topic": "cmd.helm",
                    "fields": {"heading": 90, "depth": 5.0, "speed": 1.5},
-                   "by": f.hub.origin, "since": again[0]["since"]})
+                   "by": f.hub.origin, "console": true, "since": again[0]["since"]})
         );
         assert!(again[0]["since"].as_f64().unwrap() > 1.0e9, "{again:?}");
         assert_eq!(
