@@ -582,9 +582,19 @@ fn layout_check(layout: &std::path::Path, system: &std::path::Path) -> ExitCode 
         eprintln!("{e}");
         ExitCode::from(1)
     };
-    let layout = match seabus_ui::Layout::load(layout, &Default::default()) {
+    let layout = match seabus_ui::Layout::load_all(layout, &Default::default()) {
         Ok(l) => l,
-        Err(e) => return fail(&e),
+        Err(errors) => {
+            for e in &errors {
+                eprintln!("{e}");
+            }
+            eprintln!(
+                "{}: {}",
+                layout.display(),
+                counted(errors.len(), "error", "errors")
+            );
+            return ExitCode::from(1);
+        }
     };
     let spec = match SystemSpec::load(system) {
         Ok(s) => s,

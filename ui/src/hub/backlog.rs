@@ -40,6 +40,41 @@ struct Series {
     samples: VecDeque<Sample>,
 }
 
+impl Series {
+    /// Adds the fields of `fields` the series does not have yet, with no value in the samples
+    /// it holds.
+    fn widen(&mut self, fields: Vec<String>) {
+        let before = self.fields.len();
+        for f in fields {
+            if !self.fields.contains(&f) {
+                self.fields.push(f);
+            }
+        }
+        let width = self.fields.len();
+        if width == before {
+            return;
+        }
+        for (_, values) in self.samples.iter_mut() {
+            let mut wider = std::mem::take(values).into_vec();
+            wider.resize(width, None);
+            *values = wider.into_boxed_slice();
+        }
+    }
+}
+
+/// The fields the followed patterns bind of `topic`, each once, in the order they were bound.
+fn wanted_fields(wanted: &[(Pattern, Vec<String>)], topic: &Topic) -> Vec<String> {
+    let mut fields: Vec<String> = Vec::new();
+    for (_, f) in wanted.iter().filter(|(p, _)| p.matches(topic.as_str())) {
+        for f in f {
+            if !fields.contains(f) {
+                fields.push(f.clone());
+            }
+        }
+    }
+    fields
+}
+
 /// The recent samples of the plotted and tracked variables.
 #[derive(Debug)]
 pub(super) struct Backlog {
@@ -71,7 +106,8 @@ impl Backlog {
         }
     }
 
-    /// Follows what `layout`'s plots and tracks bind. A topic that gains a field starts again.
+    /// Follows what `layout`'s plots and tracks bind. A topic that gains a field keeps the
+    /// samples it has: the new field has no value in them (a plot of it starts now).
     pub(super) fn follow(&mut self, layout: &Layout) {
         for Plotted { topic, fields, .. } in layout.plotted() {
             let Ok(p) = Pattern::new(&topic) else {
@@ -97,7 +133,12 @@ impl Backlog {
             };
             if changed {
                 self.ignored.clear();
-                self.series.retain(|t, _| !p.matches(t.as_str()));
+                let wanted = &self.wanted;
+                for (topic, s) in self.series.iter_mut() {
+                    if p.matches(topic.as_str()) {
+                        s.widen(wanted_fields(wanted, topic));
+                    }
+                }
             }
         }
     }
@@ -141,12 +182,7 @@ impl Backlog {
     /// Starts a series for `topic` when something binds it (and there is room); else remembers
     /// it is not followed.
     fn start(&mut self, topic: &Topic) -> bool {
-        let fields: Vec<String> = self
-            .wanted
-            .iter()
-            .filter(|(p, _)| p.matches(topic.as_str()))
-            .flat_map(|(_, f)| f.iter().cloned())
-            .collect();
+        let fields = wanted_fields(&self.wanted, topic);
         if fields.is_empty() || self.series.len() >= TOPICS {
             if self.ignored.len() >= IGNORED {
                 self.ignored.clear();
@@ -197,6 +233,7 @@ impl Backlog {
                 .iter()
                 .enumerate()
                 .filter(|(i, (t, _))| *i >= skip || *t >= last - secs)
+                .filter(|(_, (_, v))| fields.iter().any(|(_, i)| v[*i].is_some()))
                 .map(|(_, x)| x.clone())
                 .collect();
             out.push((topic.clone(), fields, samples));
@@ -264,6 +301,7 @@ mod tests {
     use super::super::testing::Fixture;
     use super::*;
     use seabus_medium::Stamp;
+    use std::collections::BTreeMap;
 
     fn at(secs: f64) -> Stamp {
         Stamp((secs * 1e9) as i64)
@@ -316,5 +354,54 @@ mod tests {
         // a layout with no plot gets none
         page.layout = None;
         assert!(f.hub.backlog(&page).is_none());
+    }
+
+    #[test]
+    fn a_layout_plotting_a_new_field_keeps_the_past_of_the_fields_already_kept() {
+        const TEMP: &str = r#"<layout name="temp" title="Temperature" roles="pilot">
+  <column><plot window="15min"><series bind="nav.depth.temp"/></plot></column>
+</layout>"#;
+        // the console starts with the pilot layout followed: of nav.depth, `depth` only
+        let f = Fixture::new();
+        f.hub.follow_layouts();
+        let depth = Topic::new("nav.depth").unwrap();
+        let t0 = now_s() - 180.0;
+        for i in 0..900 {
+            let m = DataMap::new().with("depth", i as f64).with("temp", 4.0);
+            f.hub.observe(&depth, at(t0 + i as f64 * 0.2), &m);
+        }
+        let mut page = f.client("ana");
+        let before = f.hub.backlog(&page).unwrap()["topics"]["nav.depth"]
+            .as_array()
+            .unwrap()
+            .len();
+        assert!(before >= 850, "{before} samples before");
+        // a page opens a layout the console did not start with, plotting `temp`
+        page.layout = Some(Layout::parse("temp.xml", TEMP, &BTreeMap::new()).unwrap());
+        assert!(f.hub.backlog(&page).is_none(), "temp has no past");
+        // the depth of the pilot layout still spans its 180 s
+        let mut pilot = f.client("bo");
+        let b = f.hub.backlog(&pilot).unwrap();
+        let samples = b["topics"]["nav.depth"].as_array().unwrap();
+        assert_eq!(samples.len(), before, "the depth plot's past was cut");
+        let first = samples[0]["stamp"].as_f64().unwrap();
+        let last = samples[samples.len() - 1]["stamp"].as_f64().unwrap();
+        assert!(last - first > 179.0, "{first} .. {last}");
+        // the new field has no past, and it is kept from now on
+        assert!(samples.iter().all(|s| s["fields"].get("temp").is_none()));
+        f.hub.observe(
+            &depth,
+            at(now_s() + 1.0),
+            &DataMap::new().with("depth", 1.0).with("temp", 5.0),
+        );
+        let b = f.hub.backlog(&page).unwrap();
+        let temps = b["topics"]["nav.depth"].as_array().unwrap();
+        assert_eq!(temps.len(), 1, "{temps:?}");
+        assert_eq!(temps[0]["fields"]["temp"], 5.0);
+        assert!(temps[0]["fields"].get("depth").is_none());
+        let b = f.hub.backlog(&pilot).unwrap();
+        assert_eq!(b["topics"]["nav.depth"].as_array().unwrap().len(), before + 1);
+        pilot.layout = None;
+        assert!(f.hub.backlog(&pilot).is_none());
     }
 }

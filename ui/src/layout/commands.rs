@@ -385,6 +385,12 @@ impl Reader {
             None => (text, None),
         };
         let Some(c) = self.commands.get(name) else {
+            if let Some(at) = self.broken.get(name) {
+                return Err(a.error(format!(
+                    "command `{name}` is in error where it is declared (line {})",
+                    at.line
+                )));
+            }
             let known: Vec<&str> = self.commands.keys().map(String::as_str).collect();
             return Err(a.error(format!(
                 "no command called `{name}`; commands: {}",

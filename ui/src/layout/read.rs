@@ -1,6 +1,8 @@
 //! Reading a layout file into the model: the `<layout>` element, its `<var>`s and `<template>`s,
 //! then (templates expanded) its commands, widget tree and input bindings, and the ids of widgets
-//! the file leaves unnamed. Every error names file, line and column.
+//! the file leaves unnamed. Every error names file, line and column; a file with several errors
+//! has them all reported ([`Layout::load_all`]): an element in error is left out and the reading
+//! goes on with the next one.
 
 use super::commands::read_command;
 use super::expand::Expander;
@@ -21,15 +23,35 @@ impl Layout {
         text: &str,
         vars: &BTreeMap<String, String>,
     ) -> Result<Layout, FileError> {
-        let root = xml::parse(file, text)?;
-        Reader::layout(&root, vars)
+        Layout::parse_all(file, text, vars).map_err(first)
     }
 
     /// Reads and parses a layout file.
     pub fn load(path: &Path, vars: &BTreeMap<String, String>) -> Result<Layout, FileError> {
-        let root = xml::parse_file(path)?;
+        Layout::load_all(path, vars).map_err(first)
+    }
+
+    /// As [`Layout::parse`], with every error the file has, in document order (an XML syntax
+    /// error, a wrong `<layout>` element, variable or template stops the reading there).
+    pub fn parse_all(
+        file: &str,
+        text: &str,
+        vars: &BTreeMap<String, String>,
+    ) -> Result<Layout, Vec<FileError>> {
+        let root = xml::parse(file, text).map_err(|e| vec![e])?;
         Reader::layout(&root, vars)
     }
+
+    /// As [`Layout::load`], with every error the file has (see [`Layout::parse_all`]).
+    pub fn load_all(path: &Path, vars: &BTreeMap<String, String>) -> Result<Layout, Vec<FileError>> {
+        let root = xml::parse_file(path).map_err(|e| vec![e])?;
+        Reader::layout(&root, vars)
+    }
+}
+
+/// The first of a file's errors.
+fn first(mut errors: Vec<FileError>) -> FileError {
+    errors.swap_remove(0)
 }
 
 /// Reads an expanded layout.
@@ -38,6 +60,10 @@ pub(super) struct Reader {
     pub(super) commands: BTreeMap<String, CommandDecl>,
     /// Ids the file gives, and where.
     pub(super) ids: BTreeMap<String, Pos>,
+    /// Commands whose declaration is in error, and where.
+    pub(super) broken: BTreeMap<String, Pos>,
+    /// The errors found so far (the elements in error are left out).
+    pub(super) errors: Vec<FileError>,
 }
 
 /// The `<layout>` element's own attributes.
@@ -67,33 +93,42 @@ fn top_elements() -> Vec<&'static str> {
 
 impl Reader {
     /// Reads the `<layout>` element `root`, with `given` overriding its variables' defaults.
-    fn layout(root: &Element, given: &BTreeMap<String, String>) -> Result<Layout, FileError> {
-        if root.name != "layout" {
-            return Err(root.error(format!(
-                "root element is <{}>, expected <layout>",
-                root.name
-            )));
-        }
-        root.only_attrs(&["name", "title", "roles", "vehicle"])?;
-        let (vars, templates) = declarations(root, given)?;
-        root.only_children(&top_elements())?;
+    fn layout(
+        root: &Element,
+        given: &BTreeMap<String, String>,
+    ) -> Result<Layout, Vec<FileError>> {
+        let (vars, templates) = Reader::head(root, given).map_err(|e| vec![e])?;
         let mut ex = Expander::new(&vars, templates);
-        let header = header(root, &ex.attrs(root, &[])?)?;
-        let mut children = Vec::new();
-        for el in &root.children {
-            if el.name != "var" && el.name != "template" {
-                children.extend(ex.expand(el, &[], 1)?);
-            }
-        }
+        let header = ex
+            .attrs(root, &[])
+            .and_then(|attrs| header(root, &attrs))
+            .map_err(|e| vec![e])?;
         let mut reader = Reader {
             commands: BTreeMap::new(),
             ids: BTreeMap::new(),
+            broken: BTreeMap::new(),
+            errors: Vec::new(),
         };
-        reader.commands(&children)?;
+        let mut children = Vec::new();
+        for el in &root.children {
+            if el.name != "var" && el.name != "template" {
+                match ex.expand(el, &[], 1) {
+                    Ok(els) => children.extend(els),
+                    Err(e) => reader.errors.push(e),
+                }
+            }
+        }
+        reader.commands(&children);
         for c in reader.commands.values_mut() {
             c.vehicle.clone_from(&header.vehicle);
         }
-        let body = reader.body(&children)?;
+        let body = reader.body(&children);
+        if !reader.errors.is_empty() {
+            let mut errors = reader.errors;
+            errors.sort_by_key(|e| (e.pos.line, e.pos.col));
+            errors.dedup();
+            return Err(errors);
+        }
         let mut root_node = root_node(body.widgets, &root.pos);
         reader.assign_ids(&mut root_node);
         Ok(Layout {
@@ -111,42 +146,84 @@ impl Reader {
         })
     }
 
+    /// The `<layout>` element's checks, its variables and its templates: an error here stops
+    /// the reading.
+    fn head<'a>(
+        root: &'a Element,
+        given: &BTreeMap<String, String>,
+    ) -> Result<Declarations<'a>, FileError> {
+        if root.name != "layout" {
+            return Err(root.error(format!(
+                "root element is <{}>, expected <layout>",
+                root.name
+            )));
+        }
+        root.only_attrs(&["name", "title", "roles", "vehicle"])?;
+        let (vars, templates) = declarations(root, given)?;
+        root.only_children(&top_elements())?;
+        Ok((vars, templates))
+    }
+
+    /// Keeps `r`'s value, or its error among the file's errors.
+    pub(super) fn keep<T>(&mut self, r: Result<T, FileError>) -> Option<T> {
+        r.map_err(|e| self.errors.push(e)).ok()
+    }
+
     /// Reads the `<command>`s among `children`; a name is declared once.
-    fn commands(&mut self, children: &[Element]) -> Result<(), FileError> {
+    fn commands(&mut self, children: &[Element]) {
         for el in children.iter().filter(|e| e.name == "command") {
-            let c = read_command(el)?;
+            let c = match read_command(el) {
+                Ok(c) => c,
+                Err(e) => {
+                    if let Some(name) = el.get("name") {
+                        self.broken.insert(name.trim().to_string(), el.pos.clone());
+                    }
+                    self.errors.push(e);
+                    continue;
+                }
+            };
             if let Some(prev) = self.commands.get(&c.name) {
-                return Err(el.error(format!(
+                let e = el.error(format!(
                     "command `{}` is already declared at line {}",
                     c.name, prev.pos.line
-                )));
+                ));
+                self.errors.push(e);
+                continue;
             }
             self.commands.insert(c.name.clone(), c);
         }
         for el in children.iter().filter(|e| e.name == "command") {
             if let Some(a) = el.attr("resume") {
-                self.command_ref(a, Some(false))?;
+                let r = self.command_ref(a, Some(false));
+                self.keep(r);
             }
         }
-        Ok(())
     }
 
     /// Reads the widgets, `<keys>` and `<gamepad>` among `children` (commands already read).
-    fn body(&mut self, children: &[Element]) -> Result<Body, FileError> {
+    fn body(&mut self, children: &[Element]) -> Body {
         let mut body = Body::default();
         let kinds = widget_kinds();
         for el in children {
             match el.name.as_str() {
                 "command" => {}
-                "keys" => body.keys.extend(self.keys(el)?),
-                "gamepad" => {
-                    let (axes, buttons) = self.gamepad(el)?;
-                    body.axes.extend(axes);
-                    body.buttons.extend(buttons);
+                "keys" => {
+                    let keys = self.keys(el);
+                    body.keys.extend(self.keep(keys).unwrap_or_default());
                 }
-                k if kinds.contains(&k) => body.widgets.push(self.node(el)?),
+                "gamepad" => {
+                    let pad = self.gamepad(el);
+                    if let Some((axes, buttons)) = self.keep(pad) {
+                        body.axes.extend(axes);
+                        body.buttons.extend(buttons);
+                    }
+                }
+                k if kinds.contains(&k) => {
+                    let node = self.node(el);
+                    body.widgets.extend(self.keep(node));
+                }
                 _ => {
-                    return Err(el.error(format!(
+                    let e = el.error(format!(
                         "unexpected element <{}> inside <layout>; expected {}",
                         el.name,
                         top_elements()
@@ -154,11 +231,12 @@ impl Reader {
                             .map(|k| format!("<{k}>"))
                             .collect::<Vec<_>>()
                             .join(", ")
-                    )));
+                    ));
+                    self.errors.push(e);
                 }
             }
         }
-        Ok(body)
+        body
     }
 
     /// Gives every node without an id `KIND-N`, N counting nodes of that kind in document order

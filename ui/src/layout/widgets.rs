@@ -29,7 +29,16 @@ fn kind_attrs(kind: &str) -> Option<&'static [&'static str]> {
             "false",
             "fresh",
         ],
-        "gauge" => &["bind", "min", "max", "unit", "precision", "ranges", "fresh"],
+        "gauge" => &[
+            "bind",
+            "min",
+            "max",
+            "unit",
+            "precision",
+            "ranges",
+            "angle",
+            "fresh",
+        ],
         "plot" => &["window", "min", "max", "fresh"],
         "series" => &["bind", "colour", "unit", "angle"],
         "track" => &["position", "heading", "trail", "waypoints", "grid", "fresh"],
@@ -222,9 +231,14 @@ impl Reader {
         Ok(Vec::new())
     }
 
-    /// The nodes inside `el`.
+    /// The nodes inside `el`; those in error are left out, their errors kept.
     fn children(&mut self, el: &Element) -> Result<Vec<Node>, FileError> {
-        el.children.iter().map(|c| self.node(c)).collect()
+        let mut nodes = Vec::new();
+        for c in &el.children {
+            let node = self.node(c);
+            nodes.extend(self.keep(node));
+        }
+        Ok(nodes)
     }
 
     /// `<row>`, `<column>`, `<grid>` and `<tab>`: any widgets, with their sizes or columns.
@@ -325,16 +339,24 @@ impl Reader {
     }
 }
 
-/// `<readout>` and `<gauge>`: a binding, precision, range and coloured ranges; whether a
-/// readout's value is an angle.
+/// `<readout>` and `<gauge>`: a binding, precision, range and coloured ranges; whether the value
+/// is an angle (a gauge of an angle is a compass dial over 0–360°, with no `min` or `max`).
 fn readout(el: &Element) -> Result<(), FileError> {
     no_children(el)?;
     bind(el.required("bind")?)?;
     if let Some(a) = el.attr("precision") {
         count(a, 0, 15)?;
     }
-    if let Some(a) = el.attr("angle") {
-        flag(a)?;
+    let angle = el.attr("angle").map(flag).transpose()?.unwrap_or(false);
+    if angle && el.name == "gauge" {
+        if let Some(a) = el.attr("min").or_else(|| el.attr("max")) {
+            return Err(a.error(
+                "a gauge of an angle is a compass dial over 0–360°: leave out `min` and `max`",
+            ));
+        }
+        if let Some(a) = el.attr("ranges") {
+            return ranges(a, Some(0.0), Some(360.0));
+        }
     }
     let (min, max) = min_max(el)?;
     if let Some(a) = el.attr("ranges") {
@@ -494,6 +516,14 @@ mod tests {
             (
                 "<layout name=\"t\">\n  <readout bind=\"a.b\" angle=\"yes\"/>\n</layout>",
                 "2:23: attribute `angle`: `yes` is not true or false",
+            ),
+            (
+                "<layout name=\"t\">\n  <gauge bind=\"a.b\" angle=\"true\" max=\"180\"/>\n</layout>",
+                "2:34: attribute `max`: a gauge of an angle is a compass dial over 0–360°: leave out `min` and `max`",
+            ),
+            (
+                "<layout name=\"t\">\n  <gauge bind=\"a.b\" angle=\"true\" ranges=\"350:370:red\"/>\n</layout>",
+                "2:34: attribute `ranges`: range `350:370:red` is outside min–max",
             ),
             (
                 "<layout name=\"t\">\n  <plot><series bind=\"a.b\" angle=\"1\"/></plot>\n</layout>",
