@@ -488,11 +488,30 @@ function readout(ctx, node) {
   const unit = node.unit ? el('span', { class: 'readout-unit', text: node.unit }) : null;
   const body = el('div', { class: 'readout-value', 'aria-live': 'off' }, value, unit);
   if (!node.label && b) node = { ...node, label: bindText(b) };
+  // the number is made smaller until it fits its box (never cut short), whenever its length or
+  // the box changes
+  let fitted = '';
+  function fit() {
+    const key = `${value.textContent.length}/${body.clientWidth}`;
+    if (key === fitted || !body.clientWidth) return;
+    fitted = key;
+    body.style.fontSize = '';
+    const need = body.scrollWidth, have = body.clientWidth;
+    if (need > have) {
+      const full = parseFloat(getComputedStyle(body).fontSize) || 32;
+      body.style.fontSize = `${Math.max(10, Math.floor(full * have / need * 0.97))}px`;
+    }
+  }
   return outputWidget(ctx, node, 'readout', body, b ? [[b.topic]] : [], {
     update() {
       const s = fmtOutput(node, valueOf(ctx, b));
-      if (value.textContent !== s) value.textContent = s;
+      if (value.textContent !== s) {
+        value.textContent = s;
+        fit();
+      }
     },
+    redraw: fit,
+    tick: fit,
   });
 }
 
@@ -512,39 +531,58 @@ export function parseRanges(x) {
   });
 }
 
+/**
+ * A dial: an arc of 270° from `min` to `max` with coloured ranges, or (`angle="true"`) a compass
+ * dial over 0–360° with 0 at the top. The needle stays inside the tick numbers; the value is
+ * written below the dial.
+ */
 function gauge(ctx, node) {
   const b = parseBind(node.bind);
-  const min = num(node.min, 0);
-  let max = num(node.max, 100);
+  const compass = isOn(node.angle);
+  const min = compass ? 0 : num(node.min, 0);
+  let max = compass ? 360 : num(node.max, 100);
   if (!(max > min)) max = min + 1;
-  const cx = 100, cy = 100, r = 78;
-  const ang = (v) => -135 + 270 * Math.max(0, Math.min(1, (v - min) / (max - min)));
+  const cx = 100, cy = compass ? 88 : 100, r = compass ? 70 : 78;
+  const ang = compass
+    ? (v) => angle360(v)
+    : (v) => -135 + 270 * Math.max(0, Math.min(1, (v - min) / (max - min)));
   const pt = (a, rr) => [cx + rr * Math.sin(a * Math.PI / 180), cy - rr * Math.cos(a * Math.PI / 180)];
   const arc = (a1, a2, rr) => {
     const [x1, y1] = pt(a1, rr);
     const [x2, y2] = pt(a2, rr);
     return `M${x1.toFixed(2)},${y1.toFixed(2)} A${rr},${rr} 0 ${a2 - a1 > 180 ? 1 : 0} 1 ${x2.toFixed(2)},${y2.toFixed(2)}`;
   };
-  const s = svg('svg', { viewBox: '0 0 200 168', role: 'img', 'aria-label': node.label || 'gauge' });
-  s.append(svg('path', { d: arc(-135, 135, r), fill: 'none', stroke: '#1c3750', 'stroke-width': 12, 'stroke-linecap': 'butt' }));
+  const height = compass ? 206 : 168;
+  const s = svg('svg', { viewBox: `0 0 200 ${height}`, role: 'img', 'aria-label': node.label || 'gauge' });
+  if (compass) s.append(svg('circle', { cx, cy, r, fill: 'none', stroke: '#1c3750', 'stroke-width': 12 }));
+  else s.append(svg('path', { d: arc(-135, 135, r), fill: 'none', stroke: '#1c3750', 'stroke-width': 12, 'stroke-linecap': 'butt' }));
   parseRanges(node.ranges).forEach((rg, i) => {
-    const a1 = ang(Math.min(rg.from, rg.to)), a2 = ang(Math.max(rg.from, rg.to));
-    if (a2 > a1) s.append(svg('path', { d: arc(a1, a2, r), fill: 'none', stroke: colour(rg.colour, i), 'stroke-width': 12 }));
+    const lo = Math.min(rg.from, rg.to), hi = Math.max(rg.from, rg.to);
+    const a1 = compass ? lo : ang(lo), a2 = compass ? hi : ang(hi);
+    if (a2 > a1) s.append(svg('path', { d: arc(a1, Math.min(a2, a1 + 359.99), r), fill: 'none', stroke: colour(rg.colour, i), 'stroke-width': 12 }));
   });
-  const step = niceStep(max - min, 5);
-  for (let v = Math.ceil(min / step) * step; v <= max + step * 1e-6; v += step) {
+  // ticks: a compass every 30° (numbers every 90°, 0 at the top and never 360 beside it)
+  const step = compass ? 30 : niceStep(max - min, 5);
+  const last = compass ? max - step / 2 : max + step * 1e-6;
+  for (let v = Math.ceil(min / step) * step; v <= last; v += step) {
     const a = ang(v);
     const [x1, y1] = pt(a, r - 8);
     const [x2, y2] = pt(a, r + 6);
     const [tx, ty] = pt(a, r - 20);
     s.append(svg('line', { x1, y1, x2, y2, stroke: '#7f9bb3', 'stroke-width': 1.2 }));
-    s.append(svg('text', { x: tx, y: ty + 3, 'text-anchor': 'middle', class: 'gauge-tick', text: fmtValue(+v.toFixed(6)) }));
+    if (!compass || v % 90 === 0) {
+      s.append(svg('text', { x: tx, y: ty + 3, 'text-anchor': 'middle', class: 'gauge-tick', text: fmtValue(+v.toFixed(6)) }));
+    }
   }
-  const needle = svg('line', { x1: cx, y1: cy, x2: cx, y2: cy - r + 14, stroke: '#ffffff', 'stroke-width': 3, 'stroke-linecap': 'round' });
-  const needleG = svg('g', { transform: `rotate(-135 ${cx} ${cy})` }, needle);
+  // the needle ends short of the numbers (their centres sit 20 units in from the arc; a number
+  // of three digits reaches 8 units either side)
+  const tip = r - 34;
+  const needle = svg('line', { x1: cx, y1: cy, x2: cx, y2: cy - tip, stroke: '#ffffff', 'stroke-width': 3, 'stroke-linecap': 'round', 'data-testid': 'needle' });
+  const needleG = svg('g', { transform: `rotate(${ang(min)} ${cx} ${cy})` }, needle);
   s.append(needleG, svg('circle', { cx, cy, r: 6, fill: '#d8e6f2' }));
-  const valText = svg('text', { x: cx, y: 142, 'text-anchor': 'middle', class: 'gauge-value', 'data-testid': 'value', text: '—' });
-  const unitText = svg('text', { x: cx, y: 160, 'text-anchor': 'middle', class: 'gauge-unit', text: node.unit || '' });
+  const valY = compass ? cy + r + 26 : 142;
+  const valText = svg('text', { x: cx, y: valY, 'text-anchor': 'middle', class: 'gauge-value', 'data-testid': 'value', text: '—' });
+  const unitText = svg('text', { x: cx, y: valY + 18, 'text-anchor': 'middle', class: 'gauge-unit', text: node.unit || '' });
   s.append(valText, unitText);
   const body = el('div', { class: 'gauge' }, s);
   if (!node.label && b) node = { ...node, label: bindText(b) };
@@ -555,7 +593,7 @@ function gauge(ctx, node) {
       if (valText.textContent !== t) valText.textContent = t;
       if (typeof v === 'number' && Number.isFinite(v)) {
         needleG.setAttribute('transform', `rotate(${ang(v).toFixed(2)} ${cx} ${cy})`);
-        needle.setAttribute('stroke', v < min || v > max ? '#ff2d6f' : '#ffffff');
+        needle.setAttribute('stroke', !compass && (v < min || v > max) ? '#ff2d6f' : '#ffffff');
       }
     },
   });
@@ -808,7 +846,11 @@ function plot(ctx, node) {
           s.samples = mergeByStamp(s.samples, [[stamp, v]], (x) => x[0]);
         }
         const txt = fmtOutput({ angle: s.angle, precision: node.precision }, v);
-        if (legendVals[i][1].textContent !== txt) legendVals[i][1].textContent = txt;
+        if (legendVals[i][1].textContent !== txt) {
+          legendVals[i][1].textContent = txt;
+          legendVals[i][0].classList.remove('noproducer');
+          legendVals[i][0].title = '';
+        }
       });
       trim();
     },
@@ -832,7 +874,14 @@ function plot(ctx, node) {
       const fresh = freshOf(node) / 1000;
       series.forEach((s, i) => {
         const last = s.samples[s.samples.length - 1];
-        legendVals[i][0].classList.toggle('stale', !last || now - last[0] > fresh);
+        const [item, val] = legendVals[i];
+        item.classList.toggle('stale', !last || now - last[0] > fresh);
+        const none = !last && ctx.producer(s.bind.topic) === false;
+        if (item.classList.contains('noproducer') !== none) {
+          item.classList.toggle('noproducer', none);
+          item.title = none ? `no module produces ${s.bind.topic}` : '';
+          if (none) val.textContent = 'no producer';
+        }
       });
       draw();
     },
@@ -982,16 +1031,22 @@ function track(ctx, node) {
     const autoStep = niceStep(Math.max(right - left, top - bottom), 6);
     if (!(step > 0) || (right - left) / step > 60 || (top - bottom) / step > 60) step = autoStep;
     const grid = svg('g', { stroke: '#143452', 'stroke-width': 1 });
+    // where the scale bar (bottom right) and the grid label (top left) go: no number there
+    const barM = niceStep((W / 4) / scale, 1);
+    const barPx = barM * scale;
+    const bx = W - barPx - 14, by = H - 16;
+    const textW = (t) => 6.2 * t.length;
     const labels = svg('g', { fill: '#56778f', 'font-size': 10, 'font-family': 'ui-monospace, monospace' });
     for (let x = Math.ceil(left / step) * step; x <= right; x += step) {
       const X = Math.round(SX(x)) + 0.5;
       grid.append(svg('line', { x1: X, y1: 0, x2: X, y2: H, stroke: Math.abs(x) < step / 1e6 ? '#24557c' : undefined }));
-      labels.append(svg('text', { x: X + 3, y: H - 4, text: `${fmtValue(+x.toFixed(3))}` }));
+      const t = `${fmtValue(+x.toFixed(3))}`;
+      if (X + 3 + textW(t) < bx - 8) labels.append(svg('text', { x: X + 3, y: H - 4, text: t }));
     }
     for (let y = Math.ceil(bottom / step) * step; y <= top; y += step) {
       const Y = Math.round(SY(y)) + 0.5;
       grid.append(svg('line', { x1: 0, y1: Y, x2: W, y2: Y, stroke: Math.abs(y) < step / 1e6 ? '#24557c' : undefined }));
-      labels.append(svg('text', { x: 3, y: Y - 3, text: `${fmtValue(+y.toFixed(3))}` }));
+      if (Y - 3 > 30 && Y - 3 < H - 18) labels.append(svg('text', { x: 3, y: Y - 3, text: `${fmtValue(+y.toFixed(3))}` }));
     }
     s.append(grid, labels);
     if (wps.length) {
@@ -1027,9 +1082,6 @@ function track(ctx, node) {
       if (key) s.append(svg('text', { x: X + 12, y: Y + 4, fill: v.colour, 'font-size': 12, 'data-testid': 'vehicle-label', text: key }));
     }
     // scale bar
-    const barM = niceStep((W / 4) / scale, 1);
-    const barPx = barM * scale;
-    const bx = W - barPx - 14, by = H - 16;
     s.append(svg('g', { 'data-testid': 'scale-bar' },
       svg('rect', { x: bx - 6, y: by - 18, width: barPx + 12, height: 26, rx: 4, fill: 'rgba(6,20,34,.75)' }),
       svg('path', { d: `M${bx},${by - 5} v5 h${barPx} v-5`, fill: 'none', stroke: '#d8e6f2', 'stroke-width': 2 }),
@@ -1329,6 +1381,15 @@ function health(ctx, node) {
       }
       for (const [k, v] of Object.entries(m)) {
         if (['severity', 'Severity', 'components', 'Components', 'reasons', 'media'].includes(k)) continue;
+        if (k === 'unknown' && typeof v === 'number') {
+          if (v > 0) {
+            extra.append(el('div', {
+              class: 'fields', 'data-testid': 'health-unknown',
+              text: `${fmtValue(v)} ${v === 1 ? 'update' : 'updates'} from components the health rules do not name (not judged)`,
+            }));
+          }
+          continue;
+        }
         extra.append(el('div', { class: 'fields', text: `${k}: ${fmtValue(v)}` }));
       }
     },
@@ -1372,7 +1433,7 @@ function history(ctx, node) {
   const lines = Math.max(1, Math.round(num(node.lines, 50)));
   const tbody = el('tbody');
   const table = el('table', { class: 'tbl' },
-    el('thead', {}, el('tr', {}, ['time', 'user', 'command', 'fields', 'state'].map((h) => el('th', { scope: 'col', text: h })))),
+    el('thead', {}, el('tr', {}, ['time', 'user', 'command', 'state'].map((h) => el('th', { scope: 'col', text: h })))),
     tbody);
   if (!node.label) node = { ...node, label: 'Commands' };
   const e = frame(ctx, node, 'history', el('div', { class: 'scroll' }, table));
@@ -1384,12 +1445,15 @@ function history(ctx, node) {
       return el('tr', { 'data-command-id': c.id, 'data-state': state },
         el('td', { text: fmtTime(c.time) }),
         el('td', { text: c.user || '' }),
-        el('td', { text: c.command || c.topic || '', title: c.topic || '' }),
-        el('td', { class: 'fields', text: fmtFields(c.fields) }),
-        el('td', {}, el('span', { class: `state state-${state}`, text: state }),
-          c.reason ? el('div', { class: 'reason', text: c.reason }) : null));
+        // the command with its fields (and why it was refused) below it, so that a narrow
+        // history keeps its state column in sight
+        el('td', { class: 'command' },
+          el('div', { class: 'name', text: c.command || c.topic || '', title: c.topic || '' }),
+          el('div', { class: 'fields', 'data-testid': 'history-fields', text: fmtFields(c.fields) }),
+          c.reason ? el('div', { class: 'reason', text: c.reason }) : null),
+        el('td', {}, el('span', { class: `state state-${state}`, text: state })));
     }));
-    if (!list.length) tbody.append(el('tr', {}, el('td', { colspan: 5, class: 'muted', text: 'no commands yet' })));
+    if (!list.length) tbody.append(el('tr', {}, el('td', { colspan: 4, class: 'muted', text: 'no commands yet' })));
   }
   const w = { node, el: e, update() {}, tick() {}, onHistory: render };
   ctx.register(w);
