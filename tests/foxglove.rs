@@ -102,6 +102,27 @@ fn foxglove_s_own_client_sees_the_demo_s_channels_values_and_command_rules() {
         String::from_utf8_lossy(&client.stdout)
     );
     let got: Json = serde_json::from_slice(&client.stdout).unwrap();
+    // the library offers only the protocol's first name, and the server takes it
+    assert_eq!(got["protocol"], "foxglove.websocket.v1");
+    // a client offering the name Foxglove's SDK gives it is served the same
+    let sdk = Command::new("node")
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/peers/foxglove_client.js"))
+        .args([&url, "3", "nav.position"])
+        .env("NODE_PATH", &modules)
+        .env("FOXGLOVE_OFFER", "foxglove.sdk.v1")
+        .output()
+        .expect("node runs");
+    assert!(
+        sdk.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sdk.stderr)
+    );
+    let sdk: Json = serde_json::from_slice(&sdk.stdout).unwrap();
+    assert_eq!(sdk["protocol"], "foxglove.sdk.v1");
+    let n = sdk["messages"]["nav.position"]
+        .as_array()
+        .map_or(0, Vec::len);
+    assert!(n >= 3, "{n} positions");
 
     let channel = |topic: &str| -> &Json {
         got["channels"]

@@ -6,8 +6,10 @@
 // Lists the advertised channels, subscribes to each TOPIC, and collects COUNT messages of each
 // (JSON channels decoded, others by size). Then, when the server takes client publishing, it
 // advertises `cmd.mission` and sends one (which the server should refuse), and `cmd.course` with a
-// course (which it should take). Prints one JSON object and exits:
-// {"serverInfo": …, "channels": [{topic, encoding, schemaName, schemaEncoding, schema}],
+// course (which it should take). Offers the subprotocols FOXGLOVE_OFFER names (comma-separated),
+// else exactly what the library offers. Prints one JSON object and exits:
+// {"serverInfo": …, "protocol": the subprotocol chosen,
+//  "channels": [{topic, encoding, schemaName, schemaEncoding, schema}],
 //  "messages": {topic: [{"timestamp": "ns", "data": …}]}, "statuses": [{level, message}]}
 
 "use strict";
@@ -26,11 +28,13 @@ const out = { serverInfo: null, channels: [], messages: {}, statuses: [] };
 const subscriptions = new Map();
 const decoder = new TextDecoder();
 let published = false;
-// the protocol's first name and the name Foxglove's SDK servers give it (the same protocol), as
-// Foxglove's app offers both
-const client = new FoxgloveClient({
-  ws: new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, "foxglove.sdk.v1"]),
-});
+// the subprotocols offered: exactly what the library's client offers (its README's
+// `new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL])`), or the names in FOXGLOVE_OFFER
+const offer = process.env.FOXGLOVE_OFFER
+  ? process.env.FOXGLOVE_OFFER.split(",")
+  : [FoxgloveClient.SUPPORTED_SUBPROTOCOL];
+const ws = new WebSocket(url, offer);
+const client = new FoxgloveClient({ ws });
 
 function done() {
   return topics.every((t) => (out.messages[t] || []).length >= count);
@@ -59,6 +63,8 @@ function publishCommands() {
 
 client.on("serverInfo", (info) => {
   out.serverInfo = info;
+  // the subprotocol the server chose
+  out.protocol = ws.protocol;
 });
 client.on("status", (s) => out.statuses.push({ level: s.level, message: s.message }));
 client.on("advertise", (channels) => {

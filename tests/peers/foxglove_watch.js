@@ -40,9 +40,13 @@ const topics = new Map();
 const subscriptions = new Map();
 const logTypes = new Map();
 
-const client = new FoxgloveClient({
-  ws: new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL, "foxglove.sdk.v1"]),
-});
+// the subprotocols offered: exactly what the library's client offers (its README's
+// `new WebSocket(url, [FoxgloveClient.SUPPORTED_SUBPROTOCOL])`), or the names in FOXGLOVE_OFFER
+const offer = process.env.FOXGLOVE_OFFER
+  ? process.env.FOXGLOVE_OFFER.split(",")
+  : [FoxgloveClient.SUPPORTED_SUBPROTOCOL];
+const ws = new WebSocket(url, offer);
+const client = new FoxgloveClient({ ws });
 client.on("advertise", (channels) => {
   for (const c of channels) {
     topics.set(c.id, c.topic);

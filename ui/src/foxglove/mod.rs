@@ -29,7 +29,9 @@
 //!   no frame) closes that connection. Either way the others are unaffected, and the server's
 //!   report of it is counted and logged the same way ([`Foxglove::client_faults`]).
 //! - `listen` defaults to 127.0.0.1:8765: the live view stays on the machine unless an address is
-//!   given.
+//!   given. The protocol's two names are both accepted: `foxglove.sdk.v1` (Foxglove's app, the
+//!   crate's own) and `foxglove.websocket.v1` (Foxglove's client library, older Lichtblick), see
+//!   [`names`]: the crate's server listens on a loopback port behind seabus's own listener.
 
 use foxglove::schemas::{FrameTransform, LocationFix, Log, Quaternion, Timestamp, Vector3};
 use foxglove::websocket::{Capability, Client, ClientChannel, ServerListener, Status};
@@ -40,12 +42,15 @@ use seabus_medium::{DataMap, Interface, Kind, Medium, Message, Pattern, Payload,
 use seabus_modules::logs::{self, Capture, Record, Wants};
 use seabus_modules::{Catalogue, SystemSpec, schema};
 use std::collections::HashMap;
-use std::net::SocketAddr;
+use std::net::{Ipv4Addr, SocketAddr};
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
+
+pub mod names;
+use names::Front;
 
 /// The system file element this module reads.
 pub const SECTION: &str = "foxglove";
@@ -215,8 +220,9 @@ struct Shared {
     to_bus: mpsc::Sender<(Topic, DataMap)>,
     /// Refused client messages by reason, logged without flooding.
     refused: Tally,
-    /// The server's reports of clients' faults by kind, logged without flooding.
-    faults: Tally,
+    /// The server's reports of clients' faults by kind (and the front door's), logged without
+    /// flooding.
+    faults: Arc<Tally>,
 }
 
 impl ServerListener for Shared {
@@ -490,7 +496,7 @@ async fn next_record(log: &mut Option<Capture>) -> Option<Record> {
 
 /// A running Foxglove server; dropping it stops it.
 pub struct Foxglove {
-    addr: SocketAddr,
+    front: Front,
     server: Option<foxglove::WebSocketServerHandle>,
     task: JoinHandle<()>,
     shared: Arc<Shared>,
@@ -511,12 +517,12 @@ impl Foxglove {
             commands: spec.commands.clone(),
             to_bus,
             refused: Tally::new(),
-            faults: Tally::new(),
+            faults: Arc::new(Tally::new()),
         });
         let mut server = foxglove::WebSocketServer::new()
             .name("seabus")
             .context(&ctx)
-            .bind(spec.listen.ip().to_string(), spec.listen.port())
+            .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
             .listener(shared.clone());
         if !spec.commands.is_empty() {
             server = server
@@ -525,11 +531,19 @@ impl Foxglove {
         }
         let handle = server.start().await.map_err(|e| {
             format!(
-                "{}: the Foxglove server cannot listen on {}: {e}",
-                spec.element.pos, spec.listen
+                "{}: the Foxglove server cannot start on a loopback port: {e}",
+                spec.element.pos
             )
         })?;
-        let addr = SocketAddr::new(spec.listen.ip(), handle.port());
+        let inner = SocketAddr::new(Ipv4Addr::LOCALHOST.into(), handle.port());
+        let front = Front::start(spec.listen, inner, shared.faults.clone())
+            .await
+            .map_err(|e| {
+                format!(
+                    "{}: the Foxglove server cannot listen on {}: {e}",
+                    spec.element.pos, spec.listen
+                )
+            })?;
         let port: Interface = medium.attach_with("foxglove", 1 << 12, 1 << 6);
         let mut feed = Feed {
             ctx,
@@ -594,7 +608,7 @@ impl Foxglove {
             }
         });
         Ok(Foxglove {
-            addr,
+            front,
             server: Some(handle),
             task,
             shared,
@@ -603,12 +617,12 @@ impl Foxglove {
 
     /// The address it listens on.
     pub fn addr(&self) -> SocketAddr {
-        self.addr
+        self.front.addr()
     }
 
     /// The URL a Foxglove client opens.
     pub fn url(&self) -> String {
-        format!("ws://{}", self.addr)
+        format!("ws://{}", self.addr())
     }
 
     /// Client messages refused so far.
