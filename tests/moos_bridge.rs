@@ -14,6 +14,7 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
     let db = MoosDb::start("127.0.0.1:0".parse().unwrap()).await.unwrap();
     let port = db.addr().port();
     let bus = format!("udp://{}:{}?ttl=0", group(), free_port());
+    let grid = format!("udp://{}:{}?ttl=0", group(), free_port());
     let system = format!(
         r#"<seabus node="gw">
   <medium name="bus" url="{bus}"/>
@@ -25,6 +26,21 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
     <route from="bus" to="shore" topics="vehicle.state" rename="VEHICLE_STATE"/>
     <route from="shore" to="bus" topics="DESIRED_DEPTH" rename="cmd.depth" keep="false">
       <field name="value" rename="depth"/>
+    </route>
+    <route from="bus" to="shore" topics="nav.local" rename="NAV_X" keep="false">
+      <field name="x" rename="value"/>
+    </route>
+    <route from="bus" to="shore" topics="nav.local" rename="NAV_Y" keep="false">
+      <field name="y" rename="value"/>
+    </route>
+  </bridge>
+  <medium name="grid" url="{grid}"/>
+  <bridge name="to-grid" media="bus grid" report="0">
+    <route from="bus" to="grid" topics="nav.local" rename="grid.east" keep="false">
+      <field name="x" rename="metres"/>
+    </route>
+    <route from="bus" to="grid" topics="nav.local" rename="grid.north" keep="false">
+      <field name="y" rename="metres"/>
     </route>
   </bridge>
 </seabus>"#
@@ -38,6 +54,7 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
     );
     let _run = spawn_run(&path, &[]);
     let (_spy, rx) = spy_json(&bus, 30);
+    let (_grid_spy, grid_rx) = spy_json(&grid, 30);
 
     // the gateway connects
     let deadline = Instant::now() + Duration::from_secs(10);
@@ -71,6 +88,45 @@ async fn routes_map_datamaps_to_moos_doubles_and_strings_and_back() {
         publish("vehicle.state", &["mode=survey", "control=in-control"]);
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
+    // every route that matches forwards, each with its own name and fields: two MOOS variables
+    // of one topic, and two seabus topics on one medium (each a message of its own there)
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while (db.value("NAV_X").is_none() || db.value("NAV_Y").is_none()) && Instant::now() < deadline
+    {
+        publish("nav.local", &["x=10.5", "y=-20.25"]);
+        tokio::time::sleep(Duration::from_millis(200)).await;
+    }
+    let x = db.value("NAV_X").expect("NAV_X reached the DB");
+    let y = db.value("NAV_Y").expect("NAV_Y reached the DB");
+    assert_eq!(
+        (x.data_type, x.value, y.value),
+        (data::DOUBLE, 10.5, -20.25)
+    );
+    let mut seen = Vec::new();
+    let east = wait_for_line(
+        &grid_rx,
+        &mut seen,
+        Duration::from_secs(5),
+        "grid.east",
+        |v| v["topic"] == "grid.east",
+    );
+    let north = match seen.iter().find(|v| v["topic"] == "grid.north") {
+        Some(v) => v.clone(),
+        None => wait_for_line(
+            &grid_rx,
+            &mut seen,
+            Duration::from_secs(5),
+            "grid.north",
+            |v| v["topic"] == "grid.north",
+        ),
+    };
+    assert_eq!(
+        (&east["payload"], &north["payload"]),
+        (
+            &serde_json::json!({"metres": 10.5}),
+            &serde_json::json!({"metres": -20.25})
+        )
+    );
     let depth = db.value("NAV_DEPTH").expect("NAV_DEPTH reached the DB");
     assert_eq!((depth.data_type, depth.value), (data::DOUBLE, 12.5));
     let state = db

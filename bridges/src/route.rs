@@ -1,5 +1,9 @@
 //! The generic bridge (`<bridge type="route">`, the default): forwards messages between two media
-//! by routes, renaming topics and fields, limiting rates and converting payload formats.
+//! by routes, renaming topics and fields, limiting rates and converting payload formats. A message
+//! goes by every route that matches it, in the order of the routes; the first copy into a medium
+//! keeps its provenance, a further one into the same medium is numbered anew there
+//! ([`Interface::forward_anew`](seabus_medium::Interface::forward_anew)), since receivers take one
+//! origin's number once. The checks below are made once per message, before its routes.
 //!
 //! Loop safety, in order of the checks:
 //! 1. each side's interface drops duplicates it receives (origin + sequence window);
@@ -231,6 +235,8 @@ pub struct RouteBridge {
     problems: Tally,
     /// What was sent to each side whose medium carries no provenance.
     echo: [Option<EchoMemory>; 2],
+    /// What the routes of the message at hand make of it (kept between messages).
+    outs: Vec<Out>,
 }
 
 fn build(spec: &BridgeSpec, caps: &[Capabilities; 2], _: &Catalogue) -> Result<Built, FileError> {
@@ -309,6 +315,7 @@ impl RouteBridge {
             problems: Tally::new(),
             echo: [0, 1].map(|i| (!caps[i].provenance).then(EchoMemory::default)),
             names_channels: [0, 1].map(|i| caps[i].names_channels()),
+            outs: Vec::new(),
         };
         Ok((bridge, decl))
     }
@@ -343,20 +350,25 @@ fn route_qos(
     )))
 }
 
-/// What became of one message.
-#[derive(Debug, PartialEq)]
-enum Verdict {
-    Forward(usize, Message),
-    Drop(&'static str),
-}
+/// Where a message goes: the side, and the message as it leaves.
+type Out = (usize, Message);
 
 impl RouteBridge {
-    fn route(&mut self, node: &str, port: usize, mut msg: Message) -> Verdict {
+    /// Puts in `out` what `msg`, read on side `port`, becomes under every route that matches it
+    /// (in the order of the routes); or says why nothing goes (the last route's reason when every
+    /// matching route dropped it).
+    fn routes(
+        &mut self,
+        node: &str,
+        port: usize,
+        msg: Message,
+        out: &mut Vec<Out>,
+    ) -> Result<(), &'static str> {
         match self.seen.check(&msg) {
             Seen::New => {}
             Seen::Duplicate => {
                 self.counters.duplicates += 1;
-                return Verdict::Drop("duplicate");
+                return Err("duplicate");
             }
             // Taken later than a thousand newer ones from its origin (the two sides are read
             // turn about, commands first): forwarded all the same. Each side already dropped the
@@ -368,28 +380,55 @@ impl RouteBridge {
             && memory.is_echo(&msg.topic, &msg.payload)
         {
             self.counters.echoes += 1;
-            return Verdict::Drop("echo of what it sent");
+            return Err("echo of what it sent");
         }
-        let Some(i) = self.legs.iter().position(|l| {
-            l.from == port && l.topics.matches(&msg.topic) && l.kind.is_none_or(|k| k == msg.kind)
-        }) else {
-            self.counters.unrouted += 1;
-            return Verdict::Drop("no route");
+        let (topic, kind) = (msg.topic.clone(), msg.kind);
+        let takes = |l: &Leg| {
+            l.from == port && l.topics.matches(&topic) && l.kind.is_none_or(|k| k == kind)
         };
+        let matching = self.legs.iter().filter(|l| takes(l)).count();
+        if matching == 0 {
+            self.counters.unrouted += 1;
+            return Err("no route");
+        }
         if msg.provenance.hops >= self.hops {
             self.counters.hop_limited += 1;
-            return Verdict::Drop("hop limit");
+            return Err("hop limit");
         }
+        let mut why = "no route";
+        let mut msg = Some(msg);
+        let mut left = matching;
+        for i in 0..self.legs.len() {
+            if !takes(&self.legs[i]) {
+                continue;
+            }
+            left -= 1;
+            // the last route takes the message itself, the others a copy
+            let m = match (left, &mut msg) {
+                (0, m) => m.take(),
+                (_, m) => m.clone(),
+            };
+            let Some(m) = m else { break };
+            match self.leg(i, node, m) {
+                Ok(o) => out.push(o),
+                Err(reason) => why = reason,
+            }
+        }
+        if out.is_empty() { Err(why) } else { Ok(()) }
+    }
+
+    /// What `msg` becomes under route leg `i`, or why it does not go.
+    fn leg(&mut self, i: usize, node: &str, mut msg: Message) -> Result<Out, &'static str> {
         let leg = &self.legs[i];
         // a channel name that is not a seabus topic (from LCM) goes only where such names go
         if !self.names_channels[leg.to] && !msg.topic.is_topic() {
             self.counters.unrouted += 1;
-            return Verdict::Drop("not a seabus topic");
+            return Err("not a seabus topic");
         }
         let origin = &msg.provenance.origin;
         if &*origin.node == node && *origin.medium == *self.media[leg.to] {
             self.counters.returned += 1;
-            return Verdict::Drop("would return to its origin medium");
+            return Err("would return to its origin medium");
         }
         let topic = match &leg.rename {
             None => msg.topic.clone(),
@@ -403,7 +442,7 @@ impl RouteBridge {
                     Some(t) => t,
                     None => {
                         self.counters.errors += 1;
-                        return Verdict::Drop("rename produced no valid topic");
+                        return Err("rename produced no valid topic");
                     }
                 }
             }
@@ -412,7 +451,7 @@ impl RouteBridge {
             let now = Instant::now();
             if !self.schedule.admit(i, &topic, period, now) {
                 self.stats[i].rate_limited += 1;
-                return Verdict::Drop("rate limit");
+                return Err("rate limit");
             }
             if self.schedule.len() > MAX_RATE_ENTRIES {
                 let legs = &self.legs;
@@ -444,7 +483,7 @@ impl RouteBridge {
                 self.counters.errors += 1;
                 self.problems
                     .record(self.report_topic.as_str(), p.reason, p.detail);
-                return Verdict::Drop("conversion");
+                return Err("conversion");
             }
         };
         let st = &mut self.stats[i];
@@ -461,7 +500,7 @@ impl RouteBridge {
         if let Some(memory) = &mut self.echo[to] {
             memory.sent(&out.topic, &out.payload);
         }
-        Verdict::Forward(to, out)
+        Ok((to, out))
     }
 
     fn report_map(&mut self) -> DataMap {
@@ -618,15 +657,38 @@ impl Module for RouteBridge {
         port: usize,
         msg: Message,
     ) -> Result<(), ModuleError> {
-        if let Verdict::Forward(to, out) = self.route(&ctx.node().name, port, msg) {
+        let mut outs = std::mem::take(&mut self.outs);
+        // what no route takes is counted where it was dropped
+        let _ = self.routes(&ctx.node().name, port, msg, &mut outs);
+        // per side: whether a message went there already, and whether another bridge had
+        // forwarded it there before
+        let (mut sent, mut skip) = ([false; 2], [false; 2]);
+        for (to, out) in outs.drain(..) {
+            if skip[to] {
+                self.counters.duplicates += 1;
+                continue;
+            }
             let Some(iface) = ctx.port(to) else {
                 return Err(ModuleError::msg(format!("bridge has no port {to}")));
             };
-            if iface.medium().shared::<Forwarded>().already(&out) {
+            let result = if std::mem::replace(&mut sent[to], true) {
+                // a second route into the same medium: the copy is a message of its own there,
+                // numbered by that medium (receivers would take one origin's number once)
+                match iface.forward_anew(out).await {
+                    Ok(seq) => {
+                        self.seen.check_raw(iface.medium().origin().id, seq);
+                        Ok(())
+                    }
+                    Err(e) => Err(e),
+                }
+            } else if iface.medium().shared::<Forwarded>().already(&out) {
+                skip[to] = true;
                 self.counters.duplicates += 1;
-                return Ok(());
-            }
-            if let Err(e) = iface.forward(out).await {
+                continue;
+            } else {
+                iface.forward(out).await
+            };
+            if let Err(e) = result {
                 self.counters.errors += 1;
                 // a medium whose link is down refuses every message: counted, logged now and then
                 self.problems.record(
@@ -636,6 +698,7 @@ impl Module for RouteBridge {
                 );
             }
         }
+        self.outs = outs;
         Ok(())
     }
 
@@ -680,6 +743,27 @@ mod tests {
     use super::*;
     use seabus_medium::{Origin, Provenance};
     use seabus_modules::system::SystemSpec;
+
+    /// What became of one message under a bridge whose routes send it one way at most.
+    #[derive(Debug, PartialEq)]
+    enum Verdict {
+        Forward(usize, Message),
+        Drop(&'static str),
+    }
+
+    impl RouteBridge {
+        fn route(&mut self, node: &str, port: usize, msg: Message) -> Verdict {
+            let mut out = Vec::new();
+            match self.routes(node, port, msg, &mut out) {
+                Ok(()) => {
+                    assert_eq!(out.len(), 1, "one route: {out:?}");
+                    let (to, m) = out.remove(0);
+                    Verdict::Forward(to, m)
+                }
+                Err(why) => Verdict::Drop(why),
+            }
+        }
+    }
 
     fn bridge(routes: &str, hops: u8) -> RouteBridge {
         let text = format!(
@@ -845,6 +929,61 @@ mod tests {
             b.route("me", 0, msg("t", "me", "a", 8, 2)),
             Verdict::Forward(1, _)
         ));
+    }
+
+    #[test]
+    fn every_route_that_matches_forwards_with_its_own_name_fields_and_rate() {
+        let mut b = bridge(
+            r#"<route from="a" topics="nav.local" rename="NAV_X" keep="false"><field name="x" rename="value"/></route>
+               <route from="a" topics="nav.local" rename="NAV_Y" keep="false" rate="1"><field name="y" rename="value"/></route>
+               <route from="a" topics="nav.*" format="xml"/>
+               <route from="b" topics="nav.local"/>"#,
+            8,
+        );
+        let fields = |o: &Out| {
+            let map = o.1.payload.to_map().unwrap();
+            (
+                o.1.topic.to_string(),
+                map.get_f64("value"),
+                map.get_f64("x"),
+            )
+        };
+        let local = |seq| {
+            let mut m = msg("nav.local", "n", "a", seq, 0);
+            m.payload = Payload::from(DataMap::new().with("x", 1.5).with("y", -2.0));
+            m
+        };
+        let mut out = Vec::new();
+        b.routes("me", 0, local(1), &mut out).unwrap();
+        assert_eq!(
+            out.iter().map(fields).collect::<Vec<_>>(),
+            [
+                ("NAV_X".to_string(), Some(1.5), None),
+                ("NAV_Y".to_string(), Some(-2.0), None),
+                ("nav.local".to_string(), None, Some(1.5)),
+            ]
+        );
+        assert_eq!(out[2].1.payload.format(), Format::Xml);
+        assert!(out.iter().all(|(to, m)| *to == 1 && m.provenance.hops == 1));
+        // the next one within the second: the rate-limited route drops it, the others take it
+        out.clear();
+        b.routes("me", 0, local(2), &mut out).unwrap();
+        assert_eq!(out.len(), 2);
+        // once seen, it goes by no route at all (the window is the bridge's, not a route's)
+        out.clear();
+        assert_eq!(b.routes("me", 1, local(2), &mut out), Err("duplicate"));
+        assert!(out.is_empty());
+        let report = b.report_map();
+        assert_eq!(
+            report.get("route_forwarded"),
+            Some(&Value::List(vec![
+                Value::Int(2),
+                Value::Int(1),
+                Value::Int(2),
+                Value::Int(0)
+            ]))
+        );
+        assert_eq!(report.get_i64("rate_limited"), Some(1));
     }
 
     #[test]

@@ -1472,6 +1472,18 @@ impl Interface {
         self.medium.inner.send(msg, self.id, false, false).await
     }
 
+    /// Sends a copy of a message a bridge has already forwarded into this medium under another
+    /// route (a second name, other fields): numbered anew as this medium's own, so that receivers,
+    /// which take one origin's number once, take it too; its stamp and hops are kept. Returns its
+    /// sequence number (its origin is the medium's [`origin`](Medium::origin)).
+    pub async fn forward_anew(&self, mut msg: Message) -> Result<u64, SendError> {
+        let inner = &self.medium.inner;
+        let seq = inner.next_seq();
+        msg.provenance.origin = inner.origin.clone();
+        msg.provenance.seq = seq;
+        inner.send(msg, self.id, false, true).await.map(|()| seq)
+    }
+
     /// Waits for the next message; `None` once the medium is closed and the queue drained.
     pub async fn recv(&mut self) -> Option<Message> {
         std::future::poll_fn(|cx| self.poll_recv(cx)).await
