@@ -103,10 +103,15 @@ fn every_error_of_a_layout_is_reported_in_the_order_of_the_file() {
         .collect();
     assert_eq!(
         at,
-        [":2:54:", ":5:13:", ":6:37:", ":8:15:", ":9:45:", ":11:37:", ":13:22:", ":"],
+        [
+            ":2:54:", ":5:13:", ":6:37:", ":8:15:", ":9:45:", ":11:37:", ":13:22:", ":"
+        ],
         "{stderr}"
     );
-    assert!(stderr.contains("command `go` is in error where it is declared (line 2)"), "{stderr}");
+    assert!(
+        stderr.contains("command `go` is in error where it is declared (line 2)"),
+        "{stderr}"
+    );
     assert!(stderr.trim_end().ends_with(": 7 errors"), "{stderr}");
     assert!(out.stdout.is_empty());
 }

@@ -400,7 +400,10 @@ mod tests {
         assert_eq!(temps[0]["fields"]["temp"], 5.0);
         assert!(temps[0]["fields"].get("depth").is_none());
         let b = f.hub.backlog(&pilot).unwrap();
-        assert_eq!(b["topics"]["nav.depth"].as_array().unwrap().len(), before + 1);
+        assert_eq!(
+            b["topics"]["nav.depth"].as_array().unwrap().len(),
+            before + 1
+        );
         pilot.layout = None;
         assert!(f.hub.backlog(&pilot).is_none());
     }

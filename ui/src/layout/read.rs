@@ -43,7 +43,10 @@ impl Layout {
     }
 
     /// As [`Layout::load`], with every error the file has (see [`Layout::parse_all`]).
-    pub fn load_all(path: &Path, vars: &BTreeMap<String, String>) -> Result<Layout, Vec<FileError>> {
+    pub fn load_all(
+        path: &Path,
+        vars: &BTreeMap<String, String>,
+    ) -> Result<Layout, Vec<FileError>> {
         let root = xml::parse_file(path).map_err(|e| vec![e])?;
         Reader::layout(&root, vars)
     }
@@ -93,10 +96,7 @@ fn top_elements() -> Vec<&'static str> {
 
 impl Reader {
     /// Reads the `<layout>` element `root`, with `given` overriding its variables' defaults.
-    fn layout(
-        root: &Element,
-        given: &BTreeMap<String, String>,
-    ) -> Result<Layout, Vec<FileError>> {
+    fn layout(root: &Element, given: &BTreeMap<String, String>) -> Result<Layout, Vec<FileError>> {
         let (vars, templates) = Reader::head(root, given).map_err(|e| vec![e])?;
         let mut ex = Expander::new(&vars, templates);
         let header = ex
