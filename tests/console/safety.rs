@@ -312,24 +312,9 @@ async fn escape_stops_from_every_state_of_the_page() {
     let before = slider_value(&c, "heading").await;
     // towards the side with room (a heading near north has the knob at an end)
     let by = if before > 180.0 { -60.0 } else { 60.0 };
-    c.perform_actions(
-        MouseActions::new("mouse".into())
-            .then(PointerAction::MoveTo {
-                duration: None,
-                x: x.round(),
-                y: y.round(),
-            })
-            .then(PointerAction::Down {
-                button: MOUSE_BUTTON_LEFT,
-            })
-            .then(PointerAction::MoveBy {
-                duration: Some(Duration::from_millis(200)),
-                x: by,
-                y: 0.0,
-            }),
-    )
-    .await
-    .expect("dragged");
+    c.perform_actions(press_and_move(x, y, by))
+        .await
+        .expect("dragged");
     assert_ne!(
         slider_value(&c, "heading").await,
         before,
@@ -402,25 +387,9 @@ async fn a_click_on_a_slider_s_track_sends_nothing() {
     assert_eq!(slider_value(&c, "heading").await, before);
     // the knob itself still drags, and the course goes on letting go
     let (x, y, _) = knob(&c, "heading").await;
-    c.perform_actions(
-        MouseActions::new("mouse".into())
-            .then(PointerAction::MoveTo {
-                duration: None,
-                x: x.round(),
-                y: y.round(),
-            })
-            .then(PointerAction::Down {
-                button: MOUSE_BUTTON_LEFT,
-            })
-            .then(PointerAction::MoveBy {
-                duration: Some(Duration::from_millis(200)),
-                x: 40.0,
-                y: 0.0,
-            })
-            .then(PointerAction::Up {
-                button: MOUSE_BUTTON_LEFT,
-            }),
-    )
+    c.perform_actions(press_and_move(x, y, 40.0).then(PointerAction::Up {
+        button: MOUSE_BUTTON_LEFT,
+    }))
     .await
     .expect("dragged");
     let dragged = slider_value(&c, "heading").await;
@@ -514,4 +483,22 @@ async fn taking_control_from_a_running_helm_keeps_its_course() {
     )
     .await;
     assert!(kept.as_str().unwrap_or("").contains("holding"), "{kept}");
+}
+
+/// The mouse pressed at (`x`, `y`) and moved `by` pixels sideways over 200 ms, still held.
+fn press_and_move(x: f64, y: f64, by: f64) -> MouseActions {
+    MouseActions::new("mouse".into())
+        .then(PointerAction::MoveTo {
+            duration: None,
+            x: x.round(),
+            y: y.round(),
+        })
+        .then(PointerAction::Down {
+            button: MOUSE_BUTTON_LEFT,
+        })
+        .then(PointerAction::MoveBy {
+            duration: Some(Duration::from_millis(200)),
+            x: by,
+            y: 0.0,
+        })
 }
