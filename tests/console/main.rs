@@ -8,6 +8,7 @@
 mod common;
 mod fit;
 mod harness;
+mod history;
 mod safety;
 
 use common::{
