@@ -485,6 +485,62 @@ async fn taking_control_from_a_running_helm_keeps_its_course() {
     assert!(kept.as_str().unwrap_or("").contains("holding"), "{kept}");
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_log_in_of_the_pilot_logging_out_leaves_the_first_its_control_and_course() {
+    let (sys, _layouts) = safety_system();
+    let driver = chromedriver();
+    // the pilot at the console, and logged in again on a second machine
+    let first = browser(&driver).await;
+    log_in(&first, &sys.url, "pilot", "pilot-password").await;
+    let second = browser(&driver).await;
+    log_in(&second, &sys.url, "pilot", "pilot-password").await;
+    take_control(&first, "pilot").await;
+    control_is(&first, "accepting").await;
+    // a course from the first: kept, sent again every second
+    let speed = first
+        .find(Locator::Css("[data-widget-id=speed] input[type=number]"))
+        .await
+        .expect("the speed box");
+    speed.clear().await.expect("cleared");
+    speed.send_keys("0.8\u{E007}").await.expect("typed");
+    let kept = "const k = document.querySelector('[data-testid=kept][data-command=course]');
+                return k && k.innerText;";
+    let holding = until_text(&first, Duration::from_secs(10), "the kept course", kept).await;
+    assert!(holding.contains("holding"), "{holding}");
+    // the second machine sees the control as another log-in's, and logs out
+    until(
+        &second,
+        Duration::from_secs(5),
+        "the lease in the second log-in",
+        "const s = window.seabusConsole.state(); return s.lease === 'pilot' && !s.inControl;",
+    )
+    .await;
+    second
+        .goto(&format!("{}/logout", sys.url))
+        .await
+        .expect("logged out");
+    // for ten seconds after: the first still holds control, its course still goes, unchanged
+    while sys.spy.try_recv().is_ok() {}
+    let courses = commands_on(&sys.spy, "cmd.course", Duration::from_secs(10));
+    assert!(courses.len() >= 8, "{} courses in 10 s", courses.len());
+    assert!(
+        courses.iter().all(|c| c["payload"]["speed"] == 0.8),
+        "{courses:?}"
+    );
+    let state = js(&first, STATE).await;
+    assert_eq!(
+        (&state["lease"], &state["inControl"]),
+        (&json!("pilot"), &json!(true)),
+        "{state}"
+    );
+    let holding = js(&first, kept).await;
+    assert!(
+        holding.as_str().unwrap_or("").contains("holding"),
+        "{holding}"
+    );
+    control_is(&first, "in-control").await;
+}
+
 /// The mouse pressed at (`x`, `y`) and moved `by` pixels sideways over 200 ms, still held.
 fn press_and_move(x: f64, y: f64, by: f64) -> MouseActions {
     MouseActions::new("mouse".into())
