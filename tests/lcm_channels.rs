@@ -38,9 +38,20 @@ fn lcm_url() -> String {
 
 /// A liblcm subscriber to every channel of `url` for `secs`, once it says it is subscribed.
 fn subscriber(peer: &Path, url: &str, secs: u32) -> (Running, std::sync::mpsc::Receiver<String>) {
+    subscribed(peer, "sub", url, secs)
+}
+
+/// A liblcm subscriber to every channel (`.*`) in `mode` (`sub`, or `sizes`: each message's size
+/// for its data).
+fn subscribed(
+    peer: &Path,
+    mode: &str,
+    url: &str,
+    secs: u32,
+) -> (Running, std::sync::mpsc::Receiver<String>) {
     let mut sub = Running(
         Command::new(peer)
-            .args(["sub", url, &secs.to_string()])
+            .args([mode, url, &secs.to_string()])
             .stdout(Stdio::piped())
             .stderr(Stdio::inherit())
             .spawn()
@@ -165,4 +176,49 @@ fn odd_lcm_channel_names_are_recorded_shown_and_replayed_as_they_came() {
         stderr(&replayed)
     );
     assert_eq!(received(&rx, 18, Duration::from_secs(5)), published());
+}
+
+/// A system whose first medium is LCM, with a seabus bus beside it bridged to it by one typed
+/// route: a liblcm subscriber on `.*` hears only that route's channel, in LCM's encoding (the
+/// size of `seabus.depth_t`), and nothing of seabus's own (module states, media counters, the
+/// bridge's report).
+#[test]
+fn a_liblcm_subscriber_on_every_channel_hears_only_what_the_routes_ask_for() {
+    let dir = tempfile::tempdir().expect("dir");
+    let peer = build_peer(dir.path());
+    let url = lcm_url();
+    let system = format!(
+        r#"<seabus node="lcm-first">
+  <medium name="lcm" url="{url}"/>
+  <medium name="bus" url="inproc://"/>
+  <module name="vehicle" type="vehicle-sim" medium="bus" tick="5Hz"/>
+  <bridge name="to-lcm" media="bus lcm">
+    <route from="bus" to="lcm" topics="nav.depth" rename="NAV_DEPTH" lcm="seabus.depth_t"/>
+  </bridge>
+</seabus>
+"#
+    );
+    let (_dir, path) = system_file("lcm-first.xml", &system);
+    let (_sub, rx) = subscribed(&peer, "sizes", &url, 8);
+    let _run = spawn_run(&path, &["--for", "6"]);
+    let mut channels = std::collections::BTreeMap::<String, Vec<String>>::new();
+    let deadline = Instant::now() + Duration::from_secs(8);
+    while Instant::now() < deadline {
+        if let Ok(line) = rx.recv_timeout(Duration::from_millis(100)) {
+            let (channel, size) = line.split_once('\t').expect("CHANNEL<TAB>SIZE");
+            channels
+                .entry(channel.to_string())
+                .or_default()
+                .push(size.to_string());
+        }
+    }
+    assert_eq!(
+        channels.keys().collect::<Vec<_>>(),
+        ["NAV_DEPTH"],
+        "{channels:?}"
+    );
+    // 8 bytes of fingerprint, then the stamp (int64) and four doubles of seabus.depth_t
+    let sizes = &channels["NAV_DEPTH"];
+    assert!(sizes.len() >= 10, "{} NAV_DEPTH in 6 s", sizes.len());
+    assert!(sizes.iter().all(|s| s == "48"), "{sizes:?}");
 }

@@ -4,6 +4,10 @@
 //! keeps its provenance, a further one into the same medium is numbered anew there
 //! ([`Interface::forward_anew`](seabus_medium::Interface::forward_anew)), since receivers take one
 //! origin's number once. The checks below are made once per message, before its routes.
+//! seabus's own topics (`seabus.…`: module states, media counters, bridge reports) cross to a
+//! medium whose peers are not seabus programs (no provenance on its wire: LCM, MOOS, CAN, a
+//! serial line, DSAAV) only by a route whose `topics` begins with `seabus.` itself; a wildcard
+//! route (`**`) does not carry them there.
 //!
 //! Loop safety, in order of the checks:
 //! 1. each side's interface drops duplicates it receives (origin + sequence window);
@@ -172,6 +176,8 @@ struct Leg {
     /// The quality of service of what it delivers, declared on the far medium when the bridge
     /// starts.
     qos: Option<Qos>,
+    /// Its pattern names seabus's own topics (`seabus.…`): it carries them to any medium.
+    own: bool,
 }
 
 #[derive(Default, Clone, Copy)]
@@ -237,6 +243,9 @@ pub struct RouteBridge {
     echo: [Option<EchoMemory>; 2],
     /// What the routes of the message at hand make of it (kept between messages).
     outs: Vec<Out>,
+    /// Whether each side's peers are not seabus programs (its wire carries no provenance):
+    /// seabus's own topics go there only by a route that names them.
+    foreign: [bool; 2],
 }
 
 fn build(spec: &BridgeSpec, caps: &[Capabilities; 2], _: &Catalogue) -> Result<Built, FileError> {
@@ -292,6 +301,7 @@ impl RouteBridge {
                         None => None,
                     },
                     qos: route_qos(spec, caps, r, to)?,
+                    own: r.topics.as_str().split('.').next() == Some("seabus"),
                 });
             }
         }
@@ -316,6 +326,7 @@ impl RouteBridge {
             echo: [0, 1].map(|i| (!caps[i].provenance).then(EchoMemory::default)),
             names_channels: [0, 1].map(|i| caps[i].names_channels()),
             outs: Vec::new(),
+            foreign: caps.each_ref().map(|c| !c.provenance),
         };
         Ok((bridge, decl))
     }
@@ -383,8 +394,13 @@ impl RouteBridge {
             return Err("echo of what it sent");
         }
         let (topic, kind) = (msg.topic.clone(), msg.kind);
+        let own = topic.as_str().split('.').next() == Some("seabus");
+        let foreign = self.foreign;
         let takes = |l: &Leg| {
-            l.from == port && l.topics.matches(&topic) && l.kind.is_none_or(|k| k == kind)
+            l.from == port
+                && l.topics.matches(&topic)
+                && l.kind.is_none_or(|k| k == kind)
+                && !(own && foreign[l.to] && !l.own)
         };
         let matching = self.legs.iter().filter(|l| takes(l)).count();
         if matching == 0 {
@@ -885,6 +901,55 @@ mod tests {
             vec![0],
             "CAN carries only its frames"
         );
+    }
+
+    #[test]
+    fn seabus_s_own_topics_reach_a_foreign_bus_only_by_a_route_that_names_them() {
+        let text = |routes: &str| {
+            format!(
+                "<seabus><medium name=\"net\" url=\"udp://239.1.1.1:5\"/>\
+                 <medium name=\"lcm\" url=\"udpm://239.255.76.67:7667?ttl=0\"/>\
+                 <bridge name=\"x\" media=\"net lcm\">{routes}</bridge></seabus>"
+            )
+        };
+        let build = |routes: &str| {
+            let spec = SystemSpec::parse("t.xml", &text(routes)).unwrap();
+            RouteBridge::new(&spec.bridges[0], &caps(&spec.bridges[0]))
+                .unwrap()
+                .0
+        };
+        let mut wild = build(r#"<route from="net" to="lcm" topics="**"/>"#);
+        for (i, topic) in ["seabus.media", "seabus.module.gps", "seabus.bridge.up"]
+            .iter()
+            .enumerate()
+        {
+            assert_eq!(
+                wild.route("me", 0, msg(topic, "n", "net", i as u64 + 1, 0)),
+                Verdict::Drop("no route"),
+                "{topic}"
+            );
+        }
+        assert!(matches!(
+            wild.route("me", 0, msg("nav.depth", "n", "net", 9, 0)),
+            Verdict::Forward(1, _)
+        ));
+        // a segment named like it is no reason to stop anything else
+        assert!(matches!(
+            wild.route("me", 0, msg("auv1.seabus.media", "n", "net", 10, 0)),
+            Verdict::Forward(1, _)
+        ));
+        // asked for by name, it goes
+        let mut named = build(r#"<route from="net" to="lcm" topics="seabus.media"/>"#);
+        assert!(matches!(
+            named.route("me", 0, msg("seabus.media", "n", "net", 1, 0)),
+            Verdict::Forward(1, _)
+        ));
+        // towards a seabus medium a wildcard carries them as ever
+        let mut back = build(r#"<route from="lcm" to="net" topics="**"/>"#);
+        assert!(matches!(
+            back.route("me", 1, msg("seabus.media", "n", "lcm", 1, 0)),
+            Verdict::Forward(0, _)
+        ));
     }
 
     #[test]

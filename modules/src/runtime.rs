@@ -199,12 +199,24 @@ impl Runtime {
                 services.push((t.start)(el, &media, &node)?);
             }
         }
-        let mut runtime = Runtime::with_units(node, media, spec.default_medium(), units, catalogue);
+        // status goes to the first medium whose peers are seabus programs
+        let status = spec
+            .media
+            .iter()
+            .map(|m| m.name.as_str())
+            .find(|n| media.get(*n).is_some_and(|m| m.capabilities().provenance))
+            .unwrap_or(spec.default_medium())
+            .to_string();
+        let mut runtime = Runtime::with_units(node, media, &status, units, catalogue);
         runtime.services = services;
         Ok(runtime)
     }
 
-    /// Starts `units` on already opened `media`; status goes to the medium called `default`.
+    /// Starts `units` on already opened `media`; status (`seabus.module.*`, `seabus.media`) goes
+    /// to the medium called `default` when its peers are seabus programs (its wire carries
+    /// seabus's provenance: the in-process bus, UDP, Zenoh), and nowhere else: seabus puts none of
+    /// its own traffic on a bus whose peers are not seabus (LCM, MOOS, CAN, a serial line, DSAAV).
+    /// ([`Runtime::start`] gives it the first medium of the system that has such peers.)
     pub fn with_units(
         node: Node,
         media: BTreeMap<String, Medium>,
@@ -213,7 +225,17 @@ impl Runtime {
         catalogue: Arc<Catalogue>,
     ) -> Runtime {
         let status_port = match media.get(default) {
-            Some(m) => m.attach("runtime"),
+            Some(m) if m.capabilities().provenance => m.attach("runtime"),
+            Some(m) => {
+                tracing::info!(
+                    "module states and media counters are not published: no medium of the \
+                     system has seabus programs for peers (`{}`, {}, reads only its own \
+                     messages)",
+                    m.name(),
+                    m.url()
+                );
+                Medium::in_process("runtime", &node).attach("runtime")
+            }
             None => Medium::in_process("runtime", &node).attach("runtime"),
         };
         let shared = Arc::new(Shared {

@@ -4,6 +4,8 @@
  *                                     is the channel's name
  *   lcm_channels sub URL SECS         prints "CHANNEL<TAB>DATA" for every message for SECS seconds,
  *                                     after a line "ready" once it is subscribed
+ *   lcm_channels sizes URL SECS       the same with each message's size for its data (for
+ *                                     messages whose data is binary)
  */
 #include <lcm/lcm.h>
 #include <stdio.h>
@@ -14,8 +16,10 @@
 
 static void handler(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
 {
-    (void)user;
-    printf("%s\t%.*s\n", channel, (int)rbuf->data_size, (const char *)rbuf->data);
+    if (user)
+        printf("%s\t%u\n", channel, (unsigned)rbuf->data_size);
+    else
+        printf("%s\t%.*s\n", channel, (int)rbuf->data_size, (const char *)rbuf->data);
     fflush(stdout);
 }
 
@@ -29,7 +33,7 @@ static double now(void)
 int main(int argc, char **argv)
 {
     if (argc < 4) {
-        fprintf(stderr, "usage: %s pub URL CHANNEL... | sub URL SECS\n", argv[0]);
+        fprintf(stderr, "usage: %s pub URL CHANNEL... | sub URL SECS | sizes URL SECS\n", argv[0]);
         return 2;
     }
     lcm_t *lcm = lcm_create(argv[2]);
@@ -49,7 +53,8 @@ int main(int argc, char **argv)
         }
     } else {
         double until = now() + atof(argv[3]);
-        lcm_subscribe(lcm, ".*", handler, NULL);
+        static int sizes = 1;
+        lcm_subscribe(lcm, ".*", handler, strcmp(argv[1], "sizes") == 0 ? &sizes : NULL);
         printf("ready\n");
         fflush(stdout);
         while (now() < until) {
