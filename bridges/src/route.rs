@@ -32,8 +32,10 @@
 //! ([`Capabilities::qos`]) is refused when the bridge is built, by `seabus check` as at start.
 //!
 //! Every second (the `report` parameter) it publishes its counters and latency on
-//! `seabus.bridge.<name>` on each of its media that carries datamaps as they are (not a serial
-//! line, a CAN bus, LCM or DSAAV, which carry only their own kind of messages). The per-route
+//! `seabus.bridge.<name>` on each of its media whose peers are seabus programs, or on those its
+//! `report_on` parameter names (a medium whose peers are not seabus, such as MOOS, only when
+//! asked; never a serial line, a CAN bus, LCM or DSAAV, which carry only their own kind of
+//! messages). The per-route
 //! lists (`route_forwarded`, …) go to a medium whose datamaps carry no lists (MOOS, see
 //! [`Capabilities::lists`]) flattened, one field per route (`route_forwarded.0`, …). A report
 //! that cannot be published is logged once (until one is published there again) and counted
@@ -306,6 +308,7 @@ impl RouteBridge {
             }
         }
         let report = spec.params.duration_or("report", Duration::from_secs(1))?;
+        let report_ports = report_ports(spec, caps)?;
         let report_topic = Topic::new(&format!("seabus.bridge.{}", spec.name))
             .map_err(|e| spec.pos.error(e.to_string()))?;
         let bridge = RouteBridge {
@@ -318,7 +321,7 @@ impl RouteBridge {
             schedule: crate::rate::Schedule::default(),
             report: (!report.is_zero()).then_some(report),
             report_topic,
-            report_ports: (0..2).filter(|&i| caps[i].carries_datamaps()).collect(),
+            report_ports,
             lists: caps.each_ref().map(|c| c.lists),
             report_failing: [false; 2],
             types,
@@ -330,6 +333,32 @@ impl RouteBridge {
         };
         Ok((bridge, decl))
     }
+}
+
+/// The sides the bridge reports on: those `report_on` names (each must carry datamaps as they
+/// are), else those whose peers are seabus programs (their wire carries seabus's provenance).
+fn report_ports(spec: &BridgeSpec, caps: &[Capabilities; 2]) -> Result<Vec<usize>, FileError> {
+    let Some(p) = spec.params.get("report_on") else {
+        return Ok((0..2).filter(|&i| caps[i].provenance).collect());
+    };
+    let mut ports = Vec::new();
+    for name in p.value.split_whitespace() {
+        let Some(i) = spec.media.iter().position(|m| m == name) else {
+            return Err(p.error(format!(
+                "`{name}` is not a medium of this bridge ({} and {})",
+                spec.media[0], spec.media[1]
+            )));
+        };
+        if !caps[i].carries_datamaps() {
+            return Err(p.error(format!(
+                "medium `{name}` carries only its own kind of messages: no report can go there"
+            )));
+        }
+        if !ports.contains(&i) {
+            ports.push(i);
+        }
+    }
+    Ok(ports)
 }
 
 /// The quality of service of what route `r` delivers to medium `to` (0 or 1), refused when that
