@@ -197,15 +197,19 @@ struct PubArgs {
     /// The payload in seabus's JSON form, as `spy --json` prints payloads: an object whose values
     /// may be lists and nested objects, bytes as {"base64": "…"}, NaN and ±inf as
     /// {"float": "NaN"}, {"float": "inf"}, {"float": "-inf"}.
-    #[arg(long, value_name = "JSON", conflicts_with_all = ["fields", "json_file", "raw"])]
+    #[arg(long, value_name = "JSON", conflicts_with_all = ["fields", "json_file", "raw", "raw_file"])]
     json: Option<String>,
     /// The payload in seabus's JSON form (as --json) read from a file.
-    #[arg(long = "json-file", value_name = "FILE", conflicts_with_all = ["fields", "raw"])]
+    #[arg(long = "json-file", value_name = "FILE", conflicts_with_all = ["fields", "raw", "raw_file"])]
     json_file: Option<PathBuf>,
     /// Send these bytes as the payload, hex:0102 or base64:AQI= (on a CAN topic, the frame's
     /// data).
-    #[arg(long, value_name = "BYTES", conflicts_with_all = ["fields", "lcm"])]
+    #[arg(long, value_name = "BYTES", conflicts_with_all = ["fields", "lcm", "raw_file"])]
     raw: Option<String>,
+    /// Send the bytes of this file as the payload, as they are (`-`: standard input), for
+    /// payloads too long for the command line.
+    #[arg(long = "raw-file", value_name = "FILE", conflicts_with_all = ["fields", "lcm"])]
+    raw_file: Option<PathBuf>,
     /// How many messages to send.
     #[arg(long, default_value_t = 1)]
     count: u64,
@@ -236,7 +240,19 @@ fn pub_payload(
     json: Option<&str>,
     json_file: Option<&Path>,
     raw: Option<&str>,
+    raw_file: Option<&Path>,
 ) -> Result<Payload, String> {
+    if let Some(file) = raw_file {
+        let bytes = if file == Path::new("-") {
+            let mut bytes = Vec::new();
+            std::io::Read::read_to_end(&mut std::io::stdin(), &mut bytes)
+                .map_err(|e| format!("--raw-file -: standard input: {e}"))?;
+            bytes
+        } else {
+            std::fs::read(file).map_err(|e| format!("--raw-file {}: {e}", file.display()))?
+        };
+        return Ok(Payload::from(bytes));
+    }
     if let Some(raw) = raw {
         return match seabus_medium::parse::parse_bytes(raw) {
             Some(bytes) => bytes.map(Payload::from).map_err(|e| format!("--raw: {e}")),
@@ -636,6 +652,7 @@ async fn publish(args: PubArgs) -> ExitCode {
         json,
         json_file,
         raw,
+        raw_file,
         allow_missing,
     } = args;
     let payload = match pub_payload(
@@ -643,6 +660,7 @@ async fn publish(args: PubArgs) -> ExitCode {
         json.as_deref(),
         json_file.as_deref(),
         raw.as_deref(),
+        raw_file.as_deref(),
     ) {
         Ok(p) => p,
         Err(e) => return usage(e),
@@ -666,7 +684,7 @@ async fn publish(args: PubArgs) -> ExitCode {
             }
         }
         // raw bytes go as they are, whatever the format
-        _ if raw.is_some() => Outgoing::Same(payload),
+        _ if raw.is_some() || raw_file.is_some() => Outgoing::Same(payload),
         _ => match payload.convert(format) {
             Ok(p) => Outgoing::Same(p),
             Err(e) => return usage(e.to_string()),

@@ -41,8 +41,8 @@ fn subscriber(peer: &Path, url: &str, secs: u32) -> (Running, std::sync::mpsc::R
     subscribed(peer, "sub", url, secs)
 }
 
-/// A liblcm subscriber to every channel (`.*`) in `mode` (`sub`, or `sizes`: each message's size
-/// for its data).
+/// A liblcm subscriber to every channel (`.*`) in `mode` (`sub`; `sizes`: each message's size
+/// for its data; `sums`: its size and hash).
 fn subscribed(
     peer: &Path,
     mode: &str,
@@ -221,4 +221,61 @@ fn a_liblcm_subscriber_on_every_channel_hears_only_what_the_routes_ask_for() {
     let sizes = &channels["NAV_DEPTH"];
     assert!(sizes.len() >= 10, "{} NAV_DEPTH in 6 s", sizes.len());
     assert!(sizes.iter().all(|s| s == "48"), "{sizes:?}");
+}
+
+/// `seabus pub --raw-file` sends a payload too long for the command line, from a file or from
+/// standard input: a liblcm subscriber receives its 100 000 bytes (fragmented by LCM), as they are
+/// (their FNV-1a hash, computed by the subscriber).
+#[test]
+fn pub_sends_a_hundred_kilobytes_from_a_file_or_standard_input() {
+    let dir = tempfile::tempdir().expect("dir");
+    let peer = build_peer(dir.path());
+    let url = lcm_url();
+    let file = dir.path().join("image.bin");
+    let bytes: Vec<u8> = (0..100_000u32).map(|i| (i % 251) as u8).collect();
+    std::fs::write(&file, &bytes).expect("written");
+    let hash = bytes.iter().fold(2_166_136_261u32, |h, &b| {
+        (h ^ u32::from(b)).wrapping_mul(16_777_619)
+    });
+    let (_sub, rx) = subscribed(&peer, "sums", &url, 10);
+    succeeds(
+        seabus()
+            .args(["pub", &url, "IMAGE_FILE", "--raw-file"])
+            .arg(&file),
+        "seabus pub --raw-file FILE",
+    );
+    let mut pipe = seabus()
+        .args(["pub", &url, "IMAGE_STDIN", "--raw-file", "-"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("seabus pub starts");
+    std::io::Write::write_all(&mut pipe.stdin.take().expect("piped"), &bytes).expect("written");
+    let out = pipe.wait_with_output().expect("seabus pub ends");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let sums = format!("100000\t{hash:08x}");
+    assert_eq!(
+        received(&rx, 2, Duration::from_secs(5)),
+        [
+            ("IMAGE_FILE".to_string(), sums.clone()),
+            ("IMAGE_STDIN".to_string(), sums)
+        ]
+    );
+    // a file that is not there is named
+    let out = seabus()
+        .args(["pub", &url, "IMAGE", "--raw-file", "/no/such.bin"])
+        .output()
+        .expect("runs");
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        String::from_utf8_lossy(&out.stderr)
+            .starts_with("seabus pub: --raw-file /no/such.bin: No such file"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }

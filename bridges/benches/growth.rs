@@ -149,7 +149,7 @@ fn main() {
     let mut goals = Goals::new();
     println!("bridge growth, in-process media, 10-field datamap, {n} messages a case:");
 
-    println!("  routes on one medium pair (the message matches the first):");
+    println!("  routes on one medium pair (the message matches the first of them only):");
     let one = topics(1, "r0");
     let counts = [1, 10, 100];
     let systems: Vec<String> = counts.iter().map(|c| routes(*c)).collect();

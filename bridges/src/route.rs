@@ -44,6 +44,7 @@
 use crate::lcm::ResolvedTypes;
 use async_trait::async_trait;
 use seabus_medium::dedup::{Dedup, Seen};
+use seabus_medium::subindex::{Scratch, SubIndex};
 use seabus_medium::tally::Tally;
 use seabus_medium::xml::FileError;
 use seabus_medium::{
@@ -248,6 +249,10 @@ pub struct RouteBridge {
     /// Whether each side's peers are not seabus programs (its wire carries no provenance):
     /// seabus's own topics go there only by a route that names them.
     foreign: [bool; 2],
+    /// The legs leading from each side, filed by their topics (under their place in `legs`).
+    index: [SubIndex; 2],
+    /// What the index found for the message at hand (kept between messages).
+    scratch: Scratch,
 }
 
 fn build(spec: &BridgeSpec, caps: &[Capabilities; 2], _: &Catalogue) -> Result<Built, FileError> {
@@ -307,6 +312,10 @@ impl RouteBridge {
                 });
             }
         }
+        let mut index = [SubIndex::default(), SubIndex::default()];
+        for (i, l) in legs.iter().enumerate() {
+            index[l.from].insert(i as u32, &l.topics, l.kind);
+        }
         let report = spec.params.duration_or("report", Duration::from_secs(1))?;
         let report_ports = report_ports(spec, caps)?;
         let report_topic = Topic::new(&format!("seabus.bridge.{}", spec.name))
@@ -330,6 +339,8 @@ impl RouteBridge {
             names_channels: [0, 1].map(|i| caps[i].names_channels()),
             outs: Vec::new(),
             foreign: caps.each_ref().map(|c| !c.provenance),
+            index,
+            scratch: Scratch::default(),
         };
         Ok((bridge, decl))
     }
@@ -422,17 +433,31 @@ impl RouteBridge {
             self.counters.echoes += 1;
             return Err("echo of what it sent");
         }
-        let (topic, kind) = (msg.topic.clone(), msg.kind);
-        let own = topic.as_str().split('.').next() == Some("seabus");
-        let foreign = self.foreign;
-        let takes = |l: &Leg| {
-            l.from == port
-                && l.topics.matches(&topic)
-                && l.kind.is_none_or(|k| k == kind)
-                && !(own && foreign[l.to] && !l.own)
-        };
-        let matching = self.legs.iter().filter(|l| takes(l)).count();
-        if matching == 0 {
+        // the legs from this side whose topics and kind match, in the order of the routes
+        let own = msg.topic.as_str().split('.').next() == Some("seabus");
+        self.index[port].matching(msg.topic.as_str(), msg.kind, &mut self.scratch);
+        let mut found = std::mem::take(&mut self.scratch.found);
+        if own {
+            found.retain(|&i| {
+                let l = &self.legs[i as usize];
+                !self.foreign[l.to] || l.own
+            });
+        }
+        let result = self.each_leg(node, msg, &found, out);
+        self.scratch.found = found;
+        result
+    }
+
+    /// Puts in `out` what `msg` becomes under each of the legs `found` (or says why none takes
+    /// it, the last leg's reason when each dropped it).
+    fn each_leg(
+        &mut self,
+        node: &str,
+        msg: Message,
+        found: &[u32],
+        out: &mut Vec<Out>,
+    ) -> Result<(), &'static str> {
+        if found.is_empty() {
             self.counters.unrouted += 1;
             return Err("no route");
         }
@@ -442,19 +467,15 @@ impl RouteBridge {
         }
         let mut why = "no route";
         let mut msg = Some(msg);
-        let mut left = matching;
-        for i in 0..self.legs.len() {
-            if !takes(&self.legs[i]) {
-                continue;
-            }
-            left -= 1;
+        for (n, &i) in found.iter().enumerate() {
             // the last route takes the message itself, the others a copy
-            let m = match (left, &mut msg) {
-                (0, m) => m.take(),
-                (_, m) => m.clone(),
+            let m = if n + 1 == found.len() {
+                msg.take()
+            } else {
+                msg.clone()
             };
             let Some(m) = m else { break };
-            match self.leg(i, node, m) {
+            match self.leg(i as usize, node, m) {
                 Ok(o) => out.push(o),
                 Err(reason) => why = reason,
             }

@@ -6,6 +6,8 @@
  *                                     after a line "ready" once it is subscribed
  *   lcm_channels sizes URL SECS       the same with each message's size for its data (for
  *                                     messages whose data is binary)
+ *   lcm_channels sums URL SECS        the same with the size and the 32-bit FNV-1a hash of the
+ *                                     data, in hex ("CHANNEL<TAB>SIZE<TAB>HASH")
  */
 #include <lcm/lcm.h>
 #include <stdio.h>
@@ -14,9 +16,22 @@
 #include <sys/time.h>
 #include <unistd.h>
 
+static unsigned fnv1a(const unsigned char *data, unsigned size)
+{
+    unsigned h = 2166136261u;
+    for (unsigned i = 0; i < size; i++) {
+        h ^= data[i];
+        h *= 16777619u;
+    }
+    return h;
+}
+
 static void handler(const lcm_recv_buf_t *rbuf, const char *channel, void *user)
 {
-    if (user)
+    if (user && *(int *)user == 2)
+        printf("%s\t%u\t%08x\n", channel, (unsigned)rbuf->data_size,
+               fnv1a((const unsigned char *)rbuf->data, (unsigned)rbuf->data_size));
+    else if (user)
         printf("%s\t%u\n", channel, (unsigned)rbuf->data_size);
     else
         printf("%s\t%.*s\n", channel, (int)rbuf->data_size, (const char *)rbuf->data);
@@ -33,7 +48,7 @@ static double now(void)
 int main(int argc, char **argv)
 {
     if (argc < 4) {
-        fprintf(stderr, "usage: %s pub URL CHANNEL... | sub URL SECS | sizes URL SECS\n", argv[0]);
+        fprintf(stderr, "usage: %s pub URL CHANNEL... | sub URL SECS | sizes URL SECS | sums URL SECS\n", argv[0]);
         return 2;
     }
     lcm_t *lcm = lcm_create(argv[2]);
@@ -53,8 +68,11 @@ int main(int argc, char **argv)
         }
     } else {
         double until = now() + atof(argv[3]);
-        static int sizes = 1;
-        lcm_subscribe(lcm, ".*", handler, strcmp(argv[1], "sizes") == 0 ? &sizes : NULL);
+        static int sizes = 1, sums = 2;
+        int *mode = strcmp(argv[1], "sizes") == 0  ? &sizes
+                    : strcmp(argv[1], "sums") == 0 ? &sums
+                                                   : NULL;
+        lcm_subscribe(lcm, ".*", handler, mode);
         printf("ready\n");
         fflush(stdout);
         while (now() < until) {

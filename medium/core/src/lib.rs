@@ -28,7 +28,8 @@
 //!   with its provenance in bytes, as the UDP and Zenoh media carry it), [`net`] (UDP endpoints,
 //!   socket options, datagrams received in batches), [`outbox`] (datagrams sent at once or in
 //!   batches), [`framing`] (NMEA, line, COBS and SLIP framing of byte streams), [`url`]
-//!   (medium URLs), [`tally`] (rate-limited counting of rejected input).
+//!   (medium URLs), [`tally`] (rate-limited counting of rejected input), [`subindex`] (which of
+//!   many topic patterns match a topic: a medium's subscriptions, a bridge's routes).
 //! - Files: [`csv`] (table cells), [`xml`] (a small positioned XML tree for the files users write: every error names file,
 //!   line and column), [`fs`] (atomic writes), [`eventlog`] (LCM event logs, seabus's recording
 //!   format), [`parse`] (durations, rates, field lists).
@@ -58,7 +59,7 @@ pub mod payload;
 pub mod qos;
 pub mod queue;
 pub mod schemes;
-mod subindex;
+pub mod subindex;
 pub mod tally;
 pub mod topic;
 pub mod url;

@@ -1,6 +1,7 @@
-//! The index of a medium's subscriptions: which interfaces want a topic, found by walking the
+//! An index of topic patterns: which of many patterns match a topic, found by walking the
 //! topic's segments through a tree of the patterns' segments rather than trying every pattern, so
-//! that patterns that do not match cost a message (almost) nothing, wildcards included.
+//! that patterns that do not match cost a message (almost) nothing, wildcards included. A medium
+//! files its interfaces' subscriptions in one; a bridge its routes.
 //!
 //! Each pattern is a path from the root: a literal segment is a branch by name, `*` the branch
 //! taking any one segment, `**` the branch taking any number (none included). A topic is matched
@@ -38,8 +39,8 @@ impl Hasher for Fnv {
 
 type Branches = HashMap<Box<str>, usize, BuildHasherDefault<Fnv>>;
 
-/// One subscription filed in the index: the interface's place in the medium's list, and the kind
-/// it takes (`None`: both).
+/// One pattern filed in the index: the number it was filed under (an interface's place in a
+/// medium's list, a route's), and the kind it takes (`None`: both).
 #[derive(Debug, Clone, Copy)]
 struct Entry {
     at: u32,
@@ -57,9 +58,9 @@ struct Place {
     loops: bool,
 }
 
-/// The subscriptions of every interface of a medium, filed by their patterns' segments.
+/// Patterns, each filed under a number, by their segments.
 #[derive(Debug)]
-pub(crate) struct SubIndex {
+pub struct SubIndex {
     places: Vec<Place>,
 }
 
@@ -82,9 +83,9 @@ fn bump(round: &mut u32, seen: &mut [u32]) {
 
 /// The scratch a match uses, kept between messages.
 #[derive(Debug, Default)]
-pub(crate) struct Scratch {
-    /// What the last match found.
-    pub(crate) found: Vec<u32>,
+pub struct Scratch {
+    /// What the last [`SubIndex::matching`] found: the numbers, ascending.
+    pub found: Vec<u32>,
     now: Vec<usize>,
     next: Vec<usize>,
     seen: Vec<u32>,
@@ -115,8 +116,8 @@ impl SubIndex {
         to
     }
 
-    /// Files `pattern` (for `kind`, or both) as wanted by the interface at `at`.
-    pub(crate) fn insert(&mut self, at: u32, pattern: &Pattern, kind: Option<Kind>) {
+    /// Files `pattern` (for `kind`, or both) under the number `at`.
+    pub fn insert(&mut self, at: u32, pattern: &Pattern, kind: Option<Kind>) {
         let mut here = 0;
         for step in pattern.steps() {
             here = self.branch(here, step);
@@ -137,9 +138,9 @@ impl SubIndex {
         }
     }
 
-    /// Puts into `scratch.found` the places of the interfaces that want a message of `kind` on
-    /// `topic`, in order, each once.
-    pub(crate) fn matching(&self, topic: &str, kind: Kind, scratch: &mut Scratch) {
+    /// Puts into `scratch.found` the numbers of the patterns that match a message
+    /// of `kind` on `topic`, in ascending order, each once.
+    pub fn matching(&self, topic: &str, kind: Kind, scratch: &mut Scratch) {
         let Scratch {
             found: out,
             now,
