@@ -5,6 +5,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+pub mod moos;
+
 /// Every medium family's schemes, as the program has them in its default build.
 pub fn schemes() -> seabus_medium::Schemes {
     seabus_medium::Schemes::with(&[
@@ -45,6 +47,14 @@ pub fn check(path: &Path) -> Output {
 /// A UDP port nobody uses right now.
 pub fn free_port() -> u16 {
     std::net::UdpSocket::bind("127.0.0.1:0")
+        .and_then(|s| s.local_addr())
+        .map(|a| a.port())
+        .expect("an ephemeral port")
+}
+
+/// A TCP port nobody listens on right now.
+pub fn free_tcp_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
         .and_then(|s| s.local_addr())
         .map(|a| a.port())
         .expect("an ephemeral port")

@@ -6,18 +6,17 @@
 //! | MOOS value | payload |
 //! |---|---|
 //! | double | datamap `{value = 12.5}` |
-//! | string of `key=value` pairs (`NAME=auv1,X=10.5,MODE="A,B"`) | datamap of those fields |
+//! | string of `key=value` pairs (`NAME=auv1, X = 10.5,MODE=A=B`) | datamap of those fields |
 //! | other string | datamap `{value = "text"}` |
 //! | binary | bytes |
 //!
-//! and back: a datamap with a single numeric `value` is a double, with a single string `value` a
-//! string (unless that string reads as `key=value` pairs: then it is the pair `value="…"`, so that
-//! it reads back as the same string rather than as a datamap of its pairs), any other datamap a
-//! string of `key=value` pairs; bytes are binary; XML text a string.
-//! In the pairs a value holding `,`, `=`, `"` or `\`, blanks at its ends, or text that would read
-//! as a number or boolean is written in double quotes with `\"` and `\\` escapes; numbers and
-//! booleans are written plain, so they read back as they were (`seabus pub` types them the same
-//! way). Nested maps and lists have no pair form and are refused with the field's name.
+//! and back: a datamap with a single numeric `value` is a double, with a single string `value`
+//! that string as it is, any other datamap a string of `key=value` pairs; bytes are binary; XML
+//! text a string. Pairs are read and written as MOOS apps read them with libMOOS's
+//! `MOOSValFromString` ([`parse_pairs`], [`to_pairs`]): a value ends at the next comma, so a value
+//! holding one, or blanks at its ends, has no pair form and is refused with the field's name, as
+//! are nested maps and lists. MOOS strings carry no types: a value that reads as a number is a
+//! number, `true`/`false` a boolean, so the text `"12"` sent as a field reads back as 12.
 //!
 //! Who may depend on it: the program (to register `moos://`, and to run [`db::MoosDb`] for tests).
 //! It depends on the core only.
@@ -50,13 +49,19 @@ pub fn schemes() -> Schemes {
     Schemes::with(&[register])
 }
 
-/// Writes a datamap as MOOS `key=value` pairs.
+/// The blanks MOOS trims from a value, and from between a key and its `=`
+/// (`MOOSTrimWhiteSpace`).
+const BLANKS: &[char] = &[' ', '\t', '\n', '\r'];
+
+/// Writes a datamap as MOOS `key=value` pairs, as MOOS apps read them (`MOOSValFromString`): a
+/// key or value MOOS would read otherwise is refused with the field's name — a comma (it ends a
+/// value), blanks at a value's ends (MOOS trims them), a key with `=` or blanks at its ends.
 pub fn to_pairs(map: &DataMap) -> Result<String, String> {
     let mut out = String::new();
     for (i, (key, v)) in map.iter().enumerate() {
-        if key.is_empty() || key.contains([',', '=', '"', '\\']) || key.trim() != key {
+        if key.is_empty() || key.contains([',', '=']) || key.trim_matches(BLANKS) != key {
             return Err(format!(
-                "field `{key}` cannot be a MOOS key (no `,`, `=`, `\"`, `\\` or blanks at its ends)"
+                "field `{key}` cannot be a MOOS key (no `,` or `=`, no blanks at its ends)"
             ));
         }
         if i > 0 {
@@ -66,25 +71,25 @@ pub fn to_pairs(map: &DataMap) -> Result<String, String> {
         out.push('=');
         match v {
             Value::Str(s) => {
-                let plain = Value::parse_loose(s) == Value::from(&**s)
-                    && !s.contains([',', '=', '"', '\\'])
-                    && s.trim() == &**s
-                    && !s.is_empty();
-                if plain {
-                    out.push_str(s);
-                } else {
-                    out.push('"');
-                    for c in s.chars() {
-                        if c == '"' || c == '\\' {
-                            out.push('\\');
-                        }
-                        out.push(c);
-                    }
-                    out.push('"');
+                if s.contains(',') {
+                    return Err(format!(
+                        "field `{key}`: a MOOS value cannot hold a comma (it ends the value)"
+                    ));
                 }
+                if s.trim_matches(BLANKS) != &**s {
+                    return Err(format!(
+                        "field `{key}`: MOOS trims the blanks at a value's ends"
+                    ));
+                }
+                out.push_str(s);
             }
             Value::Int(n) => out.push_str(&n.to_string()),
-            Value::Float(f) => out.push_str(&format!("{f:?}")),
+            Value::Float(f) if f.is_finite() => out.push_str(&format!("{f:?}")),
+            Value::Float(f) => {
+                return Err(format!(
+                    "field `{key}` is {f}, which MOOS apps do not read as a number"
+                ));
+            }
             Value::Bool(b) => out.push_str(if *b { "true" } else { "false" }),
             other => {
                 return Err(format!(
@@ -97,62 +102,41 @@ pub fn to_pairs(map: &DataMap) -> Result<String, String> {
     Ok(out)
 }
 
-/// Reads MOOS `key=value` pairs; `None` when the text is not such pairs.
+/// Reads MOOS `key=value` pairs as MOOS apps read them (libMOOS's `MOOSValFromString`): the text
+/// is split at its commas; in each part the key is what comes before the first `=` (blanks and
+/// tabs before it, and blanks between it and the `=`, not its own), the value all after it to the
+/// comma, blanks at its ends trimmed (a value may hold `=` and quotes, which are its own); the
+/// first of two parts with one key is the one MOOS finds. `None` when the text is not such pairs:
+/// a part (other than blanks) without `=` or with nothing before it — MOOS would find some keys
+/// of such a text, and no datamap would say which part was meant.
+///
+/// A value that reads as a number (an integer, a decimal) is a number and `true`/`false` a
+/// boolean; any other value is text, as it is.
 pub fn parse_pairs(text: &str) -> Option<DataMap> {
     let mut map = DataMap::new();
-    let mut chars = text.chars().peekable();
-    loop {
-        let mut key = String::new();
-        let mut equals = false;
-        for c in chars.by_ref() {
-            if c == '=' {
-                equals = true;
-                break;
+    for part in text.split(',') {
+        let Some((key, value)) = part.split_once('=') else {
+            if part.trim_matches(BLANKS).is_empty() {
+                continue;
             }
-            if c == ',' || c == '"' {
-                return None;
-            }
-            key.push(c);
-        }
-        if key.is_empty() || !equals {
+            return None;
+        };
+        let key = key.trim_start_matches([' ', '\t']).trim_end_matches(BLANKS);
+        if key.is_empty() {
             return None;
         }
-        let value = if chars.peek() == Some(&'"') {
-            chars.next();
-            let mut s = String::new();
-            loop {
-                match chars.next()? {
-                    '\\' => s.push(chars.next()?),
-                    '"' => break,
-                    c => s.push(c),
-                }
-            }
-            match chars.peek() {
-                None | Some(',') => {}
-                Some(_) => return None,
-            }
-            Value::from(s)
-        } else {
-            let mut raw = String::new();
-            while let Some(&c) = chars.peek() {
-                if c == ',' {
-                    break;
-                }
-                if c == '=' || c == '"' {
-                    return None;
-                }
-                raw.push(c);
-                chars.next();
-            }
-            Value::parse_loose(&raw)
-        };
-        map.insert(key, value);
-        match chars.next() {
-            None => return Some(map),
-            Some(',') => {}
-            Some(_) => return None,
+        if map.get(key).is_some() {
+            continue;
         }
+        let value = value.trim_matches(BLANKS);
+        let value = if value.starts_with('"') {
+            Value::from(value)
+        } else {
+            Value::parse_loose(value)
+        };
+        map.insert(key.to_string(), value);
     }
+    (!map.is_empty()).then_some(map)
 }
 
 /// What a payload is on MOOS: its data type, double and string fields.
@@ -168,8 +152,8 @@ pub fn to_moos(p: &Payload) -> Result<(u8, f64, Vec<u8>), String> {
                     Value::Int(_) | Value::Float(_) => {
                         return Ok((data::DOUBLE, v.as_f64().unwrap_or(0.0), Vec::new()));
                     }
-                    // text shaped like pairs goes as the pair `value="…"`, so it reads back whole
-                    Value::Str(s) if parse_pairs(s).is_none() => {
+                    // text goes as it is, whatever it looks like (MOOS strings carry no types)
+                    Value::Str(s) => {
                         return Ok((data::STRING, 0.0, s.as_bytes().to_vec()));
                     }
                     _ => {}
@@ -202,33 +186,67 @@ mod tests {
     use wire::MoosMsg;
 
     #[test]
-    fn pairs_survive_commas_equals_and_quotes() {
+    fn pairs_are_written_as_moos_reads_them() {
         let map = DataMap::new()
             .with("NAME", "auv1")
             .with("X", 10.5)
             .with("N", 3i64)
             .with("OK", true)
-            .with("MODE", "A,B=C")
+            .with("MODE", "A=B")
             .with("Q", "say \"hi\" \\ bye")
-            .with("CODE", "12")
             .with("EMPTY", "")
             .with("WHOLE", 2.0);
         let text = to_pairs(&map).unwrap();
         assert_eq!(
             text,
-            r#"NAME=auv1,X=10.5,N=3,OK=true,MODE="A,B=C",Q="say \"hi\" \\ bye",CODE="12",EMPTY="",WHOLE=2.0"#
+            r#"NAME=auv1,X=10.5,N=3,OK=true,MODE=A=B,Q=say "hi" \ bye,EMPTY=,WHOLE=2.0"#
         );
         assert_eq!(parse_pairs(&text), Some(map));
+        let refused =
+            |k: &str, v: Value| to_pairs(&DataMap::new().with(k.to_string(), v)).unwrap_err();
+        assert_eq!(
+            refused("MODE", Value::from("A,B")),
+            "field `MODE`: a MOOS value cannot hold a comma (it ends the value)"
+        );
+        assert_eq!(
+            refused("P", Value::from(" x")),
+            "field `P`: MOOS trims the blanks at a value's ends"
+        );
+        assert_eq!(
+            refused("a b ", Value::from(1i64)),
+            "field `a b ` cannot be a MOOS key (no `,` or `=`, no blanks at its ends)"
+        );
+        assert_eq!(
+            refused("F", Value::Float(f64::NAN)),
+            "field `F` is NaN, which MOOS apps do not read as a number"
+        );
     }
 
     #[test]
-    fn what_is_not_pairs_stays_a_string() {
-        assert_eq!(parse_pairs("hello world"), None);
-        assert_eq!(parse_pairs("a=1,,b=2"), None);
-        assert_eq!(parse_pairs("=1"), None);
-        assert_eq!(parse_pairs("a=\"open"), None);
+    fn pairs_are_read_as_moos_reads_them() {
+        let pairs = |t: &str| parse_pairs(t);
         assert_eq!(
-            parse_pairs("NAME=auv1,SPD=1.5"),
+            pairs("a = b , c = d"),
+            Some(DataMap::new().with("a", "b").with("c", "d"))
+        );
+        assert_eq!(pairs("k=v=w"), Some(DataMap::new().with("k", "v=w")));
+        assert_eq!(pairs("a=1\nb=2"), Some(DataMap::new().with("a", "1\nb=2")));
+        assert_eq!(pairs("x=1,x=2"), Some(DataMap::new().with("x", 1i64)));
+        assert_eq!(pairs("M=\"A\""), Some(DataMap::new().with("M", "\"A\"")));
+        assert_eq!(
+            pairs("my key=1,"),
+            Some(DataMap::new().with("my key", 1i64))
+        );
+        assert_eq!(
+            pairs("a=,b=2"),
+            Some(DataMap::new().with("a", "").with("b", 2i64))
+        );
+        assert_eq!(pairs("hello world"), None);
+        assert_eq!(pairs("=1"), None);
+        assert_eq!(pairs("pts={0,0:10,10},label=a"), None);
+        assert_eq!(pairs(""), None);
+        assert_eq!(
+            pairs("NAME=auv1,SPD=1.5"),
             Some(DataMap::new().with("NAME", "auv1").with("SPD", 1.5))
         );
     }
@@ -239,19 +257,10 @@ mod tests {
         assert_eq!((d.0, d.1), (data::DOUBLE, 12.5));
         let s = to_moos(&Payload::from(DataMap::new().with("value", "survey"))).unwrap();
         assert_eq!((s.0, s.2), (data::STRING, b"survey".to_vec()));
-        // a string shaped like pairs reads back as that string
+        // a string goes as it is, whatever it looks like
         let pairs = Payload::from(DataMap::new().with("value", "x=1"));
         let s = to_moos(&pairs).unwrap();
-        assert_eq!((s.0, &s.2[..]), (data::STRING, &br#"value="x=1""#[..]));
-        let back = from_moos(
-            &MoosMsg {
-                data_type: s.0,
-                string: s.2,
-                ..MoosMsg::default()
-            }
-            .borrowed(),
-        );
-        assert_eq!(back.unwrap(), pairs);
+        assert_eq!((s.0, &s.2[..]), (data::STRING, &b"x=1"[..]));
         let p = to_moos(&Payload::from(
             DataMap::new().with("x", 1i64).with("y", 2i64),
         ))

@@ -99,7 +99,7 @@ async fn clients_register_notify_and_filter_by_pattern_and_interval() {
             DataMap::new()
                 .with("NAME", "auv1")
                 .with("X", 10.5)
-                .with("MODE", "A,B=C"),
+                .with("MODE", "A=B=C"),
         )
         .await
         .unwrap();
@@ -120,7 +120,7 @@ async fn clients_register_notify_and_filter_by_pattern_and_interval() {
             DataMap::new()
                 .with("NAME", "auv1")
                 .with("X", 10.5)
-                .with("MODE", "A,B=C")
+                .with("MODE", "A=B=C")
         )
     );
     // from the DB A took only B's report: its own writes, which the DB sends back to it, are not
