@@ -8,6 +8,8 @@ mod logtail;
 mod media;
 mod memory;
 mod record;
+mod sending;
+use sending::{NotSent, Sending, Unfinished};
 mod spy;
 
 use clap::{Parser, Subcommand};
@@ -87,9 +89,11 @@ enum Command {
     },
     /// Publish a message on a medium: fields, a JSON payload or raw bytes.
     ///
-    /// Exit 0 when it was sent; 1 when the medium's link did not come up or what was sent did
-    /// not go out in time; 2 when the arguments or payload cannot be used; 3 when the medium
-    /// refused the message (the reason is shown).
+    /// Waits for the medium's link before the first message and, when the link is lost on the
+    /// way, for its return (logged), then goes on. Exit 0 when all was sent; 1 when what was sent
+    /// did not go out in time; 2 when the arguments or payload cannot be used; 3 when the medium
+    /// refused the message (the reason is shown); 4 when the link did not come up or back within
+    /// --link-wait, or messages were lost with it (counted).
     Pub(PubArgs),
     /// Record the traffic on a medium to an LCM event log, until Ctrl-C, SIGTERM or --for.
     ///
@@ -102,9 +106,12 @@ enum Command {
     ///
     /// Each event is sent as data: channel = topic, payload = the data in the format the log
     /// keeps for it (datamaps and XML from seabus's recordings, bytes otherwise); channels that
-    /// are not seabus topics are skipped and counted. A folder replays every log in it. Exit 0; 1 when the log is damaged (the events before
-    /// the damage are sent, and its byte offset is shown); 2 when the arguments, file or medium
-    /// cannot be used; 3 when the medium refused events.
+    /// are not seabus topics are skipped and counted. A folder replays every log in it. The link
+    /// is waited for as `seabus pub` does (pacing starts again when it comes back). Exit 0; 1
+    /// when the log is damaged (the events before the damage are sent, and its byte offset is
+    /// shown); 2 when the arguments, file or medium cannot be used; 3 when the medium refused
+    /// events; 4 when the link did not come up or back within --link-wait, or events were lost
+    /// with it.
     Replay(record::ReplayArgs),
     /// A time window of logger or record logs as JSON lines or a CSV per topic.
     ///
@@ -232,6 +239,10 @@ struct PubArgs {
     /// rather than refuse the message.
     #[arg(long = "allow-missing", requires = "lcm")]
     allow_missing: bool,
+    /// Seconds to wait for the medium's link to come up, or to come back when it is lost, and
+    /// for what was sent to go out at the end.
+    #[arg(long = "link-wait", value_name = "SECS", default_value_t = 5.0)]
+    link_wait: f64,
 }
 
 /// What `seabus pub` sends before any conversion: from its fields, its JSON, or raw bytes.
@@ -654,6 +665,7 @@ async fn publish(args: PubArgs) -> ExitCode {
         raw,
         raw_file,
         allow_missing,
+        link_wait,
     } = args;
     let payload = match pub_payload(
         &fields,
@@ -665,9 +677,15 @@ async fn publish(args: PubArgs) -> ExitCode {
         Ok(p) => p,
         Err(e) => return usage(e),
     };
-    if let Err(e) = seabus_medium::Topic::new(&topic) {
-        return usage(e.to_string());
-    }
+    let topic = match seabus_medium::Topic::new(&topic) {
+        Ok(t) => t,
+        Err(e) => return usage(e.to_string()),
+    };
+    let Some(link_wait) = sending::link_wait(link_wait) else {
+        return usage(format!(
+            "--link-wait {link_wait}: expected a number of seconds from 0 to 1e9"
+        ));
+    };
     let Some(format) = Format::parse(&format) else {
         return usage(format!("`{format}` is not a format: map, xml or bytes"));
     };
@@ -698,22 +716,10 @@ async fn publish(args: PubArgs) -> ExitCode {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };
-    // a medium with a connection (a MOOSDB, a serial port) takes a moment to come up
-    let mut link = medium.watch_link();
-    let up = tokio::time::timeout(
-        LINK_WAIT,
-        link.wait_for(|s| *s == seabus_medium::LinkState::Up),
-    )
-    .await;
-    if !matches!(up, Ok(Ok(_))) {
-        let reason = match medium.link_state() {
-            seabus_medium::LinkState::Down(r) => r,
-            seabus_medium::LinkState::Up => "closed".into(),
-        };
-        eprintln!("seabus pub: medium `pub` link is down after {LINK_WAIT:?}: {reason}");
-        return ExitCode::from(1);
-    }
-    let port = medium.attach("pub");
+    let mut sending = match Sending::open("seabus pub", medium, link_wait).await {
+        Ok(s) => s,
+        Err(e) => return not_sent("seabus pub", e),
+    };
     let kind = if command { Kind::Command } else { Kind::Data };
     let mut ticker = tokio::time::interval(period);
     for _ in 0..count {
@@ -722,24 +728,43 @@ async fn publish(args: PubArgs) -> ExitCode {
             Ok(p) => p,
             Err(e) => return usage(e),
         };
-        if let Err(e) = port.publish(kind, topic.as_str(), payload).await {
-            eprintln!("seabus pub: not sent: {e}");
-            return ExitCode::from(3);
+        match sending.send(kind, &topic, payload).await {
+            // the link came back: the rate counts from now, without a burst for the time lost
+            Ok(true) => ticker.reset(),
+            Ok(false) => {}
+            Err(e) => return not_sent("seabus pub", e),
         }
     }
     // what a connection's task still holds goes out before the process ends
-    if tokio::time::timeout(LINK_WAIT, medium.flush())
-        .await
-        .is_err()
-    {
-        eprintln!("seabus pub: medium `pub`: not all sent within {LINK_WAIT:?}");
-        return ExitCode::from(1);
+    match sending.finish().await {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("seabus pub: medium `pub`: {e}");
+            match e {
+                Unfinished::Lost(_) => ExitCode::from(sending::LINK_LOST),
+                Unfinished::Late(_) => ExitCode::from(1),
+            }
+        }
     }
-    ExitCode::SUCCESS
 }
 
-/// How long `seabus pub` waits for the medium's link to come up, and for what it sent to go out.
-const LINK_WAIT: std::time::Duration = std::time::Duration::from_secs(5);
+/// Says why a command's message was not sent, and exits with the code that says so.
+fn not_sent(command: &str, e: NotSent) -> ExitCode {
+    match e {
+        NotSent::LinkLost(why) => {
+            eprintln!("{command}: {why}");
+            ExitCode::from(sending::LINK_LOST)
+        }
+        NotSent::Refused(e) => {
+            eprintln!("{command}: not sent: {e}");
+            ExitCode::from(3)
+        }
+        NotSent::Closed => {
+            eprintln!("{command}: the medium was closed");
+            ExitCode::from(3)
+        }
+    }
+}
 
 /// What `seabus pub` sends: the same payload every time, or an LCM message made anew for each,
 /// with the time it is sent in its `utime`.

@@ -20,8 +20,9 @@
 //! says (bytes unless a format event says otherwise), an MCAP message by its encoding (JSON as a
 //! datamap, other encodings as bytes).
 
+use crate::sending::{self, NotSent, Sending, Unfinished};
 use seabus_medium::ChannelRegex;
-use seabus_medium::{Interface, Kind, Message, Node, SendError, Stamp, Topic};
+use seabus_medium::{Kind, Message, Node, Stamp, Topic};
 use seabus_modules::Catalogue;
 use seabus_record::log::{Damage, Kind as LogKind, Reader, WriteError, Writer};
 use std::collections::{HashMap, HashSet};
@@ -287,6 +288,10 @@ pub struct ReplayArgs {
     /// Start again from the beginning at the end of the log, until Ctrl-C or SIGTERM.
     #[arg(long = "loop")]
     pub looping: bool,
+    /// Seconds to wait for the medium's link to come up, or to come back when it is lost, and
+    /// for what was sent to go out at the end.
+    #[arg(long = "link-wait", value_name = "SECS", default_value_t = 5.0)]
+    pub link_wait: f64,
 }
 
 /// Slowest `--speed`.
@@ -352,6 +357,8 @@ enum PassEnd {
     Unreadable(PathBuf, std::io::Error),
     /// The medium was closed.
     Closed,
+    /// The link did not come up or back within the wait: why.
+    LinkLost(String),
 }
 
 /// Where pacing counts from in a pass: its first event's log time, the log time and clock time of
@@ -370,7 +377,7 @@ struct Replay<'a> {
     logs: Vec<PathBuf>,
     /// Whether the medium takes channel names that are not seabus topics (LCM).
     names_channels: bool,
-    port: Interface,
+    sending: Sending,
     speed: Option<f64>,
     from_micros: i64,
     filter: Option<ChannelRegex>,
@@ -484,10 +491,17 @@ impl Replay<'_> {
             } else if futures_ready(stop) {
                 return PassEnd::Stopped;
             }
-            match self.port.publish(Kind::Data, topic, payload).await {
-                Ok(()) => self.tally.sent += 1,
-                Err(SendError::Closed(_)) => return PassEnd::Closed,
-                Err(e) => {
+            match self.sending.send(Kind::Data, &topic, payload).await {
+                Ok(resumed) => {
+                    self.tally.sent += 1;
+                    if resumed {
+                        // the link came back: pacing counts again from this event
+                        *base = Some((timestamp, Instant::now()));
+                    }
+                }
+                Err(NotSent::Closed) => return PassEnd::Closed,
+                Err(NotSent::LinkLost(why)) => return PassEnd::LinkLost(why),
+                Err(NotSent::Refused(e)) => {
                     self.tally.failed += 1;
                     if self.tally.first_failure.is_none() {
                         self.tally.first_failure = Some(e.to_string());
@@ -574,6 +588,12 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
             args.from
         ));
     };
+    let Some(link_wait) = sending::link_wait(args.link_wait) else {
+        return usage(format!(
+            "--link-wait {}: expected a number of seconds from 0 to 1e9",
+            args.link_wait
+        ));
+    };
     let filter = match compile_channels("replay", args.channels.as_deref()) {
         Ok(c) => c,
         Err(code) => return code,
@@ -606,6 +626,12 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
         Ok(m) => m,
         Err(e) => return usage(e.to_string()),
     };
+    let names_channels = medium.capabilities().names_channels();
+    // nothing is sent before the link is up (a MOOSDB's takes a moment)
+    let sending = match Sending::open("seabus replay", medium, link_wait).await {
+        Ok(s) => s,
+        Err(e) => return crate::not_sent("seabus replay", e),
+    };
     let bar = if std::io::stderr().is_terminal() {
         let bar = indicatif::ProgressBar::new(0);
         let style = indicatif::ProgressStyle::with_template(
@@ -622,8 +648,8 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     let mut replay = Replay {
         file: &args.file,
         logs,
-        names_channels: medium.capabilities().names_channels(),
-        port: medium.attach("replay"),
+        names_channels,
+        sending,
         speed,
         from_micros: from.as_micros().min(i64::MAX as u128) as i64,
         filter,
@@ -645,13 +671,19 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     };
     replay.bar.finish_and_clear();
     // what the medium still holds goes out, in order, before the process ends
-    let flushed = tokio::time::timeout(crate::LINK_WAIT, medium.flush())
-        .await
-        .is_ok();
+    let finished = replay.sending.finish().await;
     eprintln!("{}", replay.summary(started.elapsed()));
-    if !flushed {
-        eprintln!("seabus replay: not all sent within {:?}", crate::LINK_WAIT);
-        return ExitCode::from(NOT_SENT);
+    match finished {
+        Ok(()) => {}
+        // said below, with what the link took
+        Err(_) if matches!(end, PassEnd::LinkLost(_)) => {}
+        Err(e) => {
+            eprintln!("seabus replay: {e}");
+            return ExitCode::from(match e {
+                Unfinished::Lost(_) => sending::LINK_LOST,
+                Unfinished::Late(_) => NOT_SENT,
+            });
+        }
     }
     match end {
         PassEnd::Damaged(file, d) => {
@@ -668,6 +700,10 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
         PassEnd::Closed => {
             eprintln!("seabus replay: the medium was closed");
             ExitCode::from(NOT_SENT)
+        }
+        PassEnd::LinkLost(why) => {
+            eprintln!("seabus replay: {why}; nothing after was sent");
+            ExitCode::from(sending::LINK_LOST)
         }
         PassEnd::Done | PassEnd::Stopped if replay.tally.failed > 0 => ExitCode::from(NOT_SENT),
         PassEnd::Done | PassEnd::Stopped => ExitCode::SUCCESS,

@@ -7,8 +7,11 @@
 //! [`spawn_link`], whose task connects, runs a session on the connection (reading the wire into
 //! the medium, writing queued frames out) until it fails, and connects again after a back-off
 //! ([`Backoff`]: `reopen` doubling up to `reopen_max`, back to `reopen` once a link has been up).
-//! The medium's link state follows ([`crate::Medium::watch_link`]), logged on each change; frames
-//! queued while the link was lost are dropped with it.
+//! The medium's link state follows ([`crate::Medium::watch_link`]), logged on each change. A frame
+//! sent while the link is first coming up (its first attempt under way, as at a system's start)
+//! waits for that attempt, at most [`COMING_UP`]; once a link has been up, or its first attempt
+//! failed, a frame sent while it is down is refused at once. Frames queued when the link was lost
+//! are dropped with it, counted as transmit errors and logged: the medium's peer never had them.
 //!
 //! A medium whose wire is such a link implements only [`Encode`] (what a message becomes) and
 //! opens as a [`Linked`] transport, which queues, flushes and closes through the link.
@@ -80,9 +83,16 @@ impl Backoff {
     }
 }
 
+/// How long a frame sent while a link is first coming up waits for it.
+pub const COMING_UP: Duration = Duration::from_secs(10);
+
 #[derive(Default)]
 struct Shared {
     up: AtomicBool,
+    /// the link's first attempt is over (up or failed), or the link is closed
+    tried: AtomicBool,
+    /// frames lost with the link since the link's task last looked
+    lost: AtomicU64,
     /// frames handed to the queue, and those written or dropped since
     queued: AtomicU64,
     done: AtomicU64,
@@ -98,6 +108,26 @@ impl Shared {
     fn set_up(&self, up: bool) {
         self.up.store(up, Ordering::Release);
         self.progress.notify_waiters();
+    }
+
+    fn tried(&self) {
+        self.tried.store(true, Ordering::Release);
+        self.progress.notify_waiters();
+    }
+
+    /// Waits (at most [`COMING_UP`]) while the link's first attempt is under way.
+    async fn coming_up(&self) {
+        let deadline = tokio::time::Instant::now() + COMING_UP;
+        loop {
+            // made before the check: a wake-up between the check and the wait is not lost
+            let progress = self.progress.notified();
+            if self.up.load(Ordering::Acquire) || self.tried.load(Ordering::Acquire) {
+                return;
+            }
+            if tokio::time::timeout_at(deadline, progress).await.is_err() {
+                return;
+            }
+        }
     }
 }
 
@@ -137,9 +167,13 @@ pub fn link_queue<F>(
 }
 
 impl<F: Send> LinkSender<F> {
-    /// Queues a frame, waiting while the link is this far behind; fails at once while the link is
-    /// down ([`SendError::LinkDown`]).
+    /// Queues a frame, waiting while the link is this far behind, and while it is first coming up
+    /// (at most [`COMING_UP`]); fails at once while the link is down after that
+    /// ([`SendError::LinkDown`]).
     pub async fn send(&self, frame: F) -> Result<(), SendError> {
+        if !self.is_up() {
+            self.shared.coming_up().await;
+        }
         if !self.is_up() {
             return Err(SendError::LinkDown {
                 medium: self.medium.to_string(),
@@ -176,6 +210,7 @@ impl<F: Send> LinkSender<F> {
     /// Marks the link down (the medium is closing).
     pub fn close(&self) {
         self.shared.set_up(false);
+        self.shared.tried();
     }
 
     /// An error of this medium's wire, for the sender.
@@ -208,9 +243,22 @@ impl<F> LinkQueue<F> {
         self.shared.advance(n);
     }
 
-    /// Marks the link up or down, for a link kept by other means than [`spawn_link`].
+    /// Marks the link up or down, for a link kept by other means than [`spawn_link`] (which also
+    /// ends the wait of frames sent while the link was first coming up).
     pub fn set_up(&self, up: bool) {
         self.shared.set_up(up);
+        self.shared.tried();
+    }
+
+    /// Notes that `n` frames taken from the queue were lost with the link (a write that failed):
+    /// [`spawn_link`] counts them as transmit errors.
+    pub fn lost(&self, n: u64) {
+        self.shared.lost.fetch_add(n, Ordering::AcqRel);
+    }
+
+    /// Takes the count of frames lost since the last call.
+    fn take_lost(&self) -> u64 {
+        self.shared.lost.swap(0, Ordering::AcqRel)
     }
 
     /// Writes a frame taken from the queue with `write` and notes it written; on failure, the reason
@@ -222,6 +270,9 @@ impl<F> LinkQueue<F> {
     ) -> Result<(), String> {
         let written = write.await;
         self.written(1);
+        if written.is_err() {
+            self.lost(1);
+        }
         written.map_err(|e| format!("{what}: {e}"))
     }
 
@@ -232,6 +283,7 @@ impl<F> LinkQueue<F> {
             n += 1;
         }
         self.written(n);
+        self.lost(n);
     }
 }
 
@@ -334,20 +386,27 @@ async fn keep_linked<C, F>(
     loop {
         let reason = match connect().await {
             Ok(conn) => {
-                queue.set_up(true);
                 ingress.set_link(LinkState::Up);
+                queue.set_up(true);
                 wait = backoff.first;
                 let reason = session(conn, &mut queue).await;
-                queue.set_up(false);
+                queue.shared.set_up(false);
                 reason
             }
-            Err(e) => e,
+            Err(e) => {
+                queue.shared.tried();
+                e
+            }
         };
         if !ingress.is_open() {
             return;
         }
         ingress.set_link(LinkState::Down(reason));
         queue.drop_waiting();
+        let lost = queue.take_lost();
+        if lost > 0 {
+            ingress.lost_with_link(lost);
+        }
         tokio::time::sleep(wait).await;
         wait = backoff.next(wait);
     }
@@ -447,6 +506,147 @@ mod tests {
         // lost at 1 s; waits 0.5, 1, 2, 4 s between the attempts
         assert_eq!(at, vec![0, 1500, 2500, 4500, 8500]);
         tx.send(9).await.unwrap();
+        tx.flush().await;
+        medium.close();
+    }
+
+    fn inproc() -> crate::Medium {
+        crate::Schemes::new()
+            .open("dev", "inproc://", &Node::new("n"))
+            .unwrap()
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_frame_sent_while_the_link_first_comes_up_waits_for_it() {
+        let medium = inproc();
+        let (tx, queue) = link_queue::<u32>(&Arc::from("dev"), "/dev/thing", 4);
+        let got = Arc::new(Mutex::new(Vec::new()));
+        let seen = got.clone();
+        let start = Instant::now();
+        // the device answers its first attempt after 2 s
+        spawn_link(
+            &medium.ingress(),
+            Backoff::default(),
+            queue,
+            || {
+                Box::pin(async {
+                    tokio::time::sleep(Duration::from_secs(2)).await;
+                    Ok(())
+                })
+            },
+            move |(), q| {
+                let seen = seen.clone();
+                Box::pin(async move {
+                    while let Some(frame) = q.recv().await {
+                        seen.lock().unwrap().push((frame, start.elapsed()));
+                        q.written(1);
+                    }
+                    "closed".to_string()
+                })
+            },
+        );
+        tx.send(1).await.unwrap();
+        assert_eq!(
+            start.elapsed(),
+            Duration::from_secs(2),
+            "waited for the link"
+        );
+        tx.flush().await;
+        assert_eq!(*got.lock().unwrap(), vec![(1, Duration::from_secs(2))]);
+        assert_eq!(medium.stats().tx_errors, 0);
+        medium.close();
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_frame_is_refused_at_once_once_the_first_attempt_failed() {
+        let medium = inproc();
+        let (tx, queue) = link_queue::<u32>(&Arc::from("dev"), "/dev/thing", 4);
+        let start = Instant::now();
+        spawn_link(
+            &medium.ingress(),
+            Backoff::default(),
+            queue,
+            || {
+                Box::pin(async {
+                    tokio::time::sleep(Duration::from_millis(300)).await;
+                    Err::<(), _>("/dev/thing: no such device".to_string())
+                })
+            },
+            |(), _q| Box::pin(async { "closed".to_string() }),
+        );
+        // the first attempt's failure ends the wait: no waiting out COMING_UP
+        let e = tx.send(1).await.unwrap_err();
+        assert!(matches!(e, SendError::LinkDown { .. }), "{e}");
+        assert_eq!(start.elapsed(), Duration::from_millis(300));
+        // and later sends are refused without waiting
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let before = Instant::now();
+        assert!(tx.send(2).await.is_err());
+        assert_eq!(before.elapsed(), Duration::ZERO);
+        medium.close();
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_link_that_never_answers_holds_a_frame_at_most_coming_up() {
+        let medium = inproc();
+        let (tx, queue) = link_queue::<u32>(&Arc::from("dev"), "/dev/thing", 4);
+        let start = Instant::now();
+        spawn_link(
+            &medium.ingress(),
+            Backoff::default(),
+            queue,
+            || Box::pin(std::future::pending::<Result<(), String>>()),
+            |(), _q| Box::pin(async { "closed".to_string() }),
+        );
+        assert!(tx.send(1).await.is_err());
+        assert_eq!(start.elapsed(), COMING_UP);
+        medium.close();
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn frames_lost_with_the_link_are_transmit_errors() {
+        let medium = inproc();
+        let (tx, queue) = link_queue::<u32>(&Arc::from("dev"), "/dev/thing", 8);
+        let sessions = Arc::new(std::sync::atomic::AtomicU32::new(0));
+        let n = sessions.clone();
+        spawn_link(
+            &medium.ingress(),
+            Backoff::default(),
+            queue,
+            || Box::pin(async { Ok(()) }),
+            move |(), q| {
+                let first = n.fetch_add(1, Ordering::AcqRel) == 0;
+                Box::pin(async move {
+                    if !first {
+                        std::future::pending::<()>().await;
+                    }
+                    // the first session: one frame's write fails, the connection goes with the
+                    // two frames waiting behind it
+                    let frame = q.recv().await.unwrap();
+                    tokio::time::sleep(Duration::from_millis(100)).await;
+                    let failed = q
+                        .write("/dev/thing", async move {
+                            let _ = frame;
+                            Err::<(), _>("broken pipe")
+                        })
+                        .await;
+                    failed.unwrap_err()
+                })
+            },
+        );
+        for f in 1..=3 {
+            tx.send(f).await.unwrap();
+        }
+        let mut link = medium.watch_link();
+        let down = link
+            .wait_for(|s| *s != LinkState::Up)
+            .await
+            .unwrap()
+            .clone();
+        assert_eq!(down, LinkState::Down("/dev/thing: broken pipe".into()));
+        // counted once the link's task has dropped what waited
+        tokio::time::sleep(Duration::from_millis(10)).await;
+        assert_eq!(medium.stats().tx_errors, 3);
         tx.flush().await;
         medium.close();
     }

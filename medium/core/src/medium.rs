@@ -1179,6 +1179,25 @@ impl Ingress {
         }
     }
 
+    /// Counts `n` messages that were on their way out when the link was lost (its peer never had
+    /// them) as transmit errors, and logs it (rate-limited as [`Ingress::send_failed`] is).
+    pub fn lost_with_link(&self, n: u64) {
+        if let Some(inner) = self.inner.upgrade() {
+            inner.counters.tx_errors.fetch_add(n, Ordering::Relaxed);
+            let held = inner
+                .send_failures
+                .lock()
+                .unwrap_or_else(|p| p.into_inner())
+                .admit(std::time::Instant::now());
+            if let Some(held) = held {
+                tracing::warn!(
+                    medium = %inner.name,
+                    "{n} message(s) on their way out were lost with the link{held}"
+                );
+            }
+        }
+    }
+
     /// Counts `bytes` read from the wire that went into no message (see
     /// [`MediumStats::dropped_bytes`]).
     pub fn dropped(&self, bytes: u64) {

@@ -443,6 +443,10 @@ async fn write_batch(
     // a frame carried to the next packet is lost with the connection
     let lost = u64::from(sent.is_err() && carried.is_some());
     queue.written(count as u64 + lost);
+    if sent.is_err() {
+        // the DB had none of the packet, or some of it: MOOS does not say which
+        queue.lost(count as u64 + lost);
+    }
     if packet.capacity() > KEPT_BUFFER {
         *packet = Vec::new();
     }
