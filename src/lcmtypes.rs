@@ -1,5 +1,6 @@
-//! LCM types for `seabus spy` (messages of a known type shown decoded) and `seabus pub --lcm` (an
-//! LCM message made from fields, stamped as it is sent). Without the `lcm` feature no type is
+//! LCM types for `seabus spy` (messages of a known type shown decoded), `seabus pub --lcm` (an
+//! LCM message made from fields, stamped as it is sent), and `seabus convert` and `replay` (an
+//! MCAP message decoded from an LCM type encoded with it again). Without the `lcm` feature no type is
 //! known: spy shows bytes, and `--lcm` or `--lcm-types` is refused with the reason.
 
 use seabus_medium::{DataMap, Payload, Stamp};
@@ -27,6 +28,19 @@ mod imp {
         /// type.
         pub fn recognise<'t>(&'t self, payload: &Payload) -> Option<(&'t str, DataMap)> {
             seabus_bridges::lcm::recognise(&self.0, payload)
+        }
+
+        /// `map` (a message decoded from type `name`) encoded as an LCM message of that type
+        /// again.
+        pub fn encode(&self, name: &str, map: &DataMap) -> Result<Payload, String> {
+            let Some(ty) = self.0.get(name) else {
+                return Err(format!(
+                    "LCM type {name} is not known (--lcm-types names the .lcm file that has it)"
+                ));
+            };
+            seabus_medium_lcm::codec::encode(&self.0, ty, map)
+                .map(Payload::from)
+                .map_err(|e| format!("LCM type {name}: {e}"))
         }
     }
 
@@ -193,6 +207,11 @@ mod imp {
         /// Nothing is recognised without types.
         pub fn recognise<'t>(&'t self, _: &Payload) -> Option<(&'t str, DataMap)> {
             None
+        }
+
+        /// Refused: encoding an LCM message needs LCM.
+        pub fn encode(&self, name: &str, _: &DataMap) -> Result<Payload, String> {
+            Err(format!("LCM type {name}: {LEFT_OUT}"))
         }
     }
 

@@ -292,6 +292,11 @@ pub struct ReplayArgs {
     /// for what was sent to go out at the end.
     #[arg(long = "link-wait", value_name = "SECS", default_value_t = 5.0)]
     pub link_wait: f64,
+    /// .lcm files or directories with the LCM types (besides the built-in ones) of an MCAP
+    /// file's messages that were decoded from LCM: replayed onto LCM, they are encoded with their
+    /// type again.
+    #[arg(long = "lcm-types", value_name = "PATH")]
+    pub lcm_types: Vec<PathBuf>,
 }
 
 /// Slowest `--speed`.
@@ -377,6 +382,8 @@ struct Replay<'a> {
     logs: Vec<PathBuf>,
     /// Whether the medium takes channel names that are not seabus topics (LCM).
     names_channels: bool,
+    /// The LCM types that encode, onto such a medium, an MCAP message decoded from one.
+    types: crate::lcmtypes::Types,
     sending: Sending,
     speed: Option<f64>,
     from_micros: i64,
@@ -465,7 +472,23 @@ impl Replay<'_> {
                     continue;
                 };
                 channel.sent += 1;
-                (event.micros, topic, event.payload)
+                let payload = match (&event.lcm_type, event.payload.as_map()) {
+                    // an MCAP message decoded from LCM goes onto LCM as LCM
+                    (Some(name), Some(map)) if self.names_channels => {
+                        match self.types.encode(name, map) {
+                            Ok(bytes) => bytes,
+                            Err(e) => {
+                                self.tally.failed += 1;
+                                if self.tally.first_failure.is_none() {
+                                    self.tally.first_failure = Some(format!("`{topic}`: {e}"));
+                                }
+                                continue;
+                            }
+                        }
+                    }
+                    _ => event.payload,
+                };
+                (event.micros, topic, payload)
             };
             if let Some(speed) = self.speed {
                 // a timestamp going back starts the pacing again from this event
@@ -504,7 +527,7 @@ impl Replay<'_> {
                 Err(NotSent::Refused(e)) => {
                     self.tally.failed += 1;
                     if self.tally.first_failure.is_none() {
-                        self.tally.first_failure = Some(e.to_string());
+                        self.tally.first_failure = Some(format!("the medium refused: {e}"));
                     }
                 }
             }
@@ -557,7 +580,7 @@ impl Replay<'_> {
             line += &format!("; {} before --from", t.early);
         }
         if let Some(e) = &t.first_failure {
-            line += &format!("; {} not sent (the medium refused: {e})", t.failed);
+            line += &format!("; {} not sent ({e})", t.failed);
         }
         line
     }
@@ -597,6 +620,10 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
     let filter = match compile_channels("replay", args.channels.as_deref()) {
         Ok(c) => c,
         Err(code) => return code,
+    };
+    let types = match crate::lcmtypes::load(&args.lcm_types) {
+        Ok(t) => t,
+        Err(e) => return usage(e),
     };
     // the logs must be there before anything is sent
     let logs = if args.file.is_dir() {
@@ -649,6 +676,7 @@ pub async fn replay(args: ReplayArgs) -> ExitCode {
         file: &args.file,
         logs,
         names_channels,
+        types,
         sending,
         speed,
         from_micros: from.as_micros().min(i64::MAX as u128) as i64,
@@ -761,7 +789,9 @@ pub fn convert(args: ConvertArgs) -> ExitCode {
     };
     let node = Node::new("convert");
     let origin = seabus_medium::Origin::new(&node.name, "log", 0);
-    let (mut written, mut decoded, mut skipped) = (0u64, 0u64, 0u64);
+    let (mut written, mut decoded, mut encoded, mut skipped) = (0u64, 0u64, 0u64, 0u64);
+    // channels whose LCM type is not known, said once each
+    let mut unencoded = HashSet::new();
     let mut damage = None;
     loop {
         let event = match reader.next_event() {
@@ -776,12 +806,31 @@ pub fn convert(args: ConvertArgs) -> ExitCode {
             skipped += 1;
             continue;
         };
-        let payload = match types.recognise(&event.payload) {
-            Some((_, map)) => {
+        // an LCM message: its fields, with its type said in an MCAP file; an MCAP message decoded
+        // from an LCM type: encoded with it again in an LCM log
+        let (payload, lcm_type) = match (types.recognise(&event.payload), kind) {
+            (Some((name, map)), LogKind::Mcap) => {
                 decoded += 1;
-                seabus_medium::Payload::from(map)
+                (seabus_medium::Payload::from(map), Some(name.to_string()))
             }
-            None => event.payload,
+            (_, LogKind::Lcm) if event.lcm_type.is_some() && event.payload.as_map().is_some() => {
+                let name = event.lcm_type.as_deref().unwrap_or_default();
+                let map = event.payload.as_map().expect("a map, looked at above");
+                match types.encode(name, map) {
+                    Ok(bytes) => {
+                        encoded += 1;
+                        (bytes, None)
+                    }
+                    Err(e) => {
+                        skipped += 1;
+                        if unencoded.insert(event.channel.clone()) {
+                            eprintln!("seabus convert: `{}`: not converted: {e}", event.channel);
+                        }
+                        continue;
+                    }
+                }
+            }
+            _ => (event.payload, event.lcm_type),
         };
         let stamp = Stamp(event.micros.saturating_mul(1000));
         let message = Message {
@@ -795,7 +844,7 @@ pub fn convert(args: ConvertArgs) -> ExitCode {
             stamp,
             payload,
         };
-        match writer.write(&message, stamp) {
+        match writer.write_typed(&message, stamp, lcm_type.as_deref()) {
             Ok(()) => written += 1,
             Err(WriteError::Unwritable(e)) => {
                 skipped += 1;
@@ -807,10 +856,15 @@ pub fn convert(args: ConvertArgs) -> ExitCode {
     if let Err(e) = writer.finish() {
         return usage(format!("{output}: cannot write: {e}"));
     }
+    let typed = match (decoded, encoded) {
+        (0, 0) => String::new(),
+        (d, 0) => format!(" ({d} decoded by their LCM type)"),
+        (0, e) => format!(" ({e} encoded with their LCM type again)"),
+        (d, e) => format!(" ({d} decoded by their LCM type, {e} encoded with it again)"),
+    };
     eprintln!(
-        "seabus convert: {} from {input} to {output} ({} decoded by their LCM type{})",
+        "seabus convert: {} from {input} to {output}{typed}{}",
         count(written, "event"),
-        decoded,
         if skipped > 0 {
             format!("; {skipped} skipped: not seabus topics or no form the output holds")
         } else {

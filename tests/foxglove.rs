@@ -147,11 +147,16 @@ fn foxglove_s_own_client_sees_the_demo_s_channels_values_and_command_rules() {
     );
     let schema: Json = serde_json::from_str(position["schema"].as_str().unwrap()).unwrap();
     assert_eq!(schema["properties"]["lat"]["type"], "number");
+    // lat is required: in its place, or (NaN, ±inf) under `$nonfinite`
     assert!(
-        schema["required"]
+        schema["allOf"]
             .as_array()
             .unwrap()
-            .contains(&Json::from("lat"))
+            .contains(&serde_json::json!({"anyOf": [
+                {"required": ["lat"]},
+                {"required": ["$nonfinite"], "properties": {"$nonfinite": {"required": ["lat"]}}},
+            ]})),
+        "{schema}"
     );
     assert_eq!(channel("nav.attitude")["schemaName"], "seabus.attitude");
     let fix = channel("foxglove/nav.position");

@@ -327,6 +327,8 @@ function renderFlex(ctx, node, dir) {
       c.style.flex = `${s > 0 ? s : 1} 1 0`;
     } else if (s !== undefined) {
       c.style.flex = `${s > 0 ? s : 1} 0 auto`;
+      // in a column of the screen's height, the sizes alone share it (console.css)
+      c.dataset.sized = '';
     } else {
       // a column without sizes: natural heights, the big widgets share what is left
       c.style.flex = /^(track|plot|tabs|log|health|history|row|column)$/.test(String(c.dataset.kind || nodeChildren(node)[i].kind)) ? '1 0 auto' : '0 0 auto';

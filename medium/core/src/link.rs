@@ -386,8 +386,9 @@ async fn keep_linked<C, F>(
     loop {
         let reason = match connect().await {
             Ok(conn) => {
-                ingress.set_link(LinkState::Up);
+                // the sender first: a send on seeing the link up is taken
                 queue.set_up(true);
+                ingress.set_link(LinkState::Up);
                 wait = backoff.first;
                 let reason = session(conn, &mut queue).await;
                 queue.shared.set_up(false);

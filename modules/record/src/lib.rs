@@ -47,6 +47,9 @@ pub const XML: &str = "xml";
 pub const JSON_SCHEMA: &str = "jsonschema";
 /// The channel metadata key that says a channel carries commands (`"command"`).
 pub const KIND_KEY: &str = "seabus.kind";
+/// The channel metadata key that names the LCM type its messages were decoded from
+/// (`package.name_t`): an LCM log made from the file encodes them with it again.
+pub const LCM_TYPE_KEY: &str = "lcm.type";
 /// The profile seabus writes in the header: none of the well-known ones fits.
 const PROFILE: &str = "";
 /// The largest record [`Reader`] reads (a chunk, an attachment): a longer one is damage.
@@ -60,9 +63,9 @@ pub enum WriteError {
     /// The file could not be written (disk full, removed, …) or the `mcap` crate refused.
     #[error("{0}")]
     Mcap(#[from] mcap::McapError),
-    /// A datamap nests deeper than any payload form allows.
-    #[error("`{0}`: the datamap nests deeper than 32 lists and maps")]
-    TooDeep(String),
+    /// A datamap has no JSON message (it nests too deep, or has a field of a reserved name).
+    #[error("`{0}`: {1}")]
+    NoJson(String, schema::MessageError),
     /// More channels than an MCAP file can name.
     #[error("`{0}`: the file already has 65 535 channels")]
     TooManyChannels(String),
@@ -91,6 +94,7 @@ struct ChannelKey {
     topic: Topic,
     form: Form,
     kind: Kind,
+    lcm_type: Option<Arc<str>>,
 }
 
 struct Channel {
@@ -174,6 +178,9 @@ impl<W: Write + Seek> Writer<W> {
             if key.kind == Kind::Command {
                 metadata.insert(KIND_KEY.to_string(), "command".to_string());
             }
+            if let Some(t) = &key.lcm_type {
+                metadata.insert(LCM_TYPE_KEY.to_string(), t.to_string());
+            }
             let id =
                 self.out
                     .add_channel(schema, key.topic.as_str(), key.form.encoding(), &metadata)?;
@@ -185,6 +192,17 @@ impl<W: Write + Seek> Writer<W> {
 
     /// Writes `msg`, recorded at `log_time`.
     pub fn write(&mut self, msg: &Message, log_time: Stamp) -> Result<(), WriteError> {
+        self.write_typed(msg, log_time, None)
+    }
+
+    /// Writes `msg`, recorded at `log_time`, decoded from an LCM message of type `lcm_type` (said
+    /// in its channel's metadata, [`LCM_TYPE_KEY`]).
+    pub fn write_typed(
+        &mut self,
+        msg: &Message,
+        log_time: Stamp,
+        lcm_type: Option<&str>,
+    ) -> Result<(), WriteError> {
         let map = match &msg.payload {
             Payload::Map(m) => Some(m.clone()),
             Payload::Xml(_) => msg.payload.to_map().ok(),
@@ -193,8 +211,8 @@ impl<W: Write + Seek> Writer<W> {
         let (form, data): (Form, &[u8]) = match (&map, &msg.payload) {
             (Some(m), _) => {
                 self.scratch.clear();
-                serde_json::to_writer(&mut self.scratch, &**m)
-                    .map_err(|_| WriteError::TooDeep(msg.topic.to_string()))?;
+                schema::write_message(m, &mut self.scratch)
+                    .map_err(|e| WriteError::NoJson(msg.topic.to_string(), e))?;
                 (Form::Json, &[])
             }
             (None, Payload::Bytes(b)) => (Form::Bytes, &b[..]),
@@ -205,6 +223,7 @@ impl<W: Write + Seek> Writer<W> {
             topic: msg.topic.clone(),
             form,
             kind: msg.kind,
+            lcm_type: lcm_type.map(Arc::from),
         };
         let channel = self.channel(key, map.as_deref())?;
         let header = MessageHeader {
@@ -277,6 +296,11 @@ impl ChannelInfo {
     /// Whether seabus wrote it as a command channel.
     pub fn is_command(&self) -> bool {
         self.metadata.get(KIND_KEY).is_some_and(|k| k == "command")
+    }
+
+    /// The LCM type its messages were decoded from, when seabus said so ([`LCM_TYPE_KEY`]).
+    pub fn lcm_type(&self) -> Option<&str> {
+        self.metadata.get(LCM_TYPE_KEY).map(String::as_str)
     }
 }
 
@@ -892,8 +916,7 @@ pub fn payload_of(m: &ReadMessage) -> Result<Payload, PayloadError> {
         JSON => {
             let text =
                 std::str::from_utf8(&m.data).map_err(|e| PayloadError::Json(e.to_string()))?;
-            let map = seabus_medium::json::from_json(text)
-                .map_err(|e| PayloadError::Json(e.to_string()))?;
+            let map = schema::read_message(text).map_err(|e| PayloadError::Json(e.to_string()))?;
             Ok(Payload::from(map))
         }
         XML => {

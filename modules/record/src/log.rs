@@ -91,6 +91,9 @@ pub struct Event {
     pub channel: String,
     /// Its payload: an LCM event's bytes; an MCAP message by its encoding (JSON as a datamap).
     pub payload: Payload,
+    /// The LCM type an MCAP message was decoded from, when its channel says
+    /// ([`crate::LCM_TYPE_KEY`]).
+    pub lcm_type: Option<String>,
 }
 
 /// Where a log stops being readable: the byte offset and what is wrong there.
@@ -197,6 +200,7 @@ impl Reader {
                     micros: e.timestamp,
                     channel: e.channel.to_string(),
                     payload,
+                    lcm_type: None,
                 }));
             },
             Reader::Mcap(r) => match r.next_message() {
@@ -212,6 +216,7 @@ impl Reader {
                         micros: i64::try_from(m.log_time / 1000).unwrap_or(i64::MAX),
                         channel: m.channel.topic.clone(),
                         payload,
+                        lcm_type: m.channel.lcm_type().map(str::to_string),
                     }))
                 }
                 Ok(None) => Ok(None),
@@ -275,6 +280,17 @@ impl Writer {
 
     /// Writes `msg`, logged at `log_time` (an LCM event's timestamp, an MCAP message's log time).
     pub fn write(&mut self, msg: &Message, log_time: Stamp) -> Result<(), WriteError> {
+        self.write_typed(msg, log_time, None)
+    }
+
+    /// Writes `msg` like [`Writer::write`], decoded from an LCM message of type `lcm_type`: an
+    /// MCAP file says so in the channel's metadata (an LCM log holds the LCM bytes themselves).
+    pub fn write_typed(
+        &mut self,
+        msg: &Message,
+        log_time: Stamp,
+        lcm_type: Option<&str>,
+    ) -> Result<(), WriteError> {
         match self {
             Writer::Lcm(w, formats) => {
                 let data = event_data(&msg.payload)
@@ -299,7 +315,7 @@ impl Writer {
                 }
                 w.write(micros, &msg.topic, &data).map(|_| ()).map_err(file)
             }
-            Writer::Mcap(w) => match w.write(msg, log_time) {
+            Writer::Mcap(w) => match w.write_typed(msg, log_time, lcm_type) {
                 Ok(()) => Ok(()),
                 Err(crate::WriteError::Mcap(e)) => Err(WriteError::File(e.to_string())),
                 Err(e) => Err(WriteError::Unwritable(e.to_string())),

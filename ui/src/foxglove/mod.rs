@@ -363,7 +363,8 @@ impl Feed {
         };
         served.last = Instant::now();
         self.scratch.clear();
-        if serde_json::to_writer(&mut self.scratch, &*map).is_err() {
+        // as its schema says: a non-finite float under `$nonfinite`, never in a number's place
+        if schema::write_message(&map, &mut self.scratch).is_err() {
             return;
         }
         served.channel.log_with_meta(
