@@ -1052,6 +1052,25 @@ mod tests {
     }
 
     #[test]
+    fn a_magnetic_heading_without_a_deviation_gives_none() {
+        let mut d = driver(&[]);
+        // magnetic 90.0002°, deviation not available (0x7FFF), variation 2.865°
+        let out = send(
+            &mut d,
+            127250,
+            35,
+            &[7, 0x5C, 0x3D, 0xFF, 0x7F, 0xF4, 0x01, 0xFD],
+            Instant::now(),
+        );
+        assert_eq!(on(&out, "n2k.35.vesselHeading").get("deviation"), None);
+        let hd = on(&out, "nav.heading");
+        assert_eq!(hd.get("deviation"), None, "{hd:?}");
+        near(hd, "variation", 0.05f64.to_degrees());
+        near(hd, "heading", (15708.0 * 1e-4f64 + 0.05).to_degrees());
+        assert_eq!(hd.get_bool("magnetic"), Some(false));
+    }
+
+    #[test]
     fn parameters_are_checked() {
         let bad = |pairs: &[(&str, &str)]| match Nmea2000::new(
             &Params::from_pairs(pairs),

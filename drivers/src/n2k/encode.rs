@@ -90,7 +90,7 @@ impl Field {
     pub fn from_seabus(&self, value: f64) -> f64 {
         match &*self.unit {
             "rad" | "rad/s" => value.to_radians(),
-            "K" => value + 273.15,
+            "K" if self.is_temperature() => value + 273.15,
             _ => value,
         }
     }

@@ -171,13 +171,17 @@ impl Navigator {
                 map
             }
             Some("Magnetic") => {
-                let dev = m.get_f64("deviation").unwrap_or(0.0);
-                match m.get_f64("variation").or(self.variation) {
-                    Some(var) => heading(h + dev + var, false)
-                        .and("deviation", dev)
-                        .and("variation", var),
-                    None => heading(h + dev, true).and("deviation", dev),
+                // a deviation the sender does not give is none known (the compass is taken as
+                // compensated), and is not published as a number
+                let dev = m.get_f64("deviation");
+                let mut map = match m.get_f64("variation").or(self.variation) {
+                    Some(var) => heading(h + dev.unwrap_or(0.0) + var, false).and("variation", var),
+                    None => heading(h + dev.unwrap_or(0.0), true),
+                };
+                if let Some(dev) = dev {
+                    map.push("deviation", dev);
                 }
+                map
             }
             // no reference (or an error): not a heading anyone can steer by
             _ => return,

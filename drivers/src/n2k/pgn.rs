@@ -15,7 +15,7 @@
 //!   or the range the codes leave);
 //! - units are those of seabus's datasets: angles in degrees (canboat's `rad` → `deg`), angular
 //!   rates in degrees per second (`rad/s` → `deg/s`), temperatures in degrees Celsius (`K` →
-//!   `degC`); every other unit is canboat's (m, m/s, Pa, V, A, s, d, %, rpm, L/h, …);
+//!   `degC`; a signed field in kelvin is a difference, kept in `K`); every other unit is canboat's (m, m/s, Pa, V, A, s, d, %, rpm, L/h, …);
 //! - a lookup gives its name (`"Magnetic"`), or its number when the enumeration has no name for
 //!   it (and nothing for the kept codes); a bit lookup the list of the names of the bits set;
 //! - strings: fixed-length ones trimmed of the fill bytes (0xFF, 0x00, `@`, space), length-prefixed
@@ -266,9 +266,16 @@ impl Field {
         match &*self.unit {
             "rad" => "deg",
             "rad/s" => "deg/s",
-            "K" => "degC",
+            "K" if self.is_temperature() => "degC",
             u => u,
         }
+    }
+
+    /// Whether the field is a temperature (in kelvin, unsigned, as canboat's analyzer tells them
+    /// apart), given in degrees Celsius; a signed field in kelvin is a temperature difference
+    /// (an offset, a calibration), the same number in kelvin and in degrees Celsius.
+    pub fn is_temperature(&self) -> bool {
+        &*self.unit == "K" && !self.signed
     }
 }
 
@@ -430,7 +437,7 @@ impl Field {
     pub fn to_seabus(&self, phys: f64) -> f64 {
         match &*self.unit {
             "rad" | "rad/s" => phys * RAD_TO_DEG,
-            "K" => phys - 273.15,
+            "K" if self.is_temperature() => phys - 273.15,
             _ => phys,
         }
     }
@@ -606,9 +613,16 @@ impl Field {
                     },
                     (None, None) => return Read::Stop,
                 };
-                if bits > r.left() {
-                    return Read::Short;
-                }
+                // a message that ends inside it keeps what it has (a proprietary payload shorter
+                // than the most the definition allows); the fields after it are short
+                let bits = if bits > r.left() {
+                    match r.left() / 8 * 8 {
+                        0 => return Read::Short,
+                        whole => whole,
+                    }
+                } else {
+                    bits
+                };
                 let mut out = Vec::with_capacity(bits.div_ceil(8) as usize);
                 let mut left = bits;
                 while left > 0 {
@@ -709,7 +723,12 @@ impl PgnDef {
                 } else {
                     Cow::Borrowed("list2")
                 };
-                map.push(key, Value::List(list));
+                // a list cut short of its count (a field it could not read) is not the list:
+                // left out rather than given with sets missing
+                let incomplete = stop && count.is_some_and(|n| (list.len() as u64) < n);
+                if !incomplete {
+                    map.push(key, Value::List(list));
+                }
                 if stop {
                     break;
                 }
@@ -797,14 +816,20 @@ impl Database {
         self.defs.is_empty()
     }
 
-    /// The definition of `pgn` that `data` is: the first whose match fields match, else its
-    /// fallback, else its first.
+    /// The definition of `pgn` that `data` is: the first whose match fields match (one with no
+    /// match fields matches anything), else its fallback, else the fallback of the proprietary
+    /// range it is in (canboat's generic definitions at 65280 for 65280–65535 and at 130816 for
+    /// 130816–131071); none when nothing fits: another manufacturer's definition is never used.
     pub fn select(&self, pgn: u32, data: &[u8]) -> Option<&Arc<PgnDef>> {
-        let defs = self.defs.get(&pgn)?;
-        defs.iter()
-            .find(|d| !d.fallback && d.matches(data))
-            .or_else(|| defs.iter().find(|d| d.fallback))
-            .or_else(|| defs.first())
+        let fallback_of = |p: u32| self.defs.get(&p)?.iter().find(|d| d.fallback);
+        let defs = self.defs.get(&pgn);
+        defs.and_then(|defs| defs.iter().find(|d| !d.fallback && d.matches(data)))
+            .or_else(|| fallback_of(pgn))
+            .or_else(|| match pgn {
+                0xFF00..=0xFFFF => fallback_of(0xFF00),
+                0x1FF00..=0x1FFFF => fallback_of(0x1FF00),
+                _ => None,
+            })
     }
 
     /// How `pgn` travels: as its definitions say; for a PGN it does not define, fast-packet in the
@@ -961,5 +986,128 @@ mod tests {
             pos: 0,
         };
         assert!(matches!(f.read(&mut r, &[]), Read::Stop));
+    }
+
+    fn named(id: &'static str, mut f: Field) -> Field {
+        f.id = Cow::Borrowed(id);
+        f
+    }
+
+    fn def(pgn: u32, id: &'static str, fields: Vec<Field>, fallback: bool) -> PgnDef {
+        PgnDef {
+            pgn,
+            id: Cow::Borrowed(id),
+            description: Cow::Borrowed(id),
+            packet: Packet::Single,
+            length: None,
+            priority: None,
+            fields,
+            repeating: Vec::new(),
+            fallback,
+        }
+    }
+
+    #[test]
+    fn a_signed_field_in_kelvin_is_a_difference_an_unsigned_one_a_temperature() {
+        // Airmar's calibration offset of canboat's capture: −8333 × 0.001 K
+        let offset = field(16, true, 0.001, "K");
+        assert_eq!(offset.seabus_unit(), "K");
+        let Some(Value::Float(v)) = offset.number((-8333i64 as u64) & 0xFFFF) else {
+            panic!("a number")
+        };
+        assert!((v - -8.333).abs() < 1e-9, "{v}");
+        assert!((offset.from_seabus(v) - v).abs() < 1e-12);
+        let sea = field(16, false, 0.01, "K");
+        assert_eq!(sea.seabus_unit(), "degC");
+        let Some(Value::Float(t)) = sea.number(27926) else {
+            panic!("a number")
+        };
+        assert!((t - 6.11).abs() < 1e-9, "{t}");
+        assert!((sea.from_seabus(t) - 279.26).abs() < 1e-9);
+    }
+
+    #[test]
+    fn another_manufacturer_s_proprietary_pgn_takes_the_generic_definition() {
+        let maker = |m: u64| {
+            let mut f = named("manufacturerCode", field(11, false, 1.0, ""));
+            f.matches = Some(m);
+            f
+        };
+        let mut db = Database::new("test");
+        db.add(def(
+            65306,
+            "airmarThing",
+            vec![maker(135), field(8, false, 1.0, "")],
+            false,
+        ));
+        db.add(def(
+            65280,
+            "generic",
+            vec![named("data", field(8, false, 1.0, ""))],
+            true,
+        ));
+        db.add(def(61184, "proprietaryAddressed", vec![maker(229)], false));
+        db.add(def(61184, "fallbackAddressed", vec![], true));
+        db.add(def(
+            130306,
+            "windData",
+            vec![field(8, false, 1.0, "")],
+            false,
+        ));
+        let id = |pgn: u32, data: &[u8]| db.select(pgn, data).map(|d| d.id.to_string());
+        // manufacturer 135 (Airmar) in the first 11 bits, industry 4
+        assert_eq!(id(65306, &[0x87, 0x98, 1]).as_deref(), Some("airmarThing"));
+        // Raymarine's (1851) frames on the same PGN: the range's generic definition
+        assert_eq!(id(65306, &[0x3B, 0x9F, 1]).as_deref(), Some("generic"));
+        assert_eq!(id(65400, &[0x3B, 0x9F, 1]).as_deref(), Some("generic"));
+        // the PGN's own fallback first
+        assert_eq!(
+            id(61184, &[0x3B, 0x9F]).as_deref(),
+            Some("fallbackAddressed")
+        );
+        assert_eq!(id(130306, &[1]).as_deref(), Some("windData"));
+        // no generic definition for the range: nothing rather than another maker's
+        let mut bare = Database::new("test");
+        bare.add(def(65306, "airmarThing", vec![maker(135)], false));
+        assert!(bare.select(65306, &[0x3B, 0x9F]).is_none());
+    }
+
+    #[test]
+    fn a_payload_shorter_than_its_definition_keeps_the_bytes_it_has() {
+        let mut data = named("data", field(8, false, 1.0, ""));
+        data.bits = Some(48);
+        data.kind = Kind::Binary { length_from: None };
+        let d = def(61184, "p", vec![field(8, false, 1.0, ""), data], true);
+        let got = d.decode(&[7, 0x90, 0x00, 0x04]);
+        assert_eq!(
+            got.map.get("data"),
+            Some(&Value::Bytes(vec![0x90, 0x00, 0x04]))
+        );
+        // a whole field after a cut binary one is short
+        let mut after = d.clone();
+        after.fields.push(named("y", field(8, false, 1.0, "")));
+        let got = after.decode(&[7, 0x90]);
+        assert_eq!(got.map.get("data"), Some(&Value::Bytes(vec![0x90])));
+        assert_eq!(got.map.get("y"), None);
+        assert!(got.short);
+    }
+
+    #[test]
+    fn a_list_cut_short_of_its_count_is_left_out() {
+        let count = named("n", field(8, false, 1.0, ""));
+        let mut value = named("value", field(8, false, 1.0, ""));
+        value.kind = Kind::Unsupported("VARIABLE");
+        let mut d = def(126208, "request", vec![count, value], false);
+        d.repeating = vec![Repeating {
+            start: 1,
+            size: 1,
+            count: Some(0),
+        }];
+        let got = d.decode(&[2, 1, 2]);
+        assert_eq!(got.map.get("n"), Some(&Value::Int(2)));
+        assert_eq!(got.map.get("list"), None, "{:?}", got.map);
+        // a count of none is an empty list, which is the list
+        let got = d.decode(&[0]);
+        assert_eq!(got.map.get("list"), Some(&Value::List(vec![])));
     }
 }
