@@ -12,7 +12,7 @@ use std::time::Duration;
 fn a_python_zenoh_program_reads_the_vehicle_and_commands_it() {
     let dir = tempfile::tempdir().unwrap();
     let line = dir.path().join("frontseat").display().to_string();
-    let port = free_port();
+    let port = free_tcp_port();
     let system = format!(
         r#"<seabus node="auv1">
   <medium name="bus" url="inproc://"/>

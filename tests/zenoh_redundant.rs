@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 fn a_vehicle_bridged_over_udp_and_zenoh_is_on_the_shore_bus_once() {
     let (link_group, link_port) = (group(), free_port());
     let (bus_group, bus_port) = (group(), free_port());
-    let zport = free_port();
+    let zport = free_tcp_port();
     let vehicle = format!(
         r#"<seabus node="auv1">
   <medium name="bus" url="inproc://"/>

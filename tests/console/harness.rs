@@ -151,7 +151,9 @@ pub fn chromedriver() -> Driver {
     // (a port taken meanwhile by another test makes chromedriver exit: it is started again on
     // another; on a loaded machine it may take long to listen)
     for _ in 0..3 {
-        let port = common::free_port();
+        // a TCP port: one free for UDP may be another program's TCP listener, which would be
+        // taken for chromedriver
+        let port = common::free_tcp_port();
         let mut child = Running(
             std::process::Command::new(CHROMEDRIVER)
                 .arg(format!("--port={port}"))

@@ -1418,7 +1418,8 @@ async fn the_fleet_console_shows_three_vehicles_and_a_pilot_commands_the_one_cho
     let dir = tempfile::tempdir().expect("a temporary directory");
     let d = dir.path();
     add_user(&d.join("users.xml"), "pilot", "pilot", "pilot-password");
-    let port = common::free_port();
+    // the shore's Zenoh router listens on TCP
+    let port = common::free_tcp_port();
     let bus = format!("udp://{}:{}?ttl=0", group(), common::free_port());
     let shore_file = d.join("shore.xml");
     std::fs::write(&shore_file, fleet_shore(port, &bus)).expect("shore written");

@@ -241,17 +241,25 @@ pub fn set_int_option(
     }
 }
 
-/// Sets a socket's receive buffer to `bytes`, beyond the system's limit when the process may
-/// (`SO_RCVBUFFORCE`, for root); returns the size the kernel granted.
+/// Sets a socket's receive buffer to `bytes`, beyond the system's limit (`net.core.rmem_max`)
+/// when the process may (`SO_RCVBUFFORCE`, for root); returns the size the kernel granted.
 pub fn set_recv_buffer(s: &Socket, bytes: usize) -> usize {
+    // Linux reports double what it grants (its bookkeeping overhead): compared as granted, a
+    // request capped at the limit is not mistaken for one met
+    let granted = |s: &Socket| s.recv_buffer_size().unwrap_or(0) / 2;
     let _ = s.set_recv_buffer_size(bytes);
-    if s.recv_buffer_size().unwrap_or(0) < bytes {
+    if granted(s) < bytes {
         let size = libc::c_int::try_from(bytes).unwrap_or(libc::c_int::MAX);
         // a refusal (not root) leaves the buffer as it was
         let _ = set_int_option(s, libc::SOL_SOCKET, libc::SO_RCVBUFFORCE, size);
     }
-    // Linux reports double what was asked for (its bookkeeping overhead)
-    s.recv_buffer_size().unwrap_or(0) / 2
+    granted(s)
+}
+
+/// Whether the process may go beyond the system's buffer limits (it runs as root).
+pub fn may_force_buffers() -> bool {
+    // SAFETY: geteuid(2) has no preconditions
+    unsafe { libc::geteuid() == 0 }
 }
 
 /// The send buffer a medium's socket asks for. With the kernel's default (about 200 kB: a few
@@ -454,6 +462,29 @@ mod tests {
         let ep = UdpEndpoint::from_url(&mut url)?;
         url.finish(&UdpEndpoint::OPTIONS)?;
         Ok(ep)
+    }
+
+    /// Beyond `net.core.rmem_max` (by half of it: within the kernel's doubled report of what it
+    /// capped), root gets what it asked for; another user the limit, and says so.
+    #[test]
+    fn a_receive_buffer_beyond_the_limit_is_forced_for_root() {
+        let max: usize = std::fs::read_to_string("/proc/sys/net/core/rmem_max")
+            .expect("net.core.rmem_max")
+            .trim()
+            .parse()
+            .expect("a number");
+        let want = max + max / 2;
+        let s = Socket::new(Domain::IPV4, Type::DGRAM, Some(Protocol::UDP)).unwrap();
+        let granted = set_recv_buffer(&s, want);
+        if may_force_buffers() {
+            assert!(granted >= want, "granted {granted} of {want} (limit {max})");
+        } else {
+            assert!(
+                std::env::var_os("SEABUS_REQUIRE_PRIVILEGES").is_none_or(|v| v == "0"),
+                "SEABUS_REQUIRE_PRIVILEGES is set, and this test does not run as root"
+            );
+            assert_eq!(granted, max, "not root: the limit");
+        }
     }
 
     #[test]

@@ -257,10 +257,14 @@ pub(crate) fn open(mut o: Opening) -> Result<Arc<LcmTransport>, OpenError> {
     let granted = seabus_medium::net::set_recv_buffer(&rx, cfg.recv_buf);
     // asked for in the URL, or too small for a burst of large messages: worth a warning
     if granted < cfg.recv_buf && (o.url.as_str().contains("recv_buf_size") || granted < 1 << 20) {
+        let raise = if seabus_medium::net::may_force_buffers() {
+            "the kernel would not give more, even to root"
+        } else {
+            "raise net.core.rmem_max, or run as root"
+        };
         tracing::warn!(
             medium = %o.name,
-            "receive buffer is {granted} bytes, asked for {} (raise net.core.rmem_max, or run as \
-             root): large messages may be lost",
+            "receive buffer is {granted} bytes, asked for {} ({raise}): large messages may be lost",
             cfg.recv_buf
         );
     }
