@@ -320,11 +320,17 @@ fn init_logs(verbose: u8) {
     };
     // the Foxglove server logs every malformed client message: the live view takes those reports,
     // counts them and logs them without flooding
-    let default: Vec<String> = ["warn", "foxglove=off"]
-        .into_iter()
-        .map(str::to_string)
-        .chain(ours.iter().map(|c| format!("{c}={level}")))
-        .collect();
+    // Zenoh's subscriber logs each gap it sees in a publisher's samples ("Sample missed", several
+    // times a gap): the Zenoh medium counts them by topic and logs them once, rate-limited
+    let default: Vec<String> = [
+        "warn",
+        "foxglove=off",
+        "zenoh_ext::advanced_subscriber=error",
+    ]
+    .into_iter()
+    .map(str::to_string)
+    .chain(ours.iter().map(|c| format!("{c}={level}")))
+    .collect();
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default.join(",")));
     use tracing_subscriber::prelude::*;

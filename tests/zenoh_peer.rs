@@ -76,3 +76,58 @@ fn a_python_zenoh_program_reads_the_vehicle_and_commands_it() {
     );
     assert_eq!(oms[1]["error"], "", "{statuses:?}");
 }
+
+/// A shore, whose Zenoh prefix is the whole fleet's key space: its own bridge report goes under its
+/// node's name (`fleet/shore/seabus/bridge/fleet`), where a `fleet/*/**` subscriber sees a node
+/// called `shore`, never one called `seabus`.
+#[test]
+fn a_shore_s_own_status_goes_under_its_name_in_the_fleet_s_key_space() {
+    let port = free_tcp_port();
+    let system = format!(
+        r#"<seabus node="shore">
+  <medium name="bus" url="inproc://"/>
+  <medium name="fleet" url="zenoh://?mode=router&amp;listen=tcp/127.0.0.1:{port}&amp;prefix=fleet&amp;scout=false&amp;json=true"/>
+  <module name="gen" type="generator" medium="bus" topic="shore.test" tick="5Hz"/>
+  <bridge name="fleet" media="bus fleet" report="1s">
+    <route from="bus" to="fleet" topics="shore.test"/>
+  </bridge>
+</seabus>"#
+    );
+    let (_sys, path) = system_file("shore.xml", &system);
+    let checked = check(&path);
+    assert!(
+        checked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    let _run = spawn_run(&path, &[]);
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/zenoh_peer.py");
+    let mut peer = Command::new("python3")
+        .args([script, &format!("tcp/127.0.0.1:{port}"), "fleet", "6"])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("python3 runs");
+    let out = BufReader::new(peer.stdout.take().unwrap());
+    let keys: Vec<String> = out
+        .lines()
+        .map_while(Result::ok)
+        .filter_map(|l| {
+            let v: serde_json::Value = serde_json::from_str(&l).ok()?;
+            v["key"].as_str().map(str::to_string)
+        })
+        .collect();
+    let status = wait_for(&mut peer, Duration::from_secs(20));
+    assert!(
+        status.is_some_and(|s| s.success()),
+        "the Python peer ends well"
+    );
+    assert!(
+        keys.iter().any(|k| k == "fleet/shore/seabus/bridge/fleet"),
+        "{keys:?}"
+    );
+    assert!(keys.iter().any(|k| k == "fleet/shore/test"), "{keys:?}");
+    assert!(
+        !keys.iter().any(|k| k.starts_with("fleet/seabus/")),
+        "{keys:?}"
+    );
+}

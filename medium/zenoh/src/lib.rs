@@ -459,6 +459,9 @@ const OPEN_WAIT: Duration = Duration::from_secs(5);
 pub struct ZenohTransport {
     name: Arc<str>,
     prefix: Arc<str>,
+    /// where this node's own status (`seabus.*`) goes when the prefix is the whole fleet's key
+    /// space (a shore's): `<fleet>/<node>`, the node's own place there, as its token's
+    own_status: Option<Arc<str>>,
     json: bool,
     /// this medium instance, to know its own datagrams
     sender: u64,
@@ -639,9 +642,12 @@ fn open(mut o: Opening) -> Result<Arc<ZenohTransport>, OpenError> {
     let (tx, rx) = watch::channel(None);
     let prefix: Arc<str> = Arc::from(cfg.prefix.as_str());
     let sender = fastrand::u64(1..);
+    let own_status = (cfg.prefix == cfg.fleet)
+        .then(|| Arc::from(format!("{}/{}", cfg.fleet, o.node.name).as_str()));
     let transport = Arc::new(ZenohTransport {
         name: o.name.clone(),
         prefix: prefix.clone(),
+        own_status,
         json: cfg.json,
         sender,
         caps: cfg.capabilities(),
@@ -789,7 +795,13 @@ impl ZenohTransport {
         if let Some(o) = self.outlets()[usize::from(command)].get(topic) {
             return Ok(o.clone());
         }
-        let key = keys::topic_key(&self.prefix, topic).map_err(|e| self.send_error(e))?;
+        // on the whole fleet's key space, the first segment names a node: seabus's own status
+        // goes under this node's name, never as a node called `seabus`
+        let base = match &self.own_status {
+            Some(own) if topic.as_str().starts_with("seabus.") => own,
+            _ => &self.prefix,
+        };
+        let key = keys::topic_key(base, topic).map_err(|e| self.send_error(e))?;
         let qos = self.qos_of(topic, kind);
         let mut outlets = self.outlets();
         let kept = outlets[0].len() + outlets[1].len() < MAX_PUBLISHERS;
