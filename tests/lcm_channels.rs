@@ -200,12 +200,28 @@ fn a_liblcm_subscriber_on_every_channel_hears_only_what_the_routes_ask_for() {
     );
     let (_dir, path) = system_file("lcm-first.xml", &system);
     let (_sub, rx) = subscribed(&peer, "sizes", &url, 8);
+    // and lcm-logger, as LCM users record a vehicle
+    let log = dir.path().join("run.lcmlog");
+    let logger = Running(
+        Command::new("lcm-logger")
+            .arg(format!("--lcm-url={url}"))
+            .arg("-f")
+            .arg(&log)
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("lcm-logger starts (scripts/test installs it with Python's lcm)"),
+    );
     let _run = spawn_run(&path, &["--for", "6"]);
     let mut channels = std::collections::BTreeMap::<String, Vec<String>>::new();
     let deadline = Instant::now() + Duration::from_secs(8);
     while Instant::now() < deadline {
         if let Ok(line) = rx.recv_timeout(Duration::from_millis(100)) {
             let (channel, size) = line.split_once('\t').expect("CHANNEL<TAB>SIZE");
+            // liblcm's own start-up self test, which lcm-logger sends
+            if channel == "LCM_SELF_TEST" {
+                continue;
+            }
             channels
                 .entry(channel.to_string())
                 .or_default()
@@ -221,6 +237,44 @@ fn a_liblcm_subscriber_on_every_channel_hears_only_what_the_routes_ask_for() {
     let sizes = &channels["NAV_DEPTH"];
     assert!(sizes.len() >= 10, "{} NAV_DEPTH in 6 s", sizes.len());
     assert!(sizes.iter().all(|s| s == "48"), "{sizes:?}");
+    // lcm-logger's log of the run decodes entirely with the lcm-gen classes of seabus's types
+    interrupt(&logger);
+    let mut logger = logger;
+    assert!(
+        wait_for(&mut logger, Duration::from_secs(5)).is_some(),
+        "lcm-logger ends on Ctrl-C"
+    );
+    let classes = dir.path().join("classes");
+    std::fs::create_dir_all(&classes).expect("a folder");
+    succeeds(
+        Command::new("lcm-gen")
+            .arg("-p")
+            .arg("--ppath")
+            .arg(&classes)
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/configs/lcm/seabus.lcm"
+            )),
+        "lcm-gen -p configs/lcm/seabus.lcm",
+    );
+    let decode = "import sys, math, lcm\n\
+                  from seabus import depth_t\n\
+                  events = [e for e in lcm.EventLog(sys.argv[1], 'r') if e.channel != 'LCM_SELF_TEST']\n\
+                  assert events, 'an empty log'\n\
+                  for e in events:\n\
+                  \x20   assert e.channel == 'NAV_DEPTH', e.channel\n\
+                  \x20   m = depth_t.decode(e.data)\n\
+                  \x20   assert m.utime > 0 and math.isfinite(m.depth), (m.utime, m.depth)\n\
+                  print(len(events))\n";
+    let logged: usize = python(
+        decode,
+        &[log.to_str().expect("a path")],
+        &[("PYTHONPATH", classes.to_str().expect("a path"))],
+    )
+    .trim()
+    .parse()
+    .expect("the number of events decoded");
+    assert!(logged >= 10, "{logged} events in lcm-logger's log");
 }
 
 /// `seabus pub --raw-file` sends a payload too long for the command line, from a file or from
