@@ -156,14 +156,10 @@ impl Sending {
 
     /// Waits, at most the wait, for the link to be up; false when it is not.
     async fn wait_up(&self) -> bool {
-        let mut link = self.medium.watch_link();
-        // the watch's guard is let go at once: the medium's link task takes it to write
-        tokio::time::timeout(self.wait, async move {
-            // (a tail expression's temporaries go before the block's locals)
-            link.wait_for(|s| *s == LinkState::Up).await.is_ok()
-        })
-        .await
-        .unwrap_or(false)
+        self.medium
+            .link_within(self.wait, |s| *s == LinkState::Up)
+            .await
+            .is_some()
     }
 
     /// Why the link is down, as the medium says.

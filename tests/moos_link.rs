@@ -43,6 +43,31 @@ fn after<'a>(text: &'a str, what: &str) -> Option<&'a str> {
     text.find(what).map(|i| &text[i..])
 }
 
+/// The stderr of a command that lived through a lost link: it logged the loss, then the return,
+/// and exited with the code documented for what it says it lost.
+fn lived_through_a_lost_link(out: &Output) {
+    let stderr = stderr(out);
+    let lost = after(&stderr, "link lost").unwrap_or_else(|| panic!("the loss logged: {stderr}"));
+    assert!(lost.contains("waiting up to 5 s"), "{stderr}");
+    assert!(
+        after(lost, "link back").is_some(),
+        "the return logged: {stderr}"
+    );
+    assert_eq!(
+        out.status.code(),
+        Some(documented_code(&stderr)),
+        "{stderr}"
+    );
+}
+
+/// Kills the DB 2 s from now and starts it again 2 s later.
+fn kill_and_restart(db: &mut MoosDb) {
+    std::thread::sleep(Duration::from_secs(2));
+    db.kill();
+    std::thread::sleep(Duration::from_secs(2));
+    db.restart();
+}
+
 /// The exit code `seabus` documents for the output: 4 when it reports messages lost with the link
 /// (a MOOSDB killed with a packet in its socket never confirms it), else 0.
 fn documented_code(stderr: &str) -> i32 {
@@ -64,10 +89,7 @@ fn pub_waits_for_a_restarted_moosdb_and_sends_the_rest() {
     let run = spawn(&[
         "pub", &url, "X_PUB", "--count", "120", "--rate", "20", "v=1",
     ]);
-    std::thread::sleep(Duration::from_secs(2));
-    db.kill();
-    std::thread::sleep(Duration::from_secs(2));
-    db.restart();
+    kill_and_restart(&mut db);
     let (_watch, rx) = moos_watch(db.port, "uWatch", 30, &["X_PUB"]);
     let (out, _) = output_within(run, started, Duration::from_secs(30));
     let stderr = stderr(&out);
@@ -83,17 +105,7 @@ fn pub_waits_for_a_restarted_moosdb_and_sends_the_rest() {
             .all(|(k, v)| k == "X_PUB" && *v == MoosValue::Text("v=1".into())),
         "{got:?}"
     );
-    let lost = after(&stderr, "link lost").unwrap_or_else(|| panic!("the loss logged: {stderr}"));
-    assert!(lost.contains("waiting up to 5 s"), "{stderr}");
-    assert!(
-        after(lost, "link back").is_some(),
-        "the return logged: {stderr}"
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(documented_code(&stderr)),
-        "{stderr}"
-    );
+    lived_through_a_lost_link(&out);
 }
 
 /// A MOOSDB that does not come back: `seabus pub` exits 4 once its link wait is over, saying why.
@@ -213,10 +225,7 @@ fn replay_waits_for_a_restarted_moosdb_and_sends_the_rest_in_order() {
     let url = db.url("uReplay", "");
     let started = Instant::now();
     let run = spawn(&["replay", &log.display().to_string(), &url]);
-    std::thread::sleep(Duration::from_secs(2));
-    db.kill();
-    std::thread::sleep(Duration::from_secs(2));
-    db.restart();
+    kill_and_restart(&mut db);
     let (_watch, rx) = moos_watch(db.port, "uWatch", 30, &["EVT"]);
     let (out, _) = output_within(run, started, Duration::from_secs(40));
     let stderr = stderr(&out);
@@ -228,16 +237,7 @@ fn replay_waits_for_a_restarted_moosdb_and_sends_the_rest_in_order() {
         .unwrap_or_else(|| panic!("events after the restart: {stderr}"));
     assert!(first <= 40, "the replay waited rather than skip: {got:?}");
     assert_eq!(got, (first..100).collect::<Vec<_>>(), "{stderr}");
-    let lost = after(&stderr, "link lost").unwrap_or_else(|| panic!("the loss logged: {stderr}"));
-    assert!(
-        after(lost, "link back").is_some(),
-        "the return logged: {stderr}"
-    );
-    assert_eq!(
-        out.status.code(),
-        Some(documented_code(&stderr)),
-        "{stderr}"
-    );
+    lived_through_a_lost_link(&out);
 }
 
 /// A system bridging its inproc bus to MOOS starts without a warning: what goes out before the

@@ -20,26 +20,18 @@ fn client(port: u16, name: &str, register: &str) -> Medium {
 }
 
 async fn up(m: &Medium) {
-    let mut link = m.watch_link();
-    tokio::time::timeout(
-        Duration::from_secs(5),
-        link.wait_for(|s| *s == LinkState::Up),
-    )
-    .await
-    .expect("connected within 5 s")
-    .expect("the medium is open");
+    m.link_within(Duration::from_secs(5), |s| *s == LinkState::Up)
+        .await
+        .expect("connected within 5 s");
 }
 
 async fn down(m: &Medium, why: &str) -> LinkState {
-    let mut link = m.watch_link();
-    tokio::time::timeout(
+    m.link_within(
         Duration::from_secs(5),
-        link.wait_for(|s| matches!(s, LinkState::Down(r) if r.contains(why))),
+        |s| matches!(s, LinkState::Down(r) if r.contains(why)),
     )
     .await
-    .unwrap_or_else(|_| panic!("the link down ({why}) within 5 s"))
-    .expect("the medium is open")
-    .clone()
+    .unwrap_or_else(|| panic!("the link down ({why}) within 5 s"))
 }
 
 /// The next message, at most `within` away.

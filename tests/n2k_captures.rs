@@ -22,27 +22,15 @@ use std::time::Duration;
 fn canboat_peer() -> &'static (PathBuf, PathBuf) {
     static BUILT: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     BUILT.get_or_init(|| {
-        if let (Some(a), Some(s)) = (
-            std::env::var_os("SEABUS_CANBOAT_ANALYZER"),
-            std::env::var_os("SEABUS_CANBOAT_SAMPLES"),
-        ) {
-            return (a.into(), s.into());
-        }
-        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        let out = succeeds(
-            Command::new(root.join("scripts/peers")).arg("canboat"),
-            "scripts/peers canboat (builds canboat's analyzer from the shared peers' archive)",
-        );
-        let text = String::from_utf8_lossy(&out.stdout);
-        let var = |name: &str| {
-            text.lines()
-                .find_map(|l| l.strip_prefix(&format!("{name}=")))
-                .map(PathBuf::from)
-                .unwrap_or_else(|| panic!("scripts/peers canboat printed no {name}: {text}"))
-        };
+        let mut paths = peer_paths(
+            "canboat",
+            &["SEABUS_CANBOAT_ANALYZER", "SEABUS_CANBOAT_SAMPLES"],
+        )
+        .into_iter();
+        let (analyzer, samples) = (paths.next(), paths.next());
         (
-            var("SEABUS_CANBOAT_ANALYZER"),
-            var("SEABUS_CANBOAT_SAMPLES"),
+            analyzer.expect("the analyzer"),
+            samples.expect("the samples"),
         )
     })
 }

@@ -681,3 +681,26 @@ pub fn http_login(url: &str, name: &str, password: &str) -> String {
     std::io::Read::read_to_string(&mut s, &mut answer).expect("answer");
     answer
 }
+
+/// The paths `scripts/peers NAME` prints for `vars` (the environment's, when it names them all, as
+/// `./scripts/test` sets them), building the peer once when it has not been built.
+pub fn peer_paths(name: &str, vars: &[&str]) -> Vec<PathBuf> {
+    let set: Vec<Option<std::ffi::OsString>> = vars.iter().map(std::env::var_os).collect();
+    if set.iter().all(Option::is_some) {
+        return set.into_iter().flatten().map(PathBuf::from).collect();
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let out = succeeds(
+        Command::new(root.join("scripts/peers")).arg(name),
+        &format!("scripts/peers {name} (builds it from the shared peers' archive)"),
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    vars.iter()
+        .map(|var| {
+            text.lines()
+                .find_map(|l| l.strip_prefix(&format!("{var}=")))
+                .map(PathBuf::from)
+                .unwrap_or_else(|| panic!("scripts/peers {name} printed no {var}: {text}"))
+        })
+        .collect()
+}

@@ -3,7 +3,7 @@
 //! `SEABUS_MOOSDB`/`SEABUS_LIBMOOS` are not set, as `./scripts/test` sets them). A build that fails
 //! fails the test.
 
-use super::{Running, free_tcp_port, lines_of, succeeds};
+use super::{Running, free_tcp_port, lines_of, peer_paths, succeeds};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::OnceLock;
@@ -19,30 +19,11 @@ pub struct CoreMoos {
 pub fn core_moos() -> &'static CoreMoos {
     static BUILT: OnceLock<CoreMoos> = OnceLock::new();
     BUILT.get_or_init(|| {
-        if let (Some(db), Some(lib)) = (
-            std::env::var_os("SEABUS_MOOSDB"),
-            std::env::var_os("SEABUS_LIBMOOS"),
-        ) {
-            return CoreMoos {
-                moosdb: db.into(),
-                libmoos: lib.into(),
-            };
-        }
-        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        let out = succeeds(
-            Command::new(root.join("scripts/peers")).arg("moos"),
-            "scripts/peers moos (builds core-moos from the shared peers' archive)",
-        );
-        let text = String::from_utf8_lossy(&out.stdout);
-        let var = |name: &str| {
-            text.lines()
-                .find_map(|l| l.strip_prefix(&format!("{name}=")))
-                .map(PathBuf::from)
-                .unwrap_or_else(|| panic!("scripts/peers moos printed no {name}: {text}"))
-        };
+        let mut paths = peer_paths("moos", &["SEABUS_MOOSDB", "SEABUS_LIBMOOS"]).into_iter();
+        let (moosdb, libmoos) = (paths.next(), paths.next());
         CoreMoos {
-            moosdb: var("SEABUS_MOOSDB"),
-            libmoos: var("SEABUS_LIBMOOS"),
+            moosdb: moosdb.expect("the MOOSDB"),
+            libmoos: libmoos.expect("libMOOS"),
         }
     })
 }

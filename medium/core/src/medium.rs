@@ -677,9 +677,27 @@ impl Medium {
         self.inner.link.borrow().clone()
     }
 
-    /// A receiver that sees every change of the link state.
+    /// A receiver that sees every change of the link state. (Its `wait_for` guard holds the
+    /// state's lock while kept: clone what it gives and let it go, as [`Medium::link_within`]
+    /// does, or the medium's link task cannot change the state.)
     pub fn watch_link(&self) -> watch::Receiver<LinkState> {
         self.inner.link.subscribe()
+    }
+
+    /// Waits at most `within` for the link state to be one `want` takes; the state then, or
+    /// `None` when the wait ended first (or the medium is gone).
+    pub async fn link_within(
+        &self,
+        within: std::time::Duration,
+        want: impl FnMut(&LinkState) -> bool,
+    ) -> Option<LinkState> {
+        let mut link = self.watch_link();
+        tokio::time::timeout(within, async move {
+            link.wait_for(want).await.ok().map(|state| state.clone())
+        })
+        .await
+        .ok()
+        .flatten()
     }
 
     /// Returns once what was sent on the medium so far has been written to the wire, as far as
@@ -1166,22 +1184,12 @@ impl Ingress {
     /// datagrams) as a transmit error, and logs it (the first in 10 s, then the next with the count
     /// of those not logged).
     pub fn send_failed(&self, detail: impl fmt::Display) {
-        if let Some(inner) = self.inner.upgrade() {
-            inner.counters.tx_errors.fetch_add(1, Ordering::Relaxed);
-            let held = inner
-                .send_failures
-                .lock()
-                .unwrap_or_else(|p| p.into_inner())
-                .admit(std::time::Instant::now());
-            if let Some(held) = held {
-                tracing::warn!(medium = %inner.name, "not sent: {detail}{held}");
-            }
-        }
+        self.tx_failed(1, |held| format!("not sent: {detail}{held}"));
     }
 
-    /// Counts `n` messages that were on their way out when the link was lost (its peer never had
-    /// them) as transmit errors, and logs it (rate-limited as [`Ingress::send_failed`] is).
-    pub fn lost_with_link(&self, n: u64) {
+    /// Counts `n` transmit errors and logs `say(held)` (the first in 10 s, then the next with the
+    /// count of those not logged, `held`).
+    fn tx_failed(&self, n: u64, say: impl FnOnce(&crate::tally::Held) -> String) {
         if let Some(inner) = self.inner.upgrade() {
             inner.counters.tx_errors.fetch_add(n, Ordering::Relaxed);
             let held = inner
@@ -1190,12 +1198,17 @@ impl Ingress {
                 .unwrap_or_else(|p| p.into_inner())
                 .admit(std::time::Instant::now());
             if let Some(held) = held {
-                tracing::warn!(
-                    medium = %inner.name,
-                    "{n} message(s) on their way out were lost with the link{held}"
-                );
+                tracing::warn!(medium = %inner.name, "{}", say(&held));
             }
         }
+    }
+
+    /// Counts `n` messages that were on their way out when the link was lost (its peer never had
+    /// them) as transmit errors, and logs it (rate-limited as [`Ingress::send_failed`] is).
+    pub fn lost_with_link(&self, n: u64) {
+        self.tx_failed(n, |held| {
+            format!("{n} message(s) on their way out were lost with the link{held}")
+        });
     }
 
     /// Counts `bytes` read from the wire that went into no message (see
