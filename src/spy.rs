@@ -178,7 +178,9 @@ impl N2k {
     fn take(&mut self, m: &Message) -> Option<Option<(Message, String)>> {
         use seabus_medium_can::frame::CanFrame;
         let frame = CanFrame::from_message(m.topic.as_str(), &m.payload).ok()?;
-        let got = self.listener.push(&frame, Instant::now());
+        // timed by when the frame was read: a spy held up by its output (a full pipe) does not
+        // time out a fast packet whose frames all came in time
+        let got = self.listener.push(&frame, m.stamp.instant());
         for r in self.listener.take_rejections() {
             *self.refused.entry(r.reason).or_default() += 1;
         }

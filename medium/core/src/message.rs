@@ -99,6 +99,14 @@ impl Stamp {
     pub fn since(self, earlier: Stamp) -> Duration {
         Duration::from_nanos(self.0.saturating_sub(earlier.0).max(0) as u64)
     }
+
+    /// The monotonic instant this stamp of this host's clock was: now, less the wall-clock time
+    /// since (now for a stamp not yet reached). For timing what arrived by when it arrived, not by
+    /// when it was looked at.
+    pub fn instant(self) -> tokio::time::Instant {
+        let now = tokio::time::Instant::now();
+        now.checked_sub(Stamp::now().since(self)).unwrap_or(now)
+    }
 }
 
 /// A message on a medium.
