@@ -547,7 +547,8 @@ def same(a, b):
 /// strict JSON (no NaN literal, as JavaScript readers need) valid against its channel's JSON
 /// Schema (Python's `jsonschema`, draft 2020-12), its channel names the LCM type, and the LCM log
 /// made from the MCAP file holds only the original channel's events, which the lcm-gen Python
-/// classes decode to the original values.
+/// classes decode to the original values, and a C program on liblcm (`tests/peers/lcm_round_trip.c`,
+/// lcm-gen's C types) to the original values bit for bit.
 #[test]
 fn lcm_to_mcap_to_lcm_keeps_nan_infinities_and_nested_types() {
     require_python_mcap();
@@ -636,4 +637,50 @@ print(json.dumps({"valid": valid, "types": sorted(map(str, types)), "moved": mov
         python(&decode, &[back.to_str().unwrap()], &path).trim(),
         "decoded 6"
     );
+    // and a C program on liblcm, with lcm-gen's C types, reads the same values bit for bit
+    let run = |program: &str, args: &[&str]| {
+        succeeds(
+            Command::new(program).args(args).current_dir(dir.path()),
+            &format!("{program} {args:?} (./scripts/test installs liblcm-bin and liblcm-dev)"),
+        )
+    };
+    std::fs::copy(
+        concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/lcm_round_trip.c"),
+        dir.path().join("lcm_round_trip.c"),
+    )
+    .unwrap();
+    run("/usr/bin/lcm-gen", &["-c", "rt.lcm"]);
+    run(
+        "cc",
+        &[
+            "-Wall",
+            "-Werror",
+            "-o",
+            "lcm_round_trip",
+            "lcm_round_trip.c",
+            "rt_outer_t.c",
+            "rt_inner_t.c",
+            "-I.",
+            "-llcm",
+            "-lm",
+        ],
+    );
+    let c_lines = String::from_utf8(
+        run(
+            dir.path().join("lcm_round_trip").to_str().unwrap(),
+            &[back.to_str().unwrap()],
+        )
+        .stdout,
+    )
+    .unwrap();
+    let wanted = format!(
+        "{ROUND_TRIP_MESSAGES}\nimport math, struct\n\
+         def d(v): return ' nan' if math.isnan(v) else ' %016x' % struct.unpack('<Q', struct.pack('<d', v))[0]\n\
+         def f(v): return ' nan' if math.isnan(v) else ' %08x' % struct.unpack('<I', struct.pack('<f', v))[0]\n\
+         for m in messages():\n\
+         \x20   line = 'NAV %d %d' % (m.utime, m.utime) + d(m.depth) + d(m.pos.x) + f(m.pos.y) + ' %d' % m.n\n\
+         \x20   line += ''.join(d(r) for r in m.ranges) + ''.join(d(p.x) + f(p.y) for p in m.pair)\n\
+         \x20   print(line + ' %s %d' % (m.name, 1 if m.ok else 0))\n"
+    );
+    assert_eq!(c_lines, python(&wanted, &[], &path));
 }
