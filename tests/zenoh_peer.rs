@@ -8,6 +8,40 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
+/// Checks and runs the system file at `path`, and starts the Python peer on the Zenoh medium it
+/// listens with on `port`, under `prefix`, for `secs`: the system, the peer and its lines.
+fn run_with_peer(
+    path: &std::path::Path,
+    port: u16,
+    prefix: &str,
+    secs: u32,
+) -> (
+    Running,
+    std::process::Child,
+    BufReader<std::process::ChildStdout>,
+) {
+    let checked = check(path);
+    assert!(
+        checked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    let run = spawn_run(path, &[]);
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/zenoh_peer.py");
+    let mut peer = Command::new("python3")
+        .args([
+            script,
+            &format!("tcp/127.0.0.1:{port}"),
+            prefix,
+            &secs.to_string(),
+        ])
+        .stdout(Stdio::piped())
+        .spawn()
+        .expect("python3 runs");
+    let out = BufReader::new(peer.stdout.take().unwrap());
+    (run, peer, out)
+}
+
 #[test]
 fn a_python_zenoh_program_reads_the_vehicle_and_commands_it() {
     let dir = tempfile::tempdir().unwrap();
@@ -28,20 +62,7 @@ fn a_python_zenoh_program_reads_the_vehicle_and_commands_it() {
 </seabus>"#
     );
     let (_sys, path) = system_file("auv1.xml", &system);
-    let checked = check(&path);
-    assert!(
-        checked.status.success(),
-        "{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    let _run = spawn_run(&path, &[]);
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/zenoh_peer.py");
-    let mut peer = Command::new("python3")
-        .args([script, &format!("tcp/127.0.0.1:{port}"), "fleet/auv1", "30"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("python3 runs");
-    let out = BufReader::new(peer.stdout.take().unwrap());
+    let (_run, mut peer, out) = run_with_peer(&path, port, "fleet/auv1", 30);
     let mut position = None;
     let mut statuses = Vec::new();
     for line in out.lines().map_while(Result::ok) {
@@ -94,20 +115,7 @@ fn a_shore_s_own_status_goes_under_its_name_in_the_fleet_s_key_space() {
 </seabus>"#
     );
     let (_sys, path) = system_file("shore.xml", &system);
-    let checked = check(&path);
-    assert!(
-        checked.status.success(),
-        "{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
-    let _run = spawn_run(&path, &[]);
-    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/peers/zenoh_peer.py");
-    let mut peer = Command::new("python3")
-        .args([script, &format!("tcp/127.0.0.1:{port}"), "fleet", "6"])
-        .stdout(Stdio::piped())
-        .spawn()
-        .expect("python3 runs");
-    let out = BufReader::new(peer.stdout.take().unwrap());
+    let (_run, mut peer, out) = run_with_peer(&path, port, "fleet", 6);
     let keys: Vec<String> = out
         .lines()
         .map_while(Result::ok)
