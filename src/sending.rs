@@ -94,6 +94,9 @@ impl Sending {
         payload: Payload,
     ) -> Result<bool, NotSent> {
         let mut resumed = false;
+        // refusals as down while the medium says up are a moment's (its sender learns first):
+        // they end in the link wait like any other
+        let deadline = tokio::time::Instant::now() + self.wait;
         loop {
             if self.medium.link_state() != LinkState::Up {
                 self.come_back().await?;
@@ -105,15 +108,20 @@ impl Sending {
                 .await
             {
                 Ok(()) => return Ok(resumed),
-                Err(SendError::LinkDown { .. }) => {
-                    // lost between the look and the send: waited for above, on the next round
+                // lost between the look and the send: waited for above, on the next round
+                Err(SendError::LinkDown { reason, .. }) => {
+                    if self.medium.link_state() == LinkState::Up {
+                        if tokio::time::Instant::now() >= deadline {
+                            return Err(NotSent::LinkLost(format!(
+                                "the link refused sends for {}: {reason}",
+                                secs(self.wait)
+                            )));
+                        }
+                        tokio::time::sleep(Duration::from_millis(10)).await;
+                    }
                 }
                 Err(SendError::Closed(_)) => return Err(NotSent::Closed),
                 Err(e) => return Err(NotSent::Refused(e)),
-            }
-            if self.medium.link_state() == LinkState::Up {
-                // refused as down, yet up again already: waits a moment rather than spin
-                tokio::time::sleep(Duration::from_millis(10)).await;
             }
         }
     }

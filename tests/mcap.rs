@@ -421,14 +421,7 @@ fn an_lcm_log_converts_to_mcap_with_its_messages_decoded_by_their_lcm_types() {
         "package lab;\nstruct probe_t {\n  int64_t utime;\n  double depth;\n  string label;\n}\n",
     )
     .unwrap();
-    let status = Command::new("lcm-gen")
-        .arg("-p")
-        .arg("--ppath")
-        .arg(dir.path())
-        .arg(&types)
-        .status()
-        .expect("lcm-gen runs (install it with ./scripts/test: pip install lcm)");
-    assert!(status.success());
+    lcm_gen_python(dir.path(), &types);
     let log = dir.path().join("dive.lcm");
     let write = r#"
 import sys, lcm
@@ -502,6 +495,18 @@ log.close()
     assert!(stderr(&again).contains("the file exists (--force replaces it)"));
 }
 
+/// Makes, with lcm-gen, the Python classes of the types in `lcm_file` in `dir`.
+fn lcm_gen_python(dir: &Path, lcm_file: &Path) {
+    let status = Command::new("lcm-gen")
+        .arg("-p")
+        .arg("--ppath")
+        .arg(dir)
+        .arg(lcm_file)
+        .status()
+        .expect("lcm-gen runs (install it with ./scripts/test: pip install lcm)");
+    assert!(status.success());
+}
+
 /// An LCM type with nested structs, arrays and floats of both widths, for the round trip.
 const ROUND_TRIP_TYPES: &str = "package rt;\n\
 struct inner_t {\n  double x;\n  float y;\n}\n\
@@ -555,14 +560,7 @@ fn lcm_to_mcap_to_lcm_keeps_nan_infinities_and_nested_types() {
     let dir = tempfile::tempdir().unwrap();
     let types = dir.path().join("rt.lcm");
     std::fs::write(&types, ROUND_TRIP_TYPES).unwrap();
-    let status = Command::new("lcm-gen")
-        .arg("-p")
-        .arg("--ppath")
-        .arg(dir.path())
-        .arg(&types)
-        .status()
-        .expect("lcm-gen runs (install it with ./scripts/test: pip install lcm)");
-    assert!(status.success());
+    lcm_gen_python(dir.path(), &types);
     let path = [("PYTHONPATH", dir.path().to_str().unwrap())];
     let log = dir.path().join("in.lcm");
     let write = format!(

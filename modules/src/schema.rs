@@ -91,7 +91,10 @@ fn put_back(map: &mut DataMap, moved: DataMap) {
 /// datamap, its non-finite floats back in their places; the error names line and column.
 pub fn read_message(text: &str) -> Result<DataMap, serde_json::Error> {
     let mut map = seabus_medium::json::from_json(text)?;
-    if let Some(Value::Map(moved)) = map.remove(NONFINITE) {
+    // another tool's field of that name that is no object stays as it came
+    if matches!(map.get(NONFINITE), Some(Value::Map(_)))
+        && let Some(Value::Map(moved)) = map.remove(NONFINITE)
+    {
         put_back(&mut map, moved);
     }
     Ok(map)

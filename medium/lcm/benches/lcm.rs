@@ -94,7 +94,9 @@ fn stamped(size: usize) -> Vec<u8> {
 }
 
 /// liblcm sender and receiver (each its own instance and thread), with liblcm's defaults.
-fn c_lcm(size: usize, n: usize, rate: Option<f64>) -> Seen {
+/// A liblcm receiver on its own thread, taking up to `n` messages until the bus goes quiet;
+/// returns once it has subscribed.
+fn liblcm_receiver(n: usize) -> std::thread::JoinHandle<Seen> {
     let (ready_tx, ready_rx) = mpsc::channel();
     let receiver = std::thread::spawn(move || {
         let mut lc = liblcm::create();
@@ -111,6 +113,11 @@ fn c_lcm(size: usize, n: usize, rate: Option<f64>) -> Seen {
         seen.take()
     });
     let _ = ready_rx.recv();
+    receiver
+}
+
+fn c_lcm(size: usize, n: usize, rate: Option<f64>) -> Seen {
+    let receiver = liblcm_receiver(n);
     let mut lc = liblcm::create();
     let start = Instant::now();
     for i in 0..n {
@@ -187,28 +194,13 @@ fn seabus(url: &str, size: usize, n: usize, rate: Option<f64>) -> Seen {
 /// One liblcm sender, unpaced, to a liblcm receiver and a seabus receiver (its defaults) on `url`
 /// at once: the messages each delivered.
 fn side_by_side(url: &str, size: usize, n: usize) -> (usize, usize) {
-    let (ready_tx, ready_rx) = mpsc::channel();
-    let c = std::thread::spawn(move || {
-        let mut lc = liblcm::create();
-        let seen = Rc::new(RefCell::new(Seen::default()));
-        let s = seen.clone();
-        lc.subscribe("BENCH", move |m: liblcm::Raw| s.borrow_mut().take(&m.0));
-        let _ = ready_tx.send(());
-        let mut quiet_since = Instant::now();
-        while seen.borrow().count < n && quiet_since.elapsed() < QUIET {
-            if lc.handle_timeout(QUIET / 3).is_ok() {
-                quiet_since = Instant::now();
-            }
-        }
-        seen.take().count
-    });
-    let _ = ready_rx.recv();
+    let c = liblcm_receiver(n);
     let s = seabus_receiver(url, n);
     let mut lc = liblcm::create();
     for _ in 0..n {
         let _ = lc.publish("BENCH", &liblcm::Raw(stamped(size)));
     }
-    let c = c.join().expect("liblcm receiver");
+    let c = c.join().expect("liblcm receiver").count;
     let s = s.join().expect("seabus receiver").count;
     (c, s)
 }
